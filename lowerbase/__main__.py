@@ -1,0 +1,3 @@
+from lowerbase.cli import main
+
+raise SystemExit(main())

@@ -65,6 +65,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # e.g. `lowerbase dbc | head`
+        sys.stderr.close()
+        return 0
     except (LowerbaseError, OSError) as exc:
         if args.debug:
             raise

@@ -1,0 +1,128 @@
+"""docs/protocol.md, generated from the DBC catalog (``lowerbase dbc --export-docs``)."""
+
+from __future__ import annotations
+
+from lowerbase.protocol.codec import Codec, MessageCodec, default_codec
+from lowerbase.protocol.framing import OVERHEAD, Framer
+
+EXAMPLE = ("MotionCommand", {"Linear": 0.5, "Angular": -0.25, "Mode": "Smoothed", "Counter": 3})
+
+
+def _fmt(x: float | None) -> str:
+    if x is None:
+        return ""
+    return f"{x:g}" if isinstance(x, float) else str(x)
+
+
+def _message_section(m: MessageCodec) -> list[str]:
+    cycle = f"{m.cycle_time * 1000:g} ms" if m.cycle_time else "event"
+    lines = [
+        f"### {m.name} (0x{m.frame_id:03X})",
+        "",
+        f"{m.comment}",
+        "",
+        f"DLC {m.length}, {cycle}, sent by {', '.join(m.senders)}; "
+        f"{m.length + OVERHEAD} bytes in the serial framing.",
+        "",
+        "| signal | bits | type | scale | offset | range | unit | values | comment |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for s in m.signals:
+        kind = "float32" if s.is_float else ("int" if s.is_signed else "uint") + str(s.length)
+        bits = f"{s.start}..{s.start + s.length - 1}"
+        values = ", ".join(f"{k}={v}" for k, v in s.choices.items())
+        lines.append(
+            f"| {s.name} | {bits} | {kind} | {_fmt(s.scale)} | {_fmt(s.offset)} | "
+            f"{_fmt(s.minimum)} .. {_fmt(s.maximum)} | {s.unit} | {values} | {s.comment} |"
+        )
+    lines.append("")
+    return lines
+
+
+def render(codec: Codec | None = None) -> str:
+    codec = codec or default_codec()
+    name, values = EXAMPLE
+    msg = codec.message(name)
+    payload = msg.encode(values)
+    frame = Framer().encode(msg.frame_id, payload)
+    n = len(payload)
+    parts = (
+        [("SOF", 0, 2), ("LEN", 2, 1), ("ID", 3, 2), ("PAYLOAD", 5, n), ("SEQ", 5 + n, 1),
+         ("CRC", 6 + n, 2)]
+    )
+    out = [
+        "# The lowerbase wire protocol",
+        "",
+        "Generated from `lowerbase/protocol/chassis.dbc` by `lowerbase dbc --export-docs "
+        "docs/protocol.md`; do not edit by hand (a test checks it is current).",
+        "",
+        codec.database.dbc.attributes.get("BusType").value + " 2.0A, 11-bit identifiers, "
+        "500 kbit/s, Intel (little-endian) byte order throughout. Lower identifiers carry "
+        "safety and commands. Periodic frames carry a 4-bit rolling counter (+1 per frame, mod "
+        "16); StatusCode needs all 64 bits for the code and relies on the SystemStatus counter "
+        "sent in the same cycle.",
+        "",
+        "## Catalog",
+        "",
+        "| ID | message | DLC | cycle | sender |",
+        "|---|---|---|---|---|",
+    ]
+    for m in codec:
+        cycle = f"{m.cycle_time * 1000:g} ms" if m.cycle_time else "event"
+        out.append(f"| 0x{m.frame_id:03X} | {m.name} | {m.length} | {cycle} | "
+                   f"{', '.join(m.senders)} |")
+    out += [
+        "",
+        "## Serial framing",
+        "",
+        "The same frames over a UART (or a pseudo-terminal): start of frame, length, ID, payload,",
+        "link sequence counter, CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no",
+        "final XOR) over LEN..SEQ. Multi-byte fields are little-endian. A frame is DLC + "
+        f"{OVERHEAD} bytes.",
+        "",
+        "| offset | size | field | meaning |",
+        "|---|---|---|---|",
+        "| 0 | 2 | SOF | 0xAA 0x55 |",
+        "| 2 | 1 | LEN | payload length 0..8 |",
+        "| 3 | 2 | ID | 11-bit identifier (upper 5 bits zero) |",
+        "| 5 | LEN | PAYLOAD | the CAN payload, as on the bus |",
+        "| 5+LEN | 1 | SEQ | +1 per frame sent (mod 256); gaps count lost frames |",
+        "| 6+LEN | 2 | CRC | over LEN..SEQ |",
+        "",
+        f"Example: {name} with "
+        + ", ".join(f"{k}={v}" for k, v in values.items())
+        + f" (sequence number 0):",
+        "",
+        "```",
+        frame.hex(" ").upper(),
+        "```",
+        "",
+        "| bytes | field | value |",
+        "|---|---|---|",
+    ]
+    for field, offset, size in parts:
+        chunk = frame[offset : offset + size]
+        if field == "ID" or field == "CRC":
+            meaning = f"0x{int.from_bytes(chunk, 'little'):04X}"
+        elif field == "LEN":
+            meaning = str(chunk[0])
+        elif field == "PAYLOAD":
+            meaning = ", ".join(
+                f"{s.name}={values[s.name]}" for s in msg.signals
+            )
+        elif field == "SEQ":
+            meaning = str(chunk[0])
+        else:
+            meaning = "start of frame"
+        out.append(f"| {chunk.hex(' ').upper()} | {field} | {meaning} |")
+    out += [
+        "",
+        "The deframer resynchronises on the next SOF after garbage, a truncated frame or a bad",
+        "CRC, and counts each (garbage bytes, bad CRC, bad length, truncated, sequence gaps).",
+        "",
+        "## Messages",
+        "",
+    ]
+    for m in codec:
+        out += _message_section(m)
+    return "\n".join(out).rstrip() + "\n"

@@ -1,0 +1,123 @@
+"""Transports: every link to a lower computer is a python-can bus.
+
+CAN backends come from python-can by name (socketcan, virtual, udp_multicast, slcan, pcan, ...),
+chosen with python-can's own flags, config file and environment variables. The serial framing
+(``lowerbase_serial``) and the virtual slcan adapter (``slcan_device``) are python-can backends
+too, registered through entry points, so the emulator, the driver and the benches never care
+which one they run on.
+
+With nothing configured, the default is ``udp_multicast`` with hop limit 0: datagrams never
+leave this host, and two processes on any machine (no SocketCAN needed) share one bus.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from typing import Any
+
+import can
+
+from lowerbase.errors import TransportError
+
+log = logging.getLogger(__name__)
+
+DEFAULT_INTERFACE = "udp_multicast"
+#: an administratively scoped IPv4 group; with hop_limit 0 nothing is sent off this host
+DEFAULT_CHANNEL = "239.74.163.2"
+DEFAULT_PORT = 43113
+DEFAULT_HOP_LIMIT = 0
+
+
+def add_bus_arguments(parser: argparse.ArgumentParser, *, serial: bool = True) -> None:
+    """python-can's bus flags (-i/-c/-b/--bus-kwargs...) plus ``--serial PORT``."""
+    from can.cli import add_bus_arguments as can_add_bus_arguments
+
+    can_add_bus_arguments(parser)
+    if serial:
+        parser.add_argument(
+            "--serial",
+            metavar="PORT",
+            help="use the serial framing instead of CAN: a serial device (/dev/ttyUSB0), "
+            "a pyserial URL, or pty:LINK to create a pseudo-terminal published at LINK",
+        )
+        parser.add_argument(
+            "--baudrate", type=int, default=115200, help="serial baud rate (default 115200)"
+        )
+
+
+def bus_config(
+    interface: str | None = None,
+    channel: Any = None,
+    **kwargs: Any,
+) -> dict[str, Any]:
+    """Resolve a bus configuration the way python-can does, with lowerbase's default.
+
+    Explicit arguments win over python-can's environment variables (CAN_INTERFACE,
+    CAN_CHANNEL, ...) and config files (~/.canrc, can.ini); with none of them, the default is
+    udp_multicast on 239.74.163.2:43113 with hop limit 0.
+    """
+    given = {k: v for k, v in {"interface": interface, "channel": channel, **kwargs}.items()
+             if v is not None}
+    try:
+        config = dict(can.util.load_config(config=given))
+    except can.CanInterfaceNotImplementedError:
+        if given.get("interface"):
+            raise TransportError(
+                f"unknown CAN interface {given['interface']!r}; "
+                f"choose one of: {', '.join(sorted(can.VALID_INTERFACES))}"
+            ) from None
+        config = {
+            "interface": DEFAULT_INTERFACE,
+            "channel": DEFAULT_CHANNEL,
+            "port": DEFAULT_PORT,
+            "hop_limit": DEFAULT_HOP_LIMIT,
+            **given,
+        }
+    config = {k: v for k, v in config.items() if v is not None}
+    if config.get("interface") == DEFAULT_INTERFACE:
+        config.setdefault("channel", DEFAULT_CHANNEL)
+        config.setdefault("hop_limit", DEFAULT_HOP_LIMIT)
+    return config
+
+
+def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The bus configuration named by parsed ``add_bus_arguments`` flags."""
+    serial_port = getattr(args, "serial", None)
+    if serial_port:
+        return {
+            "interface": "lowerbase_serial",
+            "channel": serial_port,
+            "baudrate": getattr(args, "baudrate", 115200),
+        }
+    extra: dict[str, Any] = {}
+    for key in ("bitrate", "fd", "data_bitrate", "can_filters", "timing"):
+        value = getattr(args, key, None)
+        if value is not None:
+            extra[key] = value
+    extra.update(getattr(args, "bus_kwargs", None) or {})
+    return bus_config(getattr(args, "interface", None), getattr(args, "channel", None), **extra)
+
+
+def open_bus(config: dict[str, Any] | None = None, **kwargs: Any) -> can.BusABC:
+    """Open a python-can bus; failures become one clear :class:`TransportError`."""
+    cfg = bus_config(**{**(config or {}), **kwargs})
+    try:
+        return can.Bus(**cfg)
+    except (can.CanError, OSError, ValueError, ImportError, TypeError) as exc:
+        where = f"{cfg.get('interface')} channel {cfg.get('channel')!r}"
+        reason = str(exc) or type(exc).__name__
+        if exc.__cause__ is not None and str(exc.__cause__):
+            reason = f"{reason}: {exc.__cause__}"
+        hint = ""
+        if cfg.get("interface") == "socketcan":
+            hint = " (is the interface up? see vcan/README.md)"
+        raise TransportError(f"cannot open {where}: {reason}{hint}") from None
+
+
+def describe(config: dict[str, Any]) -> str:
+    """A one-line description of a bus configuration, for 'listening on ...' messages."""
+    rest = {k: v for k, v in config.items() if k not in ("interface", "channel")}
+    extra = f" {json.dumps(rest, default=str)}" if rest else ""
+    return f"{config.get('interface')} channel {config.get('channel')}{extra}"

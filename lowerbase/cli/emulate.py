@@ -1,0 +1,121 @@
+"""``lowerbase emulate``: run the emulated lower computer on any transport."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+from typing import Any
+
+log = logging.getLogger("lowerbase.emulate")
+
+
+def add_subparser(subparsers: Any) -> None:
+    from lowerbase.transport import add_bus_arguments
+
+    p = subparsers.add_parser(
+        "emulate",
+        help="run the emulated lower computer (chassis MCU)",
+        description="Run the emulated chassis MCU. With no bus option it listens on "
+        "udp_multicast 239.74.163.2:43113 (hop limit 0: this host only); take python-can's "
+        "flags for any CAN interface (e.g. -i socketcan -c vcan0), --serial for the serial "
+        "framing, or --slcan to appear as a USB-CAN adapter on a pseudo-terminal.",
+        epilog="Faults: stall:left|right, overcurrent:left|right, encoder:left|right, "
+        "imu-freeze, imu-bias:RAD_S, silence, drop:P, delay:S, corrupt:P, estop, bms-silence; "
+        "add @T to start T s after boot and +D to last D s (e.g. --fault stall:left@5+2).",
+    )
+    add_bus_arguments(p)
+    p.add_argument("--slcan", metavar="PORT",
+                   help="act as an slcan USB-CAN adapter on PORT (pty:LINK creates a pty)")
+    p.add_argument("--profile", metavar="FILE", help="robot profile TOML (default: packaged)")
+    p.add_argument("--params", metavar="FILE",
+                   help="parameter file, written atomically on every parameter write")
+    p.add_argument("--fault", action="append", default=[], metavar="SPEC",
+                   help="inject a fault (repeatable); see below")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    timing = p.add_mutually_exclusive_group()
+    timing.add_argument("--realtime", dest="simulated", action="store_false",
+                        help="run in real time (default)")
+    timing.add_argument("--simulated", dest="simulated", action="store_true",
+                        help="simulated clock, as fast as the CPU allows (needs --duration)")
+    p.add_argument("--no-bms", action="store_true", help="run without the battery/BMS model")
+    p.add_argument("--print", dest="print_frames", action="store_true",
+                   help="print every frame sent, decoded")
+    p.set_defaults(func=run, simulated=False)
+
+
+def run(args: argparse.Namespace) -> int:
+    import can
+
+    from lowerbase.clock import RealClock, SimClock
+    from lowerbase.errors import ConfigError
+    from lowerbase.firmware_model.faults import parse_fault
+    from lowerbase.firmware_model.mcu import Mcu
+    from lowerbase.firmware_model.profile import load_profile
+    from lowerbase.firmware_model.runner import bus_sender
+    from lowerbase.firmware_model.runner import run as run_mcu
+    from lowerbase.protocol.codec import default_codec
+    from lowerbase.transport import config_from_args, describe, open_bus
+
+    if args.simulated and args.duration is None:
+        raise ConfigError("--simulated needs --duration (it runs as fast as the CPU allows)")
+    profile = load_profile(args.profile)
+    faults = [parse_fault(spec) for spec in args.fault]
+    if args.slcan:
+        config: dict[str, Any] = {"interface": "slcan_device", "channel": args.slcan}
+    else:
+        config = config_from_args(args)
+    bus = open_bus(config)
+    stop = threading.Event()
+    clock = SimClock() if args.simulated else RealClock(stop)
+    try:
+        bms = _make_bms(profile) if not args.no_bms else None
+        send = bus_sender(bus)
+        codec = default_codec()
+        if args.print_frames:
+            inner = send
+
+            def send(frame_id: int, data: bytes) -> None:
+                inner(frame_id, data)
+                name, values = codec.decode(frame_id, data, decode_choices=True, strict=False)
+                print(f"{clock.now():10.3f} {name:<18} {values}", flush=True)
+
+        mcu = Mcu(profile, clock, send, params_path=args.params, bms=bms, faults=faults)
+        mcu.stats  # noqa: B018 - created
+        where = getattr(bus, "stream", None)
+        target = where.name if where is not None else describe(config)
+        print(f"lowerbase emulate: lower computer on {target} "
+              f"({'simulated' if args.simulated else 'real'} time, boot #{mcu.boot_counter}"
+              f"{', faults: ' + ', '.join(map(str, faults)) if faults else ''}); Ctrl-C stops",
+              flush=True)
+
+        def _stop(*_: Any) -> None:
+            stop.set()
+
+        signal.signal(signal.SIGTERM, _stop)
+        try:
+            run_mcu(mcu, bus, clock, duration=args.duration, stop=stop)
+        except KeyboardInterrupt:
+            pass
+        mcu.shutdown()
+        stats = ", ".join(f"{k} {v}" for k, v in sorted(mcu.stats.items()))
+        print(f"lowerbase emulate: stopped after {clock.now() - mcu.boot_time:.1f} s; {stats}",
+              file=sys.stderr)
+    finally:
+        try:
+            bus.shutdown()
+        except can.CanError:  # pragma: no cover
+            pass
+    return 0
+
+
+def _make_bms(profile: Any) -> Any:
+    """The in-process BMS adapter, when lowerbase.bms is available."""
+    try:
+        from lowerbase.bms.adapter import InProcessBms
+    except ImportError:
+        log.debug("lowerbase.bms adapter not available; running without a BMS")
+        return None
+    return InProcessBms.from_profile(profile)

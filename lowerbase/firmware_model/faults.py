@@ -1,0 +1,109 @@
+"""Fault injection: what can be broken in a running lower computer, by API or CLI.
+
+A fault is named by a short spec, the same on the command line and in scenarios::
+
+    stall:left             the left wheel is blocked (current rises, stall, then a driver fault)
+    overcurrent:right      the right driver reports over-current (it brakes, then faults)
+    encoder:left           the left encoder loses pulses (the count freezes)
+    imu-freeze             the IMU repeats its last sample
+    imu-bias:0.02          a gyro z bias step [rad/s] (invisible to the firmware)
+    silence                the lower computer stops sending (bus silence)
+    drop:0.1               each outgoing frame is lost with probability 0.1
+    delay:0.05             each outgoing frame leaves 0.05 s late
+    corrupt:0.01           each outgoing frame is cut one byte short with probability 0.01
+    estop                  the emergency-stop button is pressed (released when the fault ends)
+    bms-silence            the BMS stops answering the lower computer's polls
+
+``@T`` starts it T seconds after boot and ``+D`` ends it D seconds later
+(``stall:left@5+2``); without them a fault starts at once and lasts until cleared.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+from lowerbase.errors import ConfigError
+
+#: fault kind -> (argument description or None, whether an argument is required)
+KINDS: dict[str, tuple[str | None, bool]] = {
+    "stall": ("left|right", True),
+    "overcurrent": ("left|right", True),
+    "encoder": ("left|right", True),
+    "imu-freeze": (None, False),
+    "imu-bias": ("rad/s", True),
+    "silence": (None, False),
+    "drop": ("probability 0..1", True),
+    "delay": ("seconds", True),
+    "corrupt": ("probability 0..1", True),
+    "estop": (None, False),
+    "bms-silence": (None, False),
+}
+
+_SPEC = re.compile(
+    r"^(?P<kind>[a-z-]+)(?::(?P<arg>[^@+]+))?(?:@(?P<start>[0-9.]+))?(?:\+(?P<dur>[0-9.]+))?$"
+)
+
+
+@dataclass(frozen=True)
+class Fault:
+    kind: str
+    arg: str | None = None
+    start: float = 0.0  #: [s] after boot
+    duration: float | None = None  #: [s], None = until cleared
+
+    @property
+    def value(self) -> float:
+        """The numeric argument (imu-bias, drop, delay, corrupt)."""
+        return float(self.arg) if self.arg is not None else 0.0
+
+    @property
+    def side(self) -> str:
+        return self.arg or ""
+
+    def active(self, t_since_boot: float) -> bool:
+        if t_since_boot < self.start:
+            return False
+        return self.duration is None or t_since_boot < self.start + self.duration
+
+    def __str__(self) -> str:
+        text = self.kind + (f":{self.arg}" if self.arg is not None else "")
+        if self.start:
+            text += f"@{self.start:g}"
+        if self.duration is not None:
+            text += f"+{self.duration:g}"
+        return text
+
+
+def parse_fault(spec: str) -> Fault:
+    """Parse a fault spec (see the module docstring); ConfigError with the usage otherwise."""
+    m = _SPEC.match(spec.strip())
+    usage = "; known: " + ", ".join(
+        k + (f":<{a}>" if a else "") for k, (a, _) in KINDS.items()
+    )
+    if not m or m["kind"] not in KINDS:
+        raise ConfigError(f"unknown fault {spec!r}{usage}")
+    kind, arg = m["kind"], m["arg"]
+    what, required = KINDS[kind]
+    if required and arg is None:
+        raise ConfigError(f"fault {spec!r} needs an argument ({what})")
+    if what is None and arg is not None:
+        raise ConfigError(f"fault {kind!r} takes no argument")
+    if what == "left|right" and arg not in ("left", "right"):
+        raise ConfigError(f"fault {spec!r}: the wheel must be left or right")
+    if arg is not None and what not in (None, "left|right"):
+        try:
+            x = float(arg)
+        except ValueError:
+            raise ConfigError(f"fault {spec!r}: {arg!r} is not a number ({what})") from None
+        if not math.isfinite(x) or (what.startswith("probability") and not 0 <= x <= 1):
+            raise ConfigError(f"fault {spec!r}: {arg} is out of range ({what})")
+        if what == "seconds" and not 0 <= x <= 10:
+            raise ConfigError(f"fault {spec!r}: delay must be 0..10 s")
+    return Fault(
+        kind=kind,
+        arg=arg,
+        start=float(m["start"]) if m["start"] else 0.0,
+        duration=float(m["dur"]) if m["dur"] else None,
+    )

@@ -1,0 +1,642 @@
+"""The emulated lower computer: state machine, safety, frames in and out.
+
+``Mcu`` is driven by whoever owns the clock: ``receive(frame_id, data)`` for every frame from
+the upper computer and ``step()`` once per control period (``1 / rates.control_hz``). It sends
+frames through the ``send(frame_id, data)`` callback at the catalog's cycle times. It never
+reads the wall clock: on a ``SimClock`` an hour of driving takes seconds.
+
+Safety as real firmware does it: standby after boot until ControlCommand EnableCanControl; a
+command watchdog (commandTimeout) brakes to zero when MotionCommand stops arriving; e-stop
+latches until EStopRelease (and then waits in standby to be enabled again); NaN, infinite and
+out-of-range commands are rejected and flagged; FaultClear clears latched faults whose cause is
+gone.
+"""
+
+from __future__ import annotations
+
+import enum
+import heapq
+import logging
+import math
+from collections import Counter
+from collections.abc import Callable, Iterable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lowerbase.clock import Clock
+from lowerbase.errors import ConfigError, ProtocolError
+from lowerbase.firmware_model import kinematics
+from lowerbase.firmware_model.encoder import EncoderCounter
+from lowerbase.firmware_model.faults import Fault, parse_fault
+from lowerbase.firmware_model.imu import ImuModel
+from lowerbase.firmware_model.motor import WheelGeometry, WheelMotor
+from lowerbase.firmware_model.parameters import SPECS, ParameterStore, Result, check
+from lowerbase.firmware_model.profile import ChassisParams, Profile
+from lowerbase.firmware_model.smoother import SmootherLimits, VelocitySmoother
+from lowerbase.firmware_model.truth import GroundTruth, SlipModel, TrueGeometry
+from lowerbase.protocol.codec import Codec, MessageCodec, default_codec
+from lowerbase.protocol.status_codes import LATCHED, STOPPING, StatusBit
+
+log = logging.getLogger(__name__)
+
+PROTOCOL_VERSION = 1
+BOOT_TIME = 0.3  #: [s] from power-on to standby
+BMS_POLL_PERIOD = 0.5  #: [s]
+BMS_LINK_TIMEOUT = 3.0  #: [s] without an answer -> BMS_LINK_LOST
+ENCODER_FAULT_TIME = 0.2  #: [s] commanded motion without pulses -> encoder fault
+IMU_FROZEN_SAMPLES = 20  #: identical consecutive samples -> IMU fault
+STANDBY_HINT_TIME = 1.0  #: [s] COMMAND_IN_STANDBY stays set after the last such command
+STATE_SAVE_PERIOD = 60.0  #: [s] odometer and boot counter persisted at least this often
+
+LED_DEFAULT = {"Urgency": 0, "Abnormal": 0, "Normal": 0xA3, "Color": 0xFFFFFF}  # Idle, white
+VALID_LED_NORMAL = frozenset(default_codec().message("LedCommand").signal("Normal").choices)
+
+
+class RobotState(enum.IntEnum):
+    BOOT = 0
+    STANDBY = 1
+    ACTIVE = 2
+    EMERGENCY_STOP = 3
+    FAULT = 4
+
+
+class Command(enum.IntEnum):
+    ENABLE_CAN_CONTROL = 1
+    STANDBY = 2
+    ESTOP_SET = 3
+    ESTOP_RELEASE = 4
+    FAULT_CLEAR = 5
+    ODOMETER_RESET = 6
+    REBOOT = 7
+
+
+Send = Callable[[int, bytes], None]
+
+
+class Mcu:
+    """The chassis MCU. See the module docstring for the contract."""
+
+    def __init__(
+        self,
+        profile: Profile,
+        clock: Clock,
+        send: Send,
+        *,
+        params_path: str | Path | None = None,
+        bms: Any = None,
+        faults: Iterable[Fault | str] = (),
+        codec: Codec | None = None,
+    ) -> None:
+        self.profile = profile
+        self.clock = clock
+        self._send = send
+        self.codec = codec or default_codec()
+        self.store = ParameterStore(params_path)
+        self.bms = bms  # lowerbase.bms device adapter: step(dt, load_current), poll(), frames
+        self.dt = 1.0 / profile.rates.control_hz
+        self.stats: Counter[str] = Counter()
+        self.faults: list[Fault] = [f if isinstance(f, Fault) else parse_fault(f) for f in faults]
+        self._rng = np.random.default_rng(profile.truth.seed + 1)
+        self._periodic = [m for m in self.codec if m.is_periodic and "Lower" in m.senders]
+        self._counters: dict[str, int] = {m.name: 0 for m in self.codec}
+        self._delayed: list[tuple[float, int, int, bytes]] = []
+        self._seq = 0
+        self.boot_counter = 0
+        self.odometer = 0.0
+        self.truth = GroundTruth(TrueGeometry.from_profile(profile.chassis, profile.truth))
+        self.slip = SlipModel(profile.truth)
+        self.power_on()
+
+    # -- boot --------------------------------------------------------------------------------
+
+    def power_on(self) -> None:
+        """Boot (also what Reboot does): load parameters, count the boot, start in BOOT."""
+        params, state, problems = self.store.load()
+        self.status = 0
+        if problems:
+            for p in problems:
+                log.warning("%s", p)
+            self.status |= StatusBit.PARAMETER_ERROR
+        try:
+            self.chassis = ChassisParams.from_wire_dict(params, self.profile.chassis)
+        except ConfigError as exc:
+            log.warning("parameter file rejected (%s); profile defaults used", exc)
+            self.chassis = self.profile.chassis
+            self.status |= StatusBit.PARAMETER_ERROR
+        self.boot_counter = (int(state.get("boot_counter", self.boot_counter)) + 1) & 0xFFFF
+        self.odometer = float(state.get("odometer", self.odometer))
+        now = self.clock.now()
+        self.boot_time = now
+        self.state = RobotState.BOOT
+        self.estop_command = False
+        self.motion_fault = 0  # latched motor-fault bits
+        self._last_cmd: tuple[float, float, int] | None = None
+        self._last_cmd_time = -math.inf
+        self._standby_cmd_time = -math.inf
+        self._watchdog = False
+        self._speed_limited = False
+        self._next_due = {m.name: now + (m.cycle_time or 0.0) for m in self._periodic}
+        self._motors = {
+            side: WheelMotor(self.profile.motor, WheelGeometry.from_chassis(self.chassis, side))
+            for side in ("left", "right")
+        }
+        self._encoders = {
+            "left": EncoderCounter(self.chassis.ratio_left, self.chassis.pulse_per_circle),
+            "right": EncoderCounter(self.chassis.ratio_right, self.chassis.pulse_per_circle),
+        }
+        self._enc_stuck = {"left": 0.0, "right": 0.0}
+        self.smoother = VelocitySmoother(SmootherLimits.from_chassis(self.chassis))
+        self.imu = ImuModel(self.profile.imu)
+        self._imu_last: tuple[Any, Any] | None = None
+        self._imu_same = 0
+        self._imu_due = now
+        self.imu_sample = ((0.0, 0.0, 0.0), (0.0, 0.0, self.profile.imu.gravity))
+        self.leds = {(strip, sub): dict(LED_DEFAULT) for strip in (0, 1) for sub in range(1, 9)}
+        self._bms_last_answer = now
+        self._bms_next_poll = now
+        self.bms_snapshot: Any = None
+        self._imu_bias_applied = 0.0
+        self._last_save = now
+        self._save_state()
+        log.info("boot #%d", self.boot_counter)
+
+    def _save_state(self) -> None:
+        try:
+            self.store.save(self.chassis.as_wire_dict(), {
+                "boot_counter": self.boot_counter, "odometer": round(self.odometer, 6)})
+        except OSError as exc:
+            log.error("cannot write the parameter file: %s", exc)
+            self.status |= StatusBit.PARAMETER_STORE_FAILED
+            return
+        self._last_save = self.clock.now()
+
+    def shutdown(self) -> None:
+        """Persist the odometer and boot counter (a clean power-off)."""
+        self._save_state()
+
+    # -- faults ------------------------------------------------------------------------------
+
+    def inject(self, fault: Fault | str) -> Fault:
+        """Start a fault now (relative times are counted from boot)."""
+        f = fault if isinstance(fault, Fault) else parse_fault(fault)
+        if f.start == 0.0:
+            f = replace(f, start=self.clock.now() - self.boot_time)
+        self.faults.append(f)
+        return f
+
+    def clear_fault(self, kind: str | None = None) -> None:
+        """End injected faults of ``kind`` (all with None)."""
+        self.faults = [f for f in self.faults if kind is not None and f.kind != kind]
+
+    def _active(self, kind: str, arg: str | None = None) -> Fault | None:
+        t = self.clock.now() - self.boot_time
+        for f in self.faults:
+            if f.kind == kind and (arg is None or f.arg == arg) and f.active(t):
+                return f
+        return None
+
+    # -- receiving ---------------------------------------------------------------------------
+
+    def receive(self, frame_id: int, data: bytes) -> None:
+        """Handle one frame from the bus. Bad frames are counted and dropped, never raised."""
+        self.stats["rx_frames"] += 1
+        if frame_id not in self.codec:
+            self.stats["rx_unknown_id"] += 1
+            return
+        msg = self.codec.message(frame_id)
+        if "Upper" not in msg.senders:
+            self.stats["rx_ignored"] += 1  # our own frames echoed, or another lower computer
+            return
+        if self.state == RobotState.BOOT:
+            self.stats["rx_during_boot"] += 1
+            return
+        try:
+            values = msg.decode(data)
+        except ProtocolError as exc:
+            self.stats["rx_malformed"] += 1
+            if msg.name == "MotionCommand":
+                self.status |= StatusBit.COMMAND_REJECTED
+            log.debug("dropped %s: %s", msg.name, exc)
+            return
+        handler = getattr(self, f"_on_{msg.name}")
+        handler(values)
+
+    def command(self, linear: float, angular: float, smoothed: bool = False) -> bool:
+        """In-process MotionCommand (what the frame does). False when rejected."""
+        return self._motion(linear, angular, 1 if smoothed else 0)
+
+    def _on_MotionCommand(self, v: dict[str, Any]) -> None:
+        self._motion(float(v["Linear"]), float(v["Angular"]), int(v["Mode"]))
+
+    def _motion(self, linear: float, angular: float, mode: int) -> bool:
+        now = self.clock.now()
+        if self.state != RobotState.ACTIVE:
+            self._standby_cmd_time = now
+            self.stats["rx_motion_ignored"] += 1
+            return False
+        lim = kinematics.limit_twist(linear, angular, self.chassis)
+        if not lim.valid:
+            self.status |= StatusBit.COMMAND_REJECTED
+            self.stats["rx_motion_rejected"] += 1
+            return False
+        self._speed_limited = lim.clipped
+        self._last_cmd = (lim.v, lim.w, mode)
+        self._last_cmd_time = now
+        return True
+
+    def _on_ControlCommand(self, v: dict[str, Any]) -> None:
+        self.control(Command(int(v["Command"])))
+
+    def control(self, cmd: Command) -> None:
+        """ControlCommand, in process."""
+        self.stats[f"control_{cmd.name.lower()}"] += 1
+        if cmd == Command.ENABLE_CAN_CONTROL:
+            if self.state == RobotState.STANDBY:
+                self.state = RobotState.ACTIVE
+                self._last_cmd = None
+                self._last_cmd_time = self.clock.now()  # the watchdog starts now
+        elif cmd == Command.STANDBY:
+            if self.state == RobotState.ACTIVE:
+                self.state = RobotState.STANDBY
+        elif cmd == Command.ESTOP_SET:
+            self.estop_command = True
+        elif cmd == Command.ESTOP_RELEASE:
+            self.estop_command = False
+        elif cmd == Command.FAULT_CLEAR:
+            self._fault_clear()
+        elif cmd == Command.ODOMETER_RESET:
+            self.odometer = 0.0
+            self._save_state()
+        elif cmd == Command.REBOOT:
+            self._save_state()
+            self.power_on()
+
+    def _fault_clear(self) -> None:
+        keep = 0
+        for side, bit in (("left", StatusBit.LEFT_MOTOR_FAULT), ("right", StatusBit.RIGHT_MOTOR_FAULT)):
+            motor = self._motors[side]
+            cause = self._active("stall", side) or self._active("overcurrent", side)
+            if cause:
+                keep |= bit
+            else:
+                motor.clear_faults()
+        self.motion_fault &= keep
+        self.status &= ~int(LATCHED & ~(StatusBit.ESTOP_BUTTON | StatusBit.ESTOP_COMMAND))
+        self.status |= keep
+
+    def _on_LedCommand(self, v: dict[str, Any]) -> None:
+        if v["Urgency"] not in (0, 0xFF) or v["Abnormal"] not in (0, 0xFF) or (
+            v["Normal"] not in VALID_LED_NORMAL
+        ):
+            self.stats["rx_led_invalid"] += 1
+            return
+        subs = range(1, 9) if v["Submodule"] == 0 else (int(v["Submodule"]),)
+        for sub in subs:
+            self.leds[(int(v["Strip"]), sub)] = {
+                k: int(v[k]) for k in ("Urgency", "Abnormal", "Normal", "Color")
+            }
+
+    def _on_ParameterRequest(self, v: dict[str, Any]) -> None:
+        index, op = int(v["Index"]), int(v["Op"])
+        result, value = self.parameter(index, float(v["Value"]) if op == 1 else None)
+        self._emit("ParameterResponse", {"Index": index, "Op": op, "Result": int(result),
+                                         "Value": value})
+
+    def parameter(self, index: int, value: float | None = None) -> tuple[Result, float]:
+        """Read (value None) or write one parameter; returns (result, value in force)."""
+        spec = SPECS.get(index)
+        if spec is None:
+            return Result.UNKNOWN_INDEX, 0.0
+        current = float(self.chassis.as_wire_dict()[spec.name])
+        if value is None:
+            return Result.ACK, current
+        result = check(spec, value)
+        if result != Result.ACK:
+            return result, current
+        moving = any(abs(m.omega) > 1e-6 for m in self._motors.values())
+        if spec.only_at_rest and moving:
+            return Result.NOT_ALLOWED_NOW, current
+        try:
+            new = self.chassis.with_wire_value(spec.name, int(value) if spec.integer else value)
+        except ConfigError:
+            return Result.OUT_OF_RANGE, current  # breaks a relation (e.g. minSpeed < maxSpeed)
+        old = self.chassis
+        self.chassis = new
+        self._save_state()
+        if self.status & StatusBit.PARAMETER_STORE_FAILED and self.store.path is not None:
+            self.chassis = old  # not persisted: keep what the file says
+            return Result.STORAGE_ERROR, current
+        self._apply_chassis()
+        return Result.ACK, float(self.chassis.as_wire_dict()[spec.name])
+
+    def _apply_chassis(self) -> None:
+        c = self.chassis
+        for side in ("left", "right"):
+            self._motors[side].geometry = WheelGeometry.from_chassis(c, side)  # type: ignore[arg-type]
+        self._encoders["left"].ratio = c.ratio_left
+        self._encoders["right"].ratio = c.ratio_right
+        for enc in self._encoders.values():
+            enc.pulse_per_circle = c.pulse_per_circle
+        self.smoother.limits = SmootherLimits.from_chassis(c)
+
+    def _on_VersionRequest(self, v: dict[str, Any]) -> None:
+        ident = self.profile.identity
+        strings = {
+            1: ident.hardware_version, 2: ident.software_version,
+            3: ident.iap_software_version, 4: ident.movebase_type,
+        }
+        fields = strings if int(v["Field"]) == 0 else {int(v["Field"]): strings[int(v["Field"])]}
+        for field, text in fields.items():
+            raw = text.encode("ascii")
+            chunks = [raw[i : i + 6] for i in range(0, len(raw), 6)] or [b""]
+            for seq, chunk in enumerate(chunks):
+                self._emit("VersionResponse", {
+                    "Field": field, "Last": int(seq == len(chunks) - 1), "Sequence": seq,
+                    "Text": int.from_bytes(chunk.ljust(6, b"\0"), "little")})
+
+    # -- the control loop --------------------------------------------------------------------
+
+    def step(self) -> None:
+        """One control period: safety, motion, sensors, BMS, then the frames that are due."""
+        now = self.clock.now()
+        dt = self.dt
+        if self.state == RobotState.BOOT and now - self.boot_time >= BOOT_TIME:
+            self.state = RobotState.STANDBY
+        self._apply_faults()
+        target_v, target_w, brake = self._target(now)
+        c = self.chassis
+        v_l, v_r = kinematics.wheel_speeds_from_twist(target_v, target_w, c.wheel_distant)
+        targets = {
+            "left": kinematics.rim_speed_to_wheel_rad_s(v_l, c.wheel_perimeter),
+            "right": kinematics.rim_speed_to_wheel_rad_s(v_r, c.wheel_perimeter),
+        }
+        angles = {}
+        for side, motor in self._motors.items():
+            angles[side] = motor.step(targets[side], dt, brake=brake)
+        rim_accel = (0.0, 0.0)
+        slip = self.slip.step(now - self.boot_time, self.truth.v * dt, rim_accel)
+        self.truth.step(angles["left"] / dt, angles["right"] / dt, dt, slip)
+        ds = 0.0
+        for side, enc in self._encoders.items():
+            before = enc.total
+            enc.add(angles[side])
+            moved = enc.total - before
+            ds += 0.5 * moved / enc.pulses_per_wheel_rad() * c.wheel_radius
+            self._check_encoder(side, moved, dt)
+        self.odometer += abs(ds)
+        if now >= self._imu_due:
+            self._sample_imu()
+            self._imu_due += self._cycle("ImuGyro")
+        self._update_bms(now, dt)
+        self._update_status(now)
+        if now - self._last_save >= STATE_SAVE_PERIOD:
+            self._save_state()
+        self._emit_due(now)
+        self._release_delayed(now)
+
+    def _target(self, now: float) -> tuple[float, float, bool]:
+        """Twist to drive (after limits and smoothing) and whether to brake."""
+        stop = bool(self.status & STOPPING) or self.estop_command or self.motion_fault
+        if self.state != RobotState.ACTIVE or stop:
+            self.smoother.reset(*self._measured_twist())
+            self._watchdog = False
+            return 0.0, 0.0, True
+        if self._last_cmd is None or now - self._last_cmd_time > self.chassis.command_timeout:
+            moving = any(abs(m.omega) > 1e-9 for m in self._motors.values())
+            self._watchdog = self._watchdog or moving or self._last_cmd is not None
+            self._last_cmd = None
+            self.smoother.reset(*self._measured_twist())
+            return 0.0, 0.0, True
+        self._watchdog = False
+        v, w, mode = self._last_cmd
+        if mode == 1:
+            v, w = self.smoother.step(v, w, self.dt)
+        else:
+            self.smoother.reset(v, w)
+        return v, w, False
+
+    def _measured_twist(self) -> tuple[float, float]:
+        return kinematics.twist_from_wheel_speeds(
+            self._motors["left"].rim_speed, self._motors["right"].rim_speed,
+            self.chassis.wheel_distant)
+
+    def _apply_faults(self) -> None:
+        for side in ("left", "right"):
+            self._motors[side].blocked = self._active("stall", side) is not None
+            if self._active("overcurrent", side):
+                self._motors[side].inject_over_current()
+            self._encoders[side].dropout = self._active("encoder", side) is not None
+        self.imu.freeze(self._active("imu-freeze") is not None)
+        bias = self._active("imu-bias")
+        want = bias.value if bias else 0.0
+        if want != self._imu_bias_applied:
+            self.imu.bias_step(gyro=(0.0, 0.0, want - self._imu_bias_applied))
+            self._imu_bias_applied = want
+
+    def _check_encoder(self, side: str, moved: int, dt: float) -> None:
+        motor = self._motors[side]
+        commanded = abs(motor.setpoint) * motor.geometry.radius > self.profile.motor.stall_speed
+        if commanded and moved == 0 and not motor.blocked:
+            self._enc_stuck[side] += dt
+        else:
+            self._enc_stuck[side] = 0.0
+
+    def _sample_imu(self) -> None:
+        gyro, accel = self.imu.sample(self.truth.body_omega, self.truth.body_accel,
+                                      self._cycle("ImuGyro"))
+        sample = (gyro, accel)
+        if self._imu_last is not None and sample == self._imu_last:
+            self._imu_same += 1
+        else:
+            self._imu_same = 0
+        self._imu_last = sample
+        self.imu_sample = sample
+
+    def load_current(self) -> float:
+        """Battery current drawn by the chassis [A] (positive = discharge)."""
+        total = self.profile.motor.idle_current * 2
+        for motor in self._motors.values():
+            # electrical power ~ torque current x motor speed share, at the pack voltage
+            rpm_share = abs(motor.motor_rpm) / max(self.chassis.max_rpm, 1.0)
+            total += abs(motor.current) * rpm_share
+        return total + 1.0  # computers, sensors, LEDs
+
+    def _update_bms(self, now: float, dt: float) -> None:
+        if self.bms is None:
+            return
+        self.bms.step(dt, self.load_current())
+        if now < self._bms_next_poll:
+            return
+        self._bms_next_poll += BMS_POLL_PERIOD
+        snapshot = None if self._active("bms-silence") else self.bms.poll()
+        if snapshot is not None:
+            self.bms_snapshot = snapshot
+            self._bms_last_answer = now
+
+    def _update_status(self, now: float) -> None:
+        s = self.status & int(LATCHED)
+        if self._active("estop"):
+            s |= StatusBit.ESTOP_BUTTON
+        if self.estop_command:
+            s |= StatusBit.ESTOP_COMMAND
+        if self._watchdog:
+            s |= StatusBit.WATCHDOG_STOP
+        if now - self._standby_cmd_time < STANDBY_HINT_TIME:
+            s |= StatusBit.COMMAND_IN_STANDBY
+        if self._speed_limited and self._last_cmd is not None:
+            s |= StatusBit.SPEED_LIMITED
+        for side, prefix in (("left", "LEFT"), ("right", "RIGHT")):
+            motor = self._motors[side]
+            if motor.over_current:
+                s |= StatusBit[f"{prefix}_OVER_CURRENT"]
+            if motor.stalled:
+                s |= StatusBit[f"{prefix}_MOTOR_STALLED"]
+            if motor.over_current or motor.stalled:
+                s |= StatusBit[f"{prefix}_MOTOR_FAULT"]
+                self.motion_fault |= StatusBit[f"{prefix}_MOTOR_FAULT"]
+            if self._enc_stuck[side] >= ENCODER_FAULT_TIME:
+                s |= StatusBit[f"{prefix}_ENCODER_FAULT"]
+        s |= self.motion_fault
+        if self._imu_same >= IMU_FROZEN_SAMPLES:
+            s |= StatusBit.IMU_FAULT
+        if self._active("silence") or self._active("drop") or self._active("corrupt"):
+            s |= StatusBit.BUS_ERROR
+        s |= self._bms_status_bits(now)
+        # the button e-stop is latched only while pressed; releasing needs EStopRelease too
+        if s & StatusBit.ESTOP_BUTTON:
+            self.estop_command = True
+        self.status = int(s)
+        if self.state in (RobotState.ACTIVE, RobotState.EMERGENCY_STOP, RobotState.FAULT):
+            if self.status & (StatusBit.ESTOP_BUTTON | StatusBit.ESTOP_COMMAND):
+                self.state = RobotState.EMERGENCY_STOP
+            elif self.motion_fault or self.status & StatusBit.BMS_PROTECTION:
+                self.state = RobotState.FAULT
+            elif self.state != RobotState.ACTIVE:
+                self.state = RobotState.STANDBY  # released: wait to be enabled again
+
+    def _bms_status_bits(self, now: float) -> int:
+        if self.bms is None:
+            return 0
+        bits = 0
+        if now - self._bms_last_answer > BMS_LINK_TIMEOUT:
+            bits |= StatusBit.BMS_LINK_LOST
+        snap = self.bms_snapshot
+        if snap is not None:
+            bits |= int(self.bms.status_bits(snap))
+        return bits
+
+    # -- sending -----------------------------------------------------------------------------
+
+    def _cycle(self, name: str) -> float:
+        return self.codec.message(name).cycle_time or 0.0
+
+    def _emit_due(self, now: float) -> None:
+        for msg in self._periodic:
+            due = self._next_due[msg.name]
+            if now + 1e-9 < due:
+                continue
+            # keep the period; after a stall, skip the missed slots instead of bursting
+            period = msg.cycle_time or 0.0
+            missed = math.floor((now - due) / period) if period else 0
+            self._next_due[msg.name] = due + (missed + 1) * period
+            for values in self._build(msg):
+                self._emit(msg.name, values)
+
+    def _build(self, msg: MessageCodec) -> list[dict[str, Any]]:
+        name = msg.name
+        if name == "WheelFeedback":
+            rows = []
+            for wheel, side in ((0, "left"), (1, "right")):
+                motor, enc = self._motors[side], self._encoders[side]
+                rows.append({
+                    "Count": enc.count, "Velocity": _clip(motor.rim_speed, msg, "Velocity"),
+                    "Current": _clip(motor.current, msg, "Current"), "Wheel": wheel,
+                    "DriverStatus": motor.status_bits | enc.status_bits})
+            return rows
+        if name == "MotionState":
+            v, w = self._measured_twist()
+            return [{"Linear": _clip(v, msg, "Linear"), "Angular": _clip(w, msg, "Angular")}]
+        if name == "Odometer":
+            return [{"Distance": _clip(self.odometer, msg, "Distance")}]
+        if name in ("ImuGyro", "ImuAccel"):
+            xyz = self.imu_sample[0 if name == "ImuGyro" else 1]
+            return [{axis: _clip(val, msg, axis) for axis, val in zip("XYZ", xyz, strict=True)}]
+        if name == "StatusCode":
+            return [{"Code": self.status}]
+        if name == "SystemStatus":
+            snap = self.bms_snapshot
+            volts = snap.voltage if snap is not None else 0.0
+            return [{
+                "RobotState": int(self.state),
+                "ControlMode": 1 if self.state == RobotState.ACTIVE else 0,
+                "EStop": int(bool(self.status & (StatusBit.ESTOP_BUTTON | StatusBit.ESTOP_COMMAND))),
+                "WatchdogStop": int(self._watchdog),
+                "Braking": int(self._watchdog or bool(self.status & STOPPING)),
+                "Charging": int(bool(self.status & StatusBit.CHARGING)),
+                "BatteryVoltage": _clip(volts, msg, "BatteryVoltage")}]
+        if name == "Heartbeat":
+            return [{"Uptime": _clip(self.clock.now() - self.boot_time, msg, "Uptime"),
+                     "BootCounter": self.boot_counter, "ProtocolVersion": PROTOCOL_VERSION}]
+        if name == "LedState":
+            return [{"Strip": strip, "Submodule": sub, **led}
+                    for (strip, sub), led in sorted(self.leds.items())]
+        if name.startswith("Bms"):
+            if self.bms is None or self.bms_snapshot is None or self._bms_link_lost():
+                return []
+            return [self.bms.frame(name, self.bms_snapshot)]
+        raise KeyError(name)  # pragma: no cover - every periodic message is built above
+
+    def _bms_link_lost(self) -> bool:
+        return self.clock.now() - self._bms_last_answer > BMS_LINK_TIMEOUT
+
+    def _emit(self, name: str, values: dict[str, Any]) -> None:
+        msg = self.codec.message(name)
+        if msg.has_counter:
+            values["Counter"] = self._counters[name]
+            self._counters[name] = (self._counters[name] + 1) & 0xF
+        data = msg.encode(values)
+        if self._active("silence"):
+            self.stats["tx_silenced"] += 1
+            return
+        drop = self._active("drop")
+        if drop and self._rng.random() < drop.value:
+            self.stats["tx_dropped"] += 1
+            return
+        corrupt = self._active("corrupt")
+        if corrupt and self._rng.random() < corrupt.value:
+            data = data[:-1]  # a frame one byte short: the strict decoder refuses it
+            self.stats["tx_corrupted"] += 1
+        delay = self._active("delay")
+        if delay and delay.value > 0:
+            self._seq += 1
+            heapq.heappush(self._delayed, (self.clock.now() + delay.value, self._seq,
+                                           msg.frame_id, data))
+            return
+        self.stats["tx_frames"] += 1
+        self._send(msg.frame_id, data)
+
+    def _release_delayed(self, now: float) -> None:
+        while self._delayed and self._delayed[0][0] <= now + 1e-9:
+            _, _, frame_id, data = heapq.heappop(self._delayed)
+            self.stats["tx_frames"] += 1
+            self._send(frame_id, data)
+
+    # -- views for tests and benches (never on the bus) ----------------------------------------
+
+    def encoder_counts(self) -> tuple[int, int]:
+        return self._encoders["left"].count, self._encoders["right"].count
+
+    @property
+    def motors(self) -> dict[str, WheelMotor]:
+        return self._motors
+
+
+def _clip(value: float, msg: MessageCodec, signal: str) -> float:
+    """Saturate a measurement at its signal's range, as a sensor register does."""
+    s = msg.signal(signal)
+    lo = s.minimum if s.minimum is not None else -math.inf
+    hi = s.maximum if s.maximum is not None else math.inf
+    return min(max(value, lo), hi)

@@ -317,9 +317,10 @@ class MessageCodec:
                 if s.raw_max != full_hi:
                     checks.append(f"{v} > {s.raw_max}")
                 lines.append(f"    if strict and ({' or '.join(checks)}):")
+                unit = s.unit.replace("%", "%%").replace("'", "")
                 lines.append(
                     f"        raise SignalRangeError('{self.name}.{s.name} = %r is outside "
-                    f"[{s.minimum}, {s.maximum}] {s.unit}' % ({v} * {s.scale!r} + {s.offset!r}))"
+                    f"[{s.minimum}, {s.maximum}] {unit}' % ({v} * {s.scale!r} + {s.offset!r}))"
                 )
             if s.kind == "identity":
                 out.append(f"'{s.name}': {v}")

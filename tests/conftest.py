@@ -1,0 +1,98 @@
+"""Shared fixtures: free loopback ports, isolated multicast buses, subprocess helpers."""
+
+from __future__ import annotations
+
+import os
+import select
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+#: a multicast group of the tests' own; each test also gets its own port
+TEST_GROUP = "239.74.163.99"
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def free_tcp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+def udp_bus_config() -> dict[str, Any]:
+    """A udp_multicast configuration no other test (or parallel run) shares."""
+    return {"interface": "udp_multicast", "channel": TEST_GROUP, "port": free_udp_port(),
+            "hop_limit": 0}
+
+
+def bus_cli_args(config: dict[str, Any]) -> list[str]:
+    """The same configuration as python-can command-line flags."""
+    extra = [f"{k}={v}" for k, v in config.items() if k not in ("interface", "channel")]
+    args = ["-i", config["interface"], "-c", str(config["channel"])]
+    return args + (["--bus-kwargs", *extra] if extra else [])
+
+
+class Proc:
+    """A lowerbase subprocess whose stdout is read line by line with a deadline."""
+
+    def __init__(self, args: list[str], env: dict[str, str] | None = None) -> None:
+        self.popen = subprocess.Popen(
+            [sys.executable, "-m", "lowerbase", *args],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
+            env={**os.environ, **(env or {})},
+        )
+        self.lines: list[str] = []
+
+    def wait_for(self, text: str, timeout: float = 20.0) -> str:
+        assert self.popen.stdout is not None
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([self.popen.stdout], [], [], 0.2)
+            if ready:
+                line = self.popen.stdout.readline()
+                if not line:
+                    break
+                self.lines.append(line)
+                if text in line:
+                    return line
+            elif self.popen.poll() is not None:
+                break
+        err = self.popen.stderr.read() if self.popen.poll() is not None and self.popen.stderr else ""
+        raise AssertionError(f"{text!r} not printed; stdout={self.lines!r} stderr={err!r}")
+
+    def stop(self, timeout: float = 10.0) -> tuple[int, str]:
+        if self.popen.poll() is None:
+            self.popen.send_signal(2)  # Ctrl-C
+        try:
+            _, err = self.popen.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.popen.kill()
+            _, err = self.popen.communicate()
+        return self.popen.returncode, err
+
+
+@pytest.fixture
+def lowerbase_proc() -> Iterator[Any]:
+    procs: list[Proc] = []
+
+    def start(*args: str, env: dict[str, str] | None = None) -> Proc:
+        p = Proc(list(args), env)
+        procs.append(p)
+        return p
+
+    yield start
+    for p in procs:
+        p.stop()

@@ -70,7 +70,8 @@ class Proc:
                     return line
             elif self.popen.poll() is not None:
                 break
-        err = self.popen.stderr.read() if self.popen.poll() is not None and self.popen.stderr else ""
+        done = self.popen.poll() is not None
+        err = self.popen.stderr.read() if done and self.popen.stderr else ""
         raise AssertionError(f"{text!r} not printed; stdout={self.lines!r} stderr={err!r}")
 
     def stop(self, timeout: float = 10.0) -> tuple[int, str]:

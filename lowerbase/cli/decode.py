@@ -73,7 +73,8 @@ def format_signals(values: dict[str, Any], codec_msg: Any) -> str:
     for s in codec_msg.signals:
         v = values[s.name]
         text = f"{v:.6g}" if isinstance(v, float) else str(v)
-        parts.append(f"{s.name}={text}{(' ' + s.unit) if s.unit and not isinstance(v, str) else ''}")
+        unit = f" {s.unit}" if s.unit and not isinstance(v, str) else ""
+        parts.append(f"{s.name}={text}{unit}")
     return " ".join(parts)
 
 

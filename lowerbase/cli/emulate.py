@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import signal
 import sys
@@ -95,19 +96,15 @@ def run(args: argparse.Namespace) -> int:
             stop.set()
 
         signal.signal(signal.SIGTERM, _stop)
-        try:
+        with contextlib.suppress(KeyboardInterrupt):
             run_mcu(mcu, bus, clock, duration=args.duration, stop=stop)
-        except KeyboardInterrupt:
-            pass
         mcu.shutdown()
         stats = ", ".join(f"{k} {v}" for k, v in sorted(mcu.stats.items()))
         print(f"lowerbase emulate: stopped after {clock.now() - mcu.boot_time:.1f} s; {stats}",
               file=sys.stderr)
     finally:
-        try:
+        with contextlib.suppress(can.CanError):
             bus.shutdown()
-        except can.CanError:  # pragma: no cover
-            pass
     return 0
 
 

@@ -40,6 +40,12 @@ from lowerbase.firmware_model.truth import GroundTruth, SlipModel, TrueGeometry
 from lowerbase.protocol.codec import Codec, MessageCodec, default_codec
 from lowerbase.protocol.status_codes import LATCHED, STOPPING, StatusBit
 
+ESTOP_BITS = StatusBit.ESTOP_BUTTON | StatusBit.ESTOP_COMMAND
+#: latched bits set by an event (not recomputed each step); FaultClear clears them
+CARRIED = (
+    StatusBit.COMMAND_REJECTED | StatusBit.PARAMETER_ERROR | StatusBit.PARAMETER_STORE_FAILED
+)
+
 log = logging.getLogger(__name__)
 
 PROTOCOL_VERSION = 1
@@ -264,7 +270,12 @@ class Mcu:
         elif cmd == Command.ESTOP_SET:
             self.estop_command = True
         elif cmd == Command.ESTOP_RELEASE:
+            if self._active("estop"):
+                return  # the button is still pressed
             self.estop_command = False
+            self.status &= ~int(StatusBit.ESTOP_BUTTON | StatusBit.ESTOP_COMMAND)
+            if self.state == RobotState.EMERGENCY_STOP:
+                self.state = RobotState.STANDBY  # wait to be enabled again
         elif cmd == Command.FAULT_CLEAR:
             self._fault_clear()
         elif cmd == Command.ODOMETER_RESET:
@@ -276,7 +287,8 @@ class Mcu:
 
     def _fault_clear(self) -> None:
         keep = 0
-        for side, bit in (("left", StatusBit.LEFT_MOTOR_FAULT), ("right", StatusBit.RIGHT_MOTOR_FAULT)):
+        faults = (("left", StatusBit.LEFT_MOTOR_FAULT), ("right", StatusBit.RIGHT_MOTOR_FAULT))
+        for side, bit in faults:
             motor = self._motors[side]
             cause = self._active("stall", side) or self._active("overcurrent", side)
             if cause:
@@ -334,8 +346,8 @@ class Mcu:
 
     def _apply_chassis(self) -> None:
         c = self.chassis
-        for side in ("left", "right"):
-            self._motors[side].geometry = WheelGeometry.from_chassis(c, side)  # type: ignore[arg-type]
+        self._motors["left"].geometry = WheelGeometry.from_chassis(c, "left")
+        self._motors["right"].geometry = WheelGeometry.from_chassis(c, "right")
         self._encoders["left"].ratio = c.ratio_left
         self._encoders["right"].ratio = c.ratio_right
         for enc in self._encoders.values():
@@ -477,7 +489,8 @@ class Mcu:
             self._bms_last_answer = now
 
     def _update_status(self, now: float) -> None:
-        s = self.status & int(LATCHED)
+        # event-latched bits carry over; the others are recomputed from their causes below
+        s = self.status & int(CARRIED)
         if self._active("estop"):
             s |= StatusBit.ESTOP_BUTTON
         if self.estop_command:
@@ -540,7 +553,7 @@ class Mcu:
                 continue
             # keep the period; after a stall, skip the missed slots instead of bursting
             period = msg.cycle_time or 0.0
-            missed = math.floor((now - due) / period) if period else 0
+            missed = max(0, math.floor((now - due) / period)) if period else 0
             self._next_due[msg.name] = due + (missed + 1) * period
             for values in self._build(msg):
                 self._emit(msg.name, values)
@@ -572,7 +585,7 @@ class Mcu:
             return [{
                 "RobotState": int(self.state),
                 "ControlMode": 1 if self.state == RobotState.ACTIVE else 0,
-                "EStop": int(bool(self.status & (StatusBit.ESTOP_BUTTON | StatusBit.ESTOP_COMMAND))),
+                "EStop": int(bool(self.status & ESTOP_BITS)),
                 "WatchdogStop": int(self._watchdog),
                 "Braking": int(self._watchdog or bool(self.status & STOPPING)),
                 "Charging": int(bool(self.status & StatusBit.CHARGING)),

@@ -2,7 +2,8 @@
 
 Index numbers and names come from the catalog (the value table of ParameterRequest.Index);
 units and ranges are the profile's (``ChassisParams`` field metadata), so a parameter file,
-a profile and a ParameterRequest are checked against the same limits. The store writes the parameter file atomically (temporary file,
+a profile and a ParameterRequest are checked against the same limits. The store writes the
+parameter file atomically (temporary file,
 fsync, rename), so a crash mid-write leaves the previous file intact.
 """
 

@@ -19,7 +19,9 @@ from lowerbase.firmware_model.mcu import Mcu
 log = logging.getLogger(__name__)
 
 
-def bus_sender(bus: can.BusABC, mcu_stats: Callable[[str], None] | None = None) -> Callable[[int, bytes], None]:
+def bus_sender(
+    bus: can.BusABC, mcu_stats: Callable[[str], None] | None = None
+) -> Callable[[int, bytes], None]:
     """An Mcu ``send`` callback writing to ``bus``; transmit errors are counted, not raised."""
 
     def send(frame_id: int, data: bytes) -> None:

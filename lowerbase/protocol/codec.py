@@ -174,7 +174,7 @@ class MessageCodec:
         ``strict`` (default) raises :class:`SignalRangeError` for a value outside the
         catalog range; ``decode_choices`` replaces values that have a name by the name.
         """
-        values: Signals = self._decode(data, strict)
+        values: Signals = self._decode(data, strict)  # type: ignore[arg-type]  # any buffer
         if decode_choices:
             for name, table in ((s.name, s.choices) for s in self.signals if s.choices):
                 raw = values[name]
@@ -341,7 +341,7 @@ class MessageCodec:
         self._decode_source = "\n".join(lines)
         exec(compile(self._decode_source, f"<lowerbase codec {self.name}.decode>", "exec"),
              namespace)
-        return namespace["decode"]  # type: ignore[no-any-return]
+        return namespace["decode"]
 
     def _compile_encode(self) -> Callable[[Mapping[str, Any]], bytes]:
         lines = ["def encode(values):", "    raw = 0"]
@@ -367,7 +367,8 @@ class MessageCodec:
                     lines.append(f"    if {v} != {v} or {v} in (_INF, -_INF):")
                     lines.append(f"        _range(codec, '{s.name}', {v})")
                     lines.append(f"    q, m = divmod({v} - {s.offset!r}, {s.scale!r})")
-                    lines.append(f"    r = round(q if m == 0 else ({v} - {s.offset!r}) / {s.scale!r})")
+                    exact = f"({v} - {s.offset!r}) / {s.scale!r}"
+                    lines.append(f"    r = round(q if m == 0 else {exact})")
                 else:
                     lines.append(f"    if {v} != {v} or {v} in (_INF, -_INF):")
                     lines.append(f"        _range(codec, '{s.name}', {v})")
@@ -385,7 +386,7 @@ class MessageCodec:
             "codec": self,
         }
         exec(compile("\n".join(lines), f"<lowerbase codec {self.name}.encode>", "exec"), namespace)
-        return namespace["encode"]  # type: ignore[no-any-return]
+        return namespace["encode"]
 
     def __repr__(self) -> str:
         return f"<MessageCodec {self.name} id={self.frame_id:#05x} dlc={self.length}>"
@@ -423,7 +424,10 @@ class Codec:
 
     def __init__(self, dbc_path: str | Path = DBC_PATH) -> None:
         self.path = Path(dbc_path)
-        self.database = cantools.database.load_file(str(self.path), strict=True)
+        database = cantools.database.load_file(str(self.path), strict=True)
+        if not isinstance(database, cantools.database.can.Database):
+            raise TypeError(f"{self.path} is not a CAN database")
+        self.database = database
         self.messages: tuple[MessageCodec, ...] = tuple(
             MessageCodec(m) for m in sorted(self.database.messages, key=lambda m: m.frame_id)
         )

@@ -14,6 +14,13 @@ def _fmt(x: float | None) -> str:
     return f"{x:g}" if isinstance(x, float) else str(x)
 
 
+def _bitrate(codec: Codec) -> int:
+    """The bus bit rate the catalog declares (attribute Baudrate)."""
+    dbc = codec.database.dbc
+    attr = dbc.attributes.get("Baudrate") if dbc is not None else None
+    return int(attr.value) if attr is not None else 500_000
+
+
 def _message_section(m: MessageCodec) -> list[str]:
     cycle = f"{m.cycle_time * 1000:g} ms" if m.cycle_time else "event"
     lines = [
@@ -56,8 +63,8 @@ def render(codec: Codec | None = None) -> str:
         "Generated from `lowerbase/protocol/chassis.dbc` by `lowerbase dbc --export-docs "
         "docs/protocol.md`; do not edit by hand (a test checks it is current).",
         "",
-        codec.database.dbc.attributes.get("BusType").value + " 2.0A, 11-bit identifiers, "
-        "500 kbit/s, Intel (little-endian) byte order throughout. Lower identifiers carry "
+        f"Classic CAN 2.0A, 11-bit identifiers, {_bitrate(codec) // 1000} kbit/s, Intel "
+        "(little-endian) byte order throughout. Lower identifiers carry "
         "safety and commands. Periodic frames carry a 4-bit rolling counter (+1 per frame, mod "
         "16); StatusCode needs all 64 bits for the code and relies on the SystemStatus counter "
         "sent in the same cycle.",
@@ -91,7 +98,7 @@ def render(codec: Codec | None = None) -> str:
         "",
         f"Example: {name} with "
         + ", ".join(f"{k}={v}" for k, v in values.items())
-        + f" (sequence number 0):",
+        + " (sequence number 0):",
         "",
         "```",
         frame.hex(" ").upper(),

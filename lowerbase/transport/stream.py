@@ -58,7 +58,9 @@ class PtyStream:
                 os.replace(tmp, self.link)  # atomic: a reader never sees a missing link
             except OSError as exc:
                 self.close()
-                raise TransportError(f"cannot publish the pseudo-terminal at {link}: {exc}") from None
+                raise TransportError(
+                    f"cannot publish the pseudo-terminal at {link}: {exc}"
+                ) from None
         self.name = str(self.link or self.slave_name)
 
     def fileno(self) -> int:

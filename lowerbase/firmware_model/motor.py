@@ -1,0 +1,158 @@
+"""One wheel's motor and servo driver: accel ramp, velocity-loop lag, current, stall, over-current.
+
+Model (continuous time, solved exactly per step so results do not depend on the step size):
+the driver's setpoint ``r`` ramps toward the target at most ``max_wheel_accel`` (at the rim),
+and the wheel speed follows ``r`` through a first-order lag ``time_constant``:
+``dw/dt = (r - w) / tau``. Targets below ``min_speed`` (rim) are a deadband: the wheel stays
+put. The current estimate covers inertia (half the robot mass per wheel), rolling resistance,
+viscous friction and an external load, through the gear ratio and efficiency, plus an idle
+current. Faults: an injected block (the wheel does not turn; a commanded motor draws
+``stall_current``), stall detection, over-current (modelled or injected) which latches and
+makes the driver brake to zero until :meth:`WheelMotor.clear_faults`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from lowerbase.firmware_model.kinematics import Side, motor_rpm_to_wheel_rad_s
+from lowerbase.firmware_model.profile import STANDARD_GRAVITY, ChassisParams, MotorParams
+
+STATUS_OVER_CURRENT = 0x1  # WheelFeedback.DriverStatus bit 0
+STATUS_STALLED = 0x2  # bit 1 (bit 2, encoder fault, belongs to the encoder)
+
+
+@dataclass(frozen=True)
+class WheelGeometry:
+    """What the firmware believes about one wheel: nominal radius [m], gear ratio (motor:wheel),
+    rim deadband ``min_speed`` [m/s] and motor limit ``max_rpm`` [rpm]."""
+
+    radius: float
+    ratio: float
+    min_speed: float
+    max_rpm: float
+
+    @classmethod
+    def from_chassis(cls, chassis: ChassisParams, side: Side) -> WheelGeometry:
+        ratio = chassis.ratio_left if side == "left" else chassis.ratio_right
+        return cls(chassis.wheel_radius, ratio, chassis.min_speed, chassis.max_rpm)
+
+
+def follow(omega0: float, r0: float, slope: float, t: float, tau: float) -> tuple[float, float]:
+    """Exact first-order lag ``tau`` [s] from speed ``omega0`` following the ramp
+    ``r(s) = r0 + slope*s`` for ``t`` [s]; returns (speed at t, angle travelled [rad])."""
+    if tau <= 0.0:
+        return r0 + slope * t, r0 * t + 0.5 * slope * t * t
+    c = omega0 - r0 + slope * tau
+    one_minus_e = -math.expm1(-t / tau)
+    omega = r0 + slope * t - slope * tau + c * (1.0 - one_minus_e)
+    angle = r0 * t + 0.5 * slope * t * t - slope * tau * t + c * tau * one_minus_e
+    return omega, angle
+
+
+class WheelMotor:
+    """State: wheel speed ``omega`` [rad/s], driver setpoint [rad/s], current [A], fault flags."""
+
+    def __init__(self, params: MotorParams, geometry: WheelGeometry) -> None:
+        self.params = params  # replaceable at any time; the state is kept
+        self.geometry = geometry  # replaceable (parameter writes); the state is kept
+        self.omega = 0.0  # [rad/s] wheel angular velocity, forward positive
+        self.setpoint = 0.0  # [rad/s] the driver's ramped setpoint
+        self.current = 0.0  # [A] phase current, sign of the torque
+        self.blocked = False  # injected: the wheel cannot turn
+        self.over_current = False  # latched until clear_faults()
+        self.stalled = False  # latched until clear_faults()
+        self._over_time = 0.0  # [s] how long |current| has exceeded the limit
+        self._stall_time = 0.0  # [s] how long the wheel has lagged far behind its setpoint
+
+    @property
+    def rim_speed(self) -> float:
+        """Rim speed [m/s] at the nominal radius."""
+        return self.omega * self.geometry.radius
+
+    @property
+    def motor_rpm(self) -> float:
+        """Motor speed [rpm] = omega * ratio * 60 / 2pi."""
+        return self.omega * self.geometry.ratio * 60.0 / (2.0 * math.pi)
+
+    @property
+    def status_bits(self) -> int:
+        """DriverStatus bits 0 (over-current) and 1 (stalled)."""
+        return (STATUS_OVER_CURRENT if self.over_current else 0) | (
+            STATUS_STALLED if self.stalled else 0
+        )
+
+    def inject_over_current(self) -> None:
+        """Latch an over-current fault now (the driver then brakes to zero)."""
+        self.over_current = True
+
+    def clear_faults(self) -> None:
+        """Clear the latched over-current and stall flags (FaultClear)."""
+        self.over_current = self.stalled = False
+        self._over_time = self._stall_time = 0.0
+
+    def step(
+        self, target: float, dt: float, *, brake: bool = False, load_force: float = 0.0
+    ) -> float:
+        """Advance ``dt`` [s] toward ``target`` wheel speed [rad/s]; return the angle turned [rad].
+
+        ``brake`` (or a latched over-current) ramps to zero instead. ``load_force`` [N] is an
+        external force at the rim opposing forward motion (e.g. a slope); it only affects the
+        current. The mean speed over the step is the returned angle / dt.
+        """
+        if dt <= 0.0:
+            return 0.0
+        p, g = self.params, self.geometry
+        if brake or self.over_current or abs(target) * g.radius < g.min_speed:
+            target = 0.0
+        limit = motor_rpm_to_wheel_rad_s(g.max_rpm, g.ratio)
+        target = min(max(target, -limit), limit)
+        omega0 = self.omega
+        alpha = p.max_wheel_accel / g.radius  # [rad/s^2]; 0 = no ramp
+        r0 = target if alpha == 0.0 else self.setpoint
+        t_ramp = 0.0 if alpha == 0.0 else min(dt, abs(target - r0) / alpha)
+        slope = math.copysign(alpha, target - r0) if t_ramp > 0.0 else 0.0
+        omega, angle = follow(omega0, r0, slope, t_ramp, p.time_constant)
+        self.setpoint = target if t_ramp < dt or alpha == 0.0 else r0 + slope * t_ramp
+        omega, angle2 = follow(omega, self.setpoint, 0.0, dt - t_ramp, p.time_constant)
+        angle += angle2
+        if self.blocked:
+            omega, angle = 0.0, 0.0
+        self.omega = omega
+        self._update_current((omega - omega0) / dt, load_force)
+        self._update_faults(dt)
+        return angle
+
+    def _update_current(self, wheel_accel: float, load_force: float) -> None:
+        p, g = self.params, self.geometry
+        commanded = abs(self.setpoint) * g.radius >= p.stall_speed and not self.over_current
+        if self.blocked:
+            self.current = math.copysign(p.stall_current, self.setpoint) if commanded else 0.0
+            self.current += math.copysign(p.idle_current, self.current)
+            return
+        m = 0.5 * p.robot_mass
+        v = self.omega * g.radius
+        sign_v = 0.0 if v == 0.0 else math.copysign(1.0, v)
+        force = m * wheel_accel * g.radius  # [N] at the rim
+        force += sign_v * p.rolling_resistance * m * STANDARD_GRAVITY + p.viscous_friction * v
+        force += load_force
+        wheel_torque = force * g.radius
+        motoring = wheel_torque * self.omega >= 0.0
+        eta = p.gear_efficiency
+        motor_torque = wheel_torque / (g.ratio * eta) if motoring else wheel_torque * eta / g.ratio
+        amps = motor_torque / p.torque_constant
+        self.current = amps + math.copysign(p.idle_current, amps)
+
+    def _update_faults(self, dt: float) -> None:
+        p, g = self.params, self.geometry
+        over = abs(self.current) > p.over_current_limit
+        self._over_time = self._over_time + dt if over else 0.0
+        if over and self._over_time >= p.over_current_time:
+            self.over_current = True
+        lagging = abs(self.setpoint) * g.radius >= p.stall_speed and abs(self.omega) < 0.5 * abs(
+            self.setpoint
+        )
+        self._stall_time = self._stall_time + dt if lagging else 0.0
+        if lagging and self._stall_time >= p.stall_time:
+            self.stalled = True

@@ -1,0 +1,153 @@
+"""Wheel motor + driver: ramp, lag, deadband, current and faults against closed forms."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import pytest
+
+from lowerbase.firmware_model.motor import (
+    STATUS_OVER_CURRENT,
+    STATUS_STALLED,
+    WheelGeometry,
+    WheelMotor,
+)
+from lowerbase.firmware_model.profile import STANDARD_GRAVITY, ChassisParams, MotorParams
+
+GEOMETRY = WheelGeometry.from_chassis(ChassisParams(), "left")
+R = GEOMETRY.radius  # 0.6283 / 2pi
+IDEAL = MotorParams(time_constant=0.0, max_wheel_accel=0.0)
+
+
+def run(
+    motor: WheelMotor, target: float, seconds: float, dt: float = 0.005, brake: bool = False
+) -> float:
+    angle = 0.0
+    for _ in range(round(seconds / dt)):
+        angle += motor.step(target, dt, brake=brake)
+    return angle
+
+
+def test_ideal_motor_follows_the_target_exactly() -> None:
+    motor = WheelMotor(IDEAL, GEOMETRY)
+    assert motor.step(7.0, 0.01) == pytest.approx(0.07)
+    assert motor.omega == 7.0
+    assert motor.rim_speed == pytest.approx(7.0 * R)
+    assert motor.motor_rpm == pytest.approx(7.0 * 20 * 60 / (2 * math.pi))
+
+
+def test_accel_ramp_gives_a_times_t_until_the_target() -> None:
+    a = 2.0  # [m/s^2] at the rim
+    motor = WheelMotor(replace(IDEAL, max_wheel_accel=a), GEOMETRY)
+    angle = run(motor, 1.0 / R, 0.2)
+    assert motor.rim_speed == pytest.approx(a * 0.2)
+    assert angle * R == pytest.approx(0.5 * a * 0.2**2)
+    angle += run(motor, 1.0 / R, 0.8)  # target 1 m/s reached at 0.5 s
+    assert motor.rim_speed == pytest.approx(1.0)
+    assert angle * R == pytest.approx(0.5 * a * 0.5**2 + 1.0 * 0.5)
+
+
+def test_first_order_lag_matches_the_exponential() -> None:
+    tau = 0.05
+    motor = WheelMotor(replace(IDEAL, time_constant=tau), GEOMETRY)
+    angle = run(motor, 10.0, 0.12)
+    assert motor.omega == pytest.approx(10.0 * (1 - math.exp(-0.12 / tau)))
+    assert angle == pytest.approx(10.0 * (0.12 - tau * (1 - math.exp(-0.12 / tau))))
+
+
+def test_ramp_plus_lag_is_exact_and_step_size_invariant() -> None:
+    params, tau, a = MotorParams(), 0.05, 3.0
+    coarse, fine = WheelMotor(params, GEOMETRY), WheelMotor(params, GEOMETRY)
+    coarse_angle = coarse.step(1.2 / R, 0.3)
+    fine_angle = run(fine, 1.2 / R, 0.3, dt=0.001)
+    assert fine.omega == pytest.approx(coarse.omega) and fine_angle == pytest.approx(coarse_angle)
+    t = 0.3  # still ramping (1.2 m/s needs 0.4 s): w = a (t - tau (1 - e^-t/tau)) / r
+    assert coarse.rim_speed == pytest.approx(a * (t - tau * (1 - math.exp(-t / tau))))
+
+
+def test_deadband_below_min_speed() -> None:
+    motor = WheelMotor(IDEAL, GEOMETRY)
+    assert run(motor, 0.004 / R, 0.1) == 0.0 and motor.omega == 0.0
+    assert run(motor, -0.006 / R, 0.1) < 0.0
+
+
+def test_max_rpm_caps_the_wheel_speed() -> None:
+    motor = WheelMotor(IDEAL, GEOMETRY)
+    motor.step(100.0, 0.01)
+    assert motor.motor_rpm == pytest.approx(3000.0)
+
+
+def test_brake_ramps_to_zero_at_the_driver_ramp() -> None:
+    motor = WheelMotor(MotorParams(time_constant=0.0), GEOMETRY)  # ramp 3 m/s^2
+    run(motor, 1.0 / R, 1.0)
+    run(motor, 1.0 / R, 0.2, brake=True)
+    assert motor.rim_speed == pytest.approx(1.0 - 3.0 * 0.2)
+    run(motor, 1.0 / R, 0.5, brake=True)
+    assert motor.omega == 0.0
+
+
+def rim_current(params: MotorParams, force: float, motoring: bool = True) -> float:
+    eta, n, kt = params.gear_efficiency, GEOMETRY.ratio, params.torque_constant
+    torque = force * R / (n * eta) if motoring else force * R * eta / n
+    return torque / kt + math.copysign(params.idle_current, torque)
+
+
+def test_current_covers_friction_inertia_and_regeneration() -> None:
+    p = MotorParams(time_constant=0.0, max_wheel_accel=2.0)
+    m = 0.5 * p.robot_mass
+    friction = p.rolling_resistance * m * STANDARD_GRAVITY
+    motor = WheelMotor(p, GEOMETRY)
+    assert motor.step(0.0, 0.01) == 0.0
+    assert motor.current == p.idle_current
+    motor.step(1.0 / R, 0.1)  # accelerating at 2 m/s^2, ends at 0.2 m/s
+    expected = rim_current(p, m * 2.0 + friction + p.viscous_friction * 0.2)
+    assert motor.current == pytest.approx(expected)
+    run(motor, 1.0 / R, 1.0)  # steady 1 m/s
+    assert motor.current == pytest.approx(rim_current(p, friction + p.viscous_friction * 1.0))
+    motor.step(0.0, 0.1)  # braking at 2 m/s^2 from 1 m/s: the motor regenerates
+    force = -m * 2.0 + friction + p.viscous_friction * 0.8
+    assert motor.current == pytest.approx(rim_current(p, force, motoring=False))
+    assert motor.current < 0
+
+
+def test_blocked_wheel_stalls_then_trips_over_current() -> None:
+    p = MotorParams()  # stall after 0.3 s, over-current after 0.5 s above 20 A
+    motor = WheelMotor(p, GEOMETRY)
+    motor.blocked = True
+    run(motor, 0.5 / R, 0.25)
+    assert motor.omega == 0.0 and motor.current == p.stall_current + p.idle_current
+    assert motor.status_bits == 0
+    run(motor, 0.5 / R, 0.1)
+    assert motor.status_bits == STATUS_STALLED
+    run(motor, 0.5 / R, 0.2)
+    assert motor.status_bits == STATUS_STALLED | STATUS_OVER_CURRENT
+    run(motor, 0.5 / R, 0.5)  # the tripped driver ramps its setpoint down and stops pushing
+    assert motor.setpoint == 0.0 and motor.current == p.idle_current
+    motor.blocked = False
+    motor.clear_faults()
+    run(motor, 0.5 / R, 1.0)
+    assert motor.status_bits == 0 and motor.rim_speed == pytest.approx(0.5, rel=1e-6)
+
+
+def test_injected_over_current_brakes_until_cleared() -> None:
+    motor = WheelMotor(MotorParams(time_constant=0.0), GEOMETRY)
+    run(motor, 1.0 / R, 1.0)
+    motor.inject_over_current()
+    run(motor, 1.0 / R, 0.1)
+    assert motor.rim_speed == pytest.approx(1.0 - 0.3)
+    assert motor.status_bits == STATUS_OVER_CURRENT
+    motor.clear_faults()
+    run(motor, 1.0 / R, 0.2)
+    assert motor.rim_speed == pytest.approx(1.0)
+
+
+def test_normal_driving_raises_no_fault() -> None:
+    motor = WheelMotor(MotorParams(), GEOMETRY)
+    peak = 0.0
+    for target in (1.5, -1.5, 0.0, 0.02, 0.0):
+        for _ in range(300):
+            motor.step(target / R, 0.005)
+            peak = max(peak, abs(motor.current))
+    assert motor.status_bits == 0
+    assert peak < MotorParams().over_current_limit

@@ -74,6 +74,16 @@ class Proc:
         err = self.popen.stderr.read() if done and self.popen.stderr else ""
         raise AssertionError(f"{text!r} not printed; stdout={self.lines!r} stderr={err!r}")
 
+    def wait(self, timeout: float = 20.0) -> tuple[int, str]:
+        """Wait for the process to end by itself; (exit code, stderr)."""
+        try:
+            _, err = self.popen.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.popen.kill()
+            _, err = self.popen.communicate()
+            raise AssertionError(f"still running after {timeout} s; stderr={err!r}") from None
+        return self.popen.returncode, err
+
     def stop(self, timeout: float = 10.0) -> tuple[int, str]:
         if self.popen.poll() is None:
             self.popen.send_signal(2)  # Ctrl-C

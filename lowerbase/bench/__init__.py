@@ -1,0 +1,1 @@
+"""Benches: the upper-computer side of tests: a protocol client, scenarios, conformance."""

@@ -12,6 +12,7 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import signal
 import threading
 from typing import Any
 
@@ -24,7 +25,7 @@ def add_subparser(subparsers: Any) -> None:
         help="run the emulated BMS alone (Modbus TCP/RTU)",
         description="Serve an emulated battery pack and BMS over Modbus TCP and/or Modbus RTU "
         "so real lower-computer firmware can be tested against it. Register map: "
-        "docs/bms-modbus.md. Stop with Ctrl-C.",
+        "docs/bms-modbus.md. Stop with Ctrl-C or SIGTERM.",
     )
     parser.add_argument(
         "--tcp", metavar="HOST:PORT", default="127.0.0.1:5020",
@@ -127,6 +128,10 @@ def run(args: argparse.Namespace) -> int:
         device, tcp=tcp, rtu=rtu, baudrate=args.baudrate, clock=RealClock(stop),
         speed=args.speed,
     )
+    # SIGTERM (systemd, docker, kill) stops as cleanly as Ctrl-C does
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
         server.start()
         print(
@@ -153,4 +158,6 @@ def run(args: argparse.Namespace) -> int:
         server.stop()
         if bridge is not None:
             bridge.close()
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     return 0

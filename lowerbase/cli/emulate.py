@@ -41,7 +41,21 @@ def add_subparser(subparsers: Any) -> None:
                         help="run in real time (default)")
     timing.add_argument("--simulated", dest="simulated", action="store_true",
                         help="simulated clock, as fast as the CPU allows (needs --duration)")
-    p.add_argument("--no-bms", action="store_true", help="run without the battery/BMS model")
+    bms = p.add_argument_group("battery and BMS")
+    bms.add_argument("--no-bms", action="store_true", help="run without a BMS")
+    bms.add_argument("--soc", type=float, default=80.0, metavar="PERCENT",
+                     help="initial state of charge of the own pack (default 80)")
+    bms.add_argument("--charger", action="store_true", help="start with the charger connected")
+    bms.add_argument("--bms-tcp", metavar="HOST:PORT",
+                     help="serve the own BMS over Modbus TCP (with --bms-external: poll this "
+                     "external BMS instead)")
+    bms.add_argument("--bms-rtu", metavar="PORT",
+                     help="serve the own BMS over Modbus RTU on PORT or pty:LINK (with "
+                     "--bms-external: poll the BMS on this serial port)")
+    bms.add_argument("--bms-unit", type=int, default=1, help="Modbus unit id (default 1)")
+    bms.add_argument("--bms-external", action="store_true",
+                     help="poll an external BMS (lowerbase bms, or a real one) over "
+                     "--bms-tcp or --bms-rtu instead of simulating a pack")
     p.add_argument("--print", dest="print_frames", action="store_true",
                    help="print every frame sent, decoded")
     p.set_defaults(func=run, simulated=False)
@@ -68,11 +82,18 @@ def run(args: argparse.Namespace) -> int:
         config: dict[str, Any] = {"interface": "slcan_device", "channel": args.slcan}
     else:
         config = config_from_args(args)
-    bus = open_bus(config)
+    if not 0 <= args.soc <= 100:
+        raise ConfigError("--soc must be within 0..100 %")
+    bms = None if args.no_bms else _make_bms(profile, args)
+    try:
+        bus = open_bus(config)
+    except BaseException:
+        if bms is not None:
+            bms.close()
+        raise
     stop = threading.Event()
     clock = SimClock() if args.simulated else RealClock(stop)
     try:
-        bms = _make_bms(profile) if not args.no_bms else None
         send = bus_sender(bus)
         codec = default_codec()
         if args.print_frames:
@@ -103,16 +124,35 @@ def run(args: argparse.Namespace) -> int:
         print(f"lowerbase emulate: stopped after {clock.now() - mcu.boot_time:.1f} s; {stats}",
               file=sys.stderr)
     finally:
+        if bms is not None:
+            bms.close()
         with contextlib.suppress(can.CanError):
             bus.shutdown()
     return 0
 
 
-def _make_bms(profile: Any) -> Any:
-    """The in-process BMS adapter, when lowerbase.bms is available."""
-    try:
-        from lowerbase.bms.adapter import InProcessBms
-    except ImportError:
-        log.debug("lowerbase.bms adapter not available; running without a BMS")
-        return None
-    return InProcessBms.from_profile(profile)
+def _make_bms(profile: Any, args: argparse.Namespace) -> Any:
+    """The BMS the lower computer polls: its own pack (maybe also served), or an external one."""
+    from lowerbase.bms.adapter import McuBmsAdapter
+    from lowerbase.bms.device import parse_host_port
+    from lowerbase.bms.link import ModbusRtuBmsLink, ModbusTcpBmsLink
+    from lowerbase.errors import ConfigError
+
+    if args.bms_external:
+        if args.bms_tcp:
+            host, port = parse_host_port(args.bms_tcp)
+            return McuBmsAdapter.external(ModbusTcpBmsLink(host, port, unit=args.bms_unit))
+        if args.bms_rtu:
+            return McuBmsAdapter.external(ModbusRtuBmsLink(args.bms_rtu, unit=args.bms_unit))
+        raise ConfigError("--bms-external needs --bms-tcp HOST:PORT or --bms-rtu PORT")
+    adapter = McuBmsAdapter.from_battery_table(profile.battery, soc=args.soc,
+                                               charger=args.charger, unit=args.bms_unit)
+    if args.bms_tcp or args.bms_rtu:
+        tcp = parse_host_port(args.bms_tcp) if args.bms_tcp else None
+        server = adapter.serve(tcp=tcp, rtu=args.bms_rtu)
+        where = [f"Modbus TCP {server.tcp_address[0]}:{server.tcp_address[1]}"
+                 if server.tcp_address else "", f"Modbus RTU {args.bms_rtu}" if args.bms_rtu
+                 else ""]
+        print(f"lowerbase emulate: BMS (unit {args.bms_unit}) on "
+              f"{' and '.join(w for w in where if w)}", flush=True)
+    return adapter

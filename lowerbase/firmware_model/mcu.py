@@ -22,6 +22,7 @@ from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -38,12 +39,20 @@ from lowerbase.firmware_model.profile import ChassisParams, Profile
 from lowerbase.firmware_model.smoother import SmootherLimits, VelocitySmoother
 from lowerbase.firmware_model.truth import GroundTruth, SlipModel, TrueGeometry
 from lowerbase.protocol.codec import Codec, MessageCodec, default_codec
-from lowerbase.protocol.status_codes import LATCHED, STOPPING, StatusBit
+from lowerbase.protocol.status_codes import LATCHED as _LATCHED
+from lowerbase.protocol.status_codes import STOPPING as _STOPPING
+from lowerbase.protocol.status_codes import StatusBit
 
-ESTOP_BITS = StatusBit.ESTOP_BUTTON | StatusBit.ESTOP_COMMAND
+#: StatusBit as plain ints: IntFlag arithmetic costs microseconds per operation, and the
+#: control loop does dozens per step
+SB: Any = SimpleNamespace(**{str(b.name): int(b) for b in StatusBit})
+LATCHED = int(_LATCHED)
+STOPPING = int(_STOPPING)
+
+ESTOP_BITS = SB.ESTOP_BUTTON | SB.ESTOP_COMMAND
 #: latched bits set by an event (not recomputed each step); FaultClear clears them
 CARRIED = (
-    StatusBit.COMMAND_REJECTED | StatusBit.PARAMETER_ERROR | StatusBit.PARAMETER_STORE_FAILED
+    SB.COMMAND_REJECTED | SB.PARAMETER_ERROR | SB.PARAMETER_STORE_FAILED
 )
 
 log = logging.getLogger(__name__)
@@ -51,6 +60,7 @@ log = logging.getLogger(__name__)
 PROTOCOL_VERSION = 1
 BOOT_TIME = 0.3  #: [s] from power-on to standby
 BMS_POLL_PERIOD = 0.5  #: [s]
+BMS_STEP = 0.1  #: [s] the pack model is stepped with the mean load over this period
 BMS_LINK_TIMEOUT = 3.0  #: [s] without an answer -> BMS_LINK_LOST
 ENCODER_FAULT_TIME = 0.2  #: [s] commanded motion without pulses -> encoder fault
 IMU_FROZEN_SAMPLES = 20  #: identical consecutive samples -> IMU fault
@@ -125,13 +135,13 @@ class Mcu:
         if problems:
             for p in problems:
                 log.warning("%s", p)
-            self.status |= StatusBit.PARAMETER_ERROR
+            self.status |= SB.PARAMETER_ERROR
         try:
             self.chassis = ChassisParams.from_wire_dict(params, self.profile.chassis)
         except ConfigError as exc:
             log.warning("parameter file rejected (%s); profile defaults used", exc)
             self.chassis = self.profile.chassis
-            self.status |= StatusBit.PARAMETER_ERROR
+            self.status |= SB.PARAMETER_ERROR
         self.boot_counter = (int(state.get("boot_counter", self.boot_counter)) + 1) & 0xFFFF
         self.odometer = float(state.get("odometer", self.odometer))
         now = self.clock.now()
@@ -145,6 +155,7 @@ class Mcu:
         self._watchdog = False
         self._speed_limited = False
         self._next_due = {m.name: now + (m.cycle_time or 0.0) for m in self._periodic}
+        self._next_any_due = min(self._next_due.values())
         self._motors = {
             side: WheelMotor(self.profile.motor, WheelGeometry.from_chassis(self.chassis, side))
             for side in ("left", "right")
@@ -163,6 +174,9 @@ class Mcu:
         self.leds = {(strip, sub): dict(LED_DEFAULT) for strip in (0, 1) for sub in range(1, 9)}
         self._bms_last_answer = now
         self._bms_next_poll = now
+        self._bms_bits = 0  # StatusCode bits of the last BMS reading
+        self._bms_charge = 0.0  # [A*s] drawn since the pack was last stepped
+        self._bms_elapsed = 0.0  # [s]
         self.bms_snapshot: Any = None
         self._imu_bias_applied = 0.0
         self._last_save = now
@@ -175,7 +189,7 @@ class Mcu:
                 "boot_counter": self.boot_counter, "odometer": round(self.odometer, 6)})
         except OSError as exc:
             log.error("cannot write the parameter file: %s", exc)
-            self.status |= StatusBit.PARAMETER_STORE_FAILED
+            self.status |= SB.PARAMETER_STORE_FAILED
             return
         self._last_save = self.clock.now()
 
@@ -198,6 +212,8 @@ class Mcu:
         self.faults = [f for f in self.faults if kind is not None and f.kind != kind]
 
     def _active(self, kind: str, arg: str | None = None) -> Fault | None:
+        if not self.faults:
+            return None
         t = self.clock.now() - self.boot_time
         for f in self.faults:
             if f.kind == kind and (arg is None or f.arg == arg) and f.active(t):
@@ -224,7 +240,7 @@ class Mcu:
         except ProtocolError as exc:
             self.stats["rx_malformed"] += 1
             if msg.name == "MotionCommand":
-                self.status |= StatusBit.COMMAND_REJECTED
+                self.status |= SB.COMMAND_REJECTED
             log.debug("dropped %s: %s", msg.name, exc)
             return
         handler = getattr(self, f"_on_{msg.name}")
@@ -245,7 +261,7 @@ class Mcu:
             return False
         lim = kinematics.limit_twist(linear, angular, self.chassis)
         if not lim.valid:
-            self.status |= StatusBit.COMMAND_REJECTED
+            self.status |= SB.COMMAND_REJECTED
             self.stats["rx_motion_rejected"] += 1
             return False
         self._speed_limited = lim.clipped
@@ -273,7 +289,7 @@ class Mcu:
             if self._active("estop"):
                 return  # the button is still pressed
             self.estop_command = False
-            self.status &= ~int(StatusBit.ESTOP_BUTTON | StatusBit.ESTOP_COMMAND)
+            self.status &= ~int(SB.ESTOP_BUTTON | SB.ESTOP_COMMAND)
             if self.state == RobotState.EMERGENCY_STOP:
                 self.state = RobotState.STANDBY  # wait to be enabled again
         elif cmd == Command.FAULT_CLEAR:
@@ -287,7 +303,7 @@ class Mcu:
 
     def _fault_clear(self) -> None:
         keep = 0
-        faults = (("left", StatusBit.LEFT_MOTOR_FAULT), ("right", StatusBit.RIGHT_MOTOR_FAULT))
+        faults = (("left", SB.LEFT_MOTOR_FAULT), ("right", SB.RIGHT_MOTOR_FAULT))
         for side, bit in faults:
             motor = self._motors[side]
             cause = self._active("stall", side) or self._active("overcurrent", side)
@@ -296,7 +312,7 @@ class Mcu:
             else:
                 motor.clear_faults()
         self.motion_fault &= keep
-        self.status &= ~int(LATCHED & ~(StatusBit.ESTOP_BUTTON | StatusBit.ESTOP_COMMAND))
+        self.status &= ~LATCHED & ~(SB.ESTOP_BUTTON | SB.ESTOP_COMMAND)
         self.status |= keep
 
     def _on_LedCommand(self, v: dict[str, Any]) -> None:
@@ -338,7 +354,7 @@ class Mcu:
         old = self.chassis
         self.chassis = new
         self._save_state()
-        if self.status & StatusBit.PARAMETER_STORE_FAILED and self.store.path is not None:
+        if self.status & SB.PARAMETER_STORE_FAILED and self.store.path is not None:
             self.chassis = old  # not persisted: keep what the file says
             return Result.STORAGE_ERROR, current
         self._apply_chassis()
@@ -436,6 +452,11 @@ class Mcu:
             self.chassis.wheel_distant)
 
     def _apply_faults(self) -> None:
+        if not self.faults and not self._imu_bias_applied and not self.imu.frozen:
+            for side in ("left", "right"):
+                self._motors[side].blocked = False
+                self._encoders[side].dropout = False
+            return
         for side in ("left", "right"):
             self._motors[side].blocked = self._active("stall", side) is not None
             if self._active("overcurrent", side):
@@ -479,53 +500,60 @@ class Mcu:
     def _update_bms(self, now: float, dt: float) -> None:
         if self.bms is None:
             return
-        self.bms.step(dt, self.load_current())
+        # the pack integrates charge exactly over a batch; stepping it every control period
+        # would cost more than the whole control loop
+        self._bms_charge += self.load_current() * dt
+        self._bms_elapsed += dt
+        if self._bms_elapsed >= BMS_STEP - 1e-9:
+            self.bms.step(self._bms_elapsed, self._bms_charge / self._bms_elapsed)
+            self._bms_charge = self._bms_elapsed = 0.0
         if now < self._bms_next_poll:
             return
         self._bms_next_poll += BMS_POLL_PERIOD
         snapshot = None if self._active("bms-silence") else self.bms.poll()
         if snapshot is not None:
             self.bms_snapshot = snapshot
+            self._bms_bits = int(self.bms.status_bits(snapshot))
             self._bms_last_answer = now
 
     def _update_status(self, now: float) -> None:
         # event-latched bits carry over; the others are recomputed from their causes below
-        s = self.status & int(CARRIED)
+        s = self.status & CARRIED
         if self._active("estop"):
-            s |= StatusBit.ESTOP_BUTTON
+            s |= SB.ESTOP_BUTTON
         if self.estop_command:
-            s |= StatusBit.ESTOP_COMMAND
+            s |= SB.ESTOP_COMMAND
         if self._watchdog:
-            s |= StatusBit.WATCHDOG_STOP
+            s |= SB.WATCHDOG_STOP
         if now - self._standby_cmd_time < STANDBY_HINT_TIME:
-            s |= StatusBit.COMMAND_IN_STANDBY
+            s |= SB.COMMAND_IN_STANDBY
         if self._speed_limited and self._last_cmd is not None:
-            s |= StatusBit.SPEED_LIMITED
+            s |= SB.SPEED_LIMITED
         for side, prefix in (("left", "LEFT"), ("right", "RIGHT")):
             motor = self._motors[side]
             if motor.over_current:
-                s |= StatusBit[f"{prefix}_OVER_CURRENT"]
+                s |= getattr(SB, f"{prefix}_OVER_CURRENT")
             if motor.stalled:
-                s |= StatusBit[f"{prefix}_MOTOR_STALLED"]
+                s |= getattr(SB, f"{prefix}_MOTOR_STALLED")
             if motor.over_current or motor.stalled:
-                s |= StatusBit[f"{prefix}_MOTOR_FAULT"]
-                self.motion_fault |= StatusBit[f"{prefix}_MOTOR_FAULT"]
+                s |= getattr(SB, f"{prefix}_MOTOR_FAULT")
+                self.motion_fault |= getattr(SB, f"{prefix}_MOTOR_FAULT")
             if self._enc_stuck[side] >= ENCODER_FAULT_TIME:
-                s |= StatusBit[f"{prefix}_ENCODER_FAULT"]
+                s |= getattr(SB, f"{prefix}_ENCODER_FAULT")
         s |= self.motion_fault
         if self._imu_same >= IMU_FROZEN_SAMPLES:
-            s |= StatusBit.IMU_FAULT
+            s |= SB.IMU_FAULT
         if self._active("silence") or self._active("drop") or self._active("corrupt"):
-            s |= StatusBit.BUS_ERROR
+            s |= SB.BUS_ERROR
         s |= self._bms_status_bits(now)
         # the button e-stop is latched only while pressed; releasing needs EStopRelease too
-        if s & StatusBit.ESTOP_BUTTON:
+        if s & SB.ESTOP_BUTTON:
             self.estop_command = True
         self.status = int(s)
         if self.state in (RobotState.ACTIVE, RobotState.EMERGENCY_STOP, RobotState.FAULT):
-            if self.status & (StatusBit.ESTOP_BUTTON | StatusBit.ESTOP_COMMAND):
+            if self.status & (SB.ESTOP_BUTTON | SB.ESTOP_COMMAND):
                 self.state = RobotState.EMERGENCY_STOP
-            elif self.motion_fault or self.status & StatusBit.BMS_PROTECTION:
+            elif self.motion_fault or self.status & SB.BMS_PROTECTION:
                 self.state = RobotState.FAULT
             elif self.state != RobotState.ACTIVE:
                 self.state = RobotState.STANDBY  # released: wait to be enabled again
@@ -535,11 +563,8 @@ class Mcu:
             return 0
         bits = 0
         if now - self._bms_last_answer > BMS_LINK_TIMEOUT:
-            bits |= StatusBit.BMS_LINK_LOST
-        snap = self.bms_snapshot
-        if snap is not None:
-            bits |= int(self.bms.status_bits(snap))
-        return bits
+            bits |= SB.BMS_LINK_LOST
+        return bits | self._bms_bits
 
     # -- sending -----------------------------------------------------------------------------
 
@@ -547,6 +572,8 @@ class Mcu:
         return self.codec.message(name).cycle_time or 0.0
 
     def _emit_due(self, now: float) -> None:
+        if now + 1e-9 < self._next_any_due:
+            return
         for msg in self._periodic:
             due = self._next_due[msg.name]
             if now + 1e-9 < due:
@@ -557,6 +584,7 @@ class Mcu:
             self._next_due[msg.name] = due + (missed + 1) * period
             for values in self._build(msg):
                 self._emit(msg.name, values)
+        self._next_any_due = min(self._next_due.values())
 
     def _build(self, msg: MessageCodec) -> list[dict[str, Any]]:
         name = msg.name
@@ -588,7 +616,7 @@ class Mcu:
                 "EStop": int(bool(self.status & ESTOP_BITS)),
                 "WatchdogStop": int(self._watchdog),
                 "Braking": int(self._watchdog or bool(self.status & STOPPING)),
-                "Charging": int(bool(self.status & StatusBit.CHARGING)),
+                "Charging": int(bool(self.status & SB.CHARGING)),
                 "BatteryVoltage": _clip(volts, msg, "BatteryVoltage")}]
         if name == "Heartbeat":
             return [{"Uptime": _clip(self.clock.now() - self.boot_time, msg, "Uptime"),
@@ -647,9 +675,16 @@ class Mcu:
         return self._motors
 
 
+_RANGES: dict[tuple[str, str], tuple[float, float]] = {
+    (m.name, s.name): (
+        s.minimum if s.minimum is not None else -math.inf,
+        s.maximum if s.maximum is not None else math.inf,
+    )
+    for m in default_codec() for s in m.signals
+}
+
+
 def _clip(value: float, msg: MessageCodec, signal: str) -> float:
     """Saturate a measurement at its signal's range, as a sensor register does."""
-    s = msg.signal(signal)
-    lo = s.minimum if s.minimum is not None else -math.inf
-    hi = s.maximum if s.maximum is not None else math.inf
-    return min(max(value, lo), hi)
+    lo, hi = _RANGES[msg.name, signal]
+    return lo if value < lo else hi if value > hi else value

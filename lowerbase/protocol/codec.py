@@ -188,17 +188,7 @@ class MessageCodec:
         With ``strict`` every signal must be given and no unknown one; without it, missing
         signals encode as 0 where 0 is in range.
         """
-        if strict:
-            if values.keys() != self.signal_names:
-                missing = sorted(self.signal_names - values.keys())
-                unknown = sorted(set(values) - self.signal_names)
-                raise EncodeError(
-                    f"{self.name}: "
-                    + (f"missing signals {missing}" if missing else "")
-                    + ("; " if missing and unknown else "")
-                    + (f"unknown signals {unknown}" if unknown else "")
-                )
-        else:
+        if not strict:
             unknown = sorted(set(values) - self.signal_names)
             if unknown:
                 raise EncodeError(f"{self.name}: unknown signals {unknown}")
@@ -258,70 +248,63 @@ class MessageCodec:
             byte = run
         return fmt, fields
 
+    def _piece_expr(self, s: SignalSpec, pieces: list[tuple[str, int, int]]) -> str:
+        """Expression extracting signal ``s`` (unsigned raw bits) from the run pieces."""
+        parts = [(n, first, w) for n, first, w in pieces
+                 if first < s.start + s.length and first + w > s.start]
+        base = parts[0][1]
+        joined = " | ".join(n if first == base else f"({n} << {first - base})"
+                            for n, first, _ in parts)
+        expr = f"({joined})" if len(parts) > 1 else joined
+        shift = s.start - base
+        if shift:
+            expr = f"({expr} >> {shift})"
+        width = sum(w for _, _, w in parts)
+        if shift + s.length < width or len(parts) > 1:
+            expr = f"{expr} & {s.mask:#x}"
+        return expr
+
     def _compile_decode(self) -> Callable[[bytes, bool], Signals]:
+        """Generate ``decode(data, strict)``: one struct unpack, then shifts and masks."""
         fmt, fields = self._layout()
-        direct_names = {f[0] for f in fields if f[0].startswith("d_")}
+        direct = {f[0] for f in fields if f[0].startswith("d_")}
+        pieces = [f for f in fields if f[0].startswith("p")]
         lines = [
             "def decode(data, strict):",
-            f"    if len(data) != {self.length}:",
+            "    try:",
+            f"        {', '.join(f[0] for f in fields)}, = _unpack(data)",
+            "    except _StructError:",
             f"        raise FrameLengthError('{self.name}: payload of %d bytes, the catalog "
-            f"says {self.length}' % len(data))",
-            f"    {', '.join(f[0] for f in fields)}, = _S.unpack(data)",
+            f"says {self.length}' % len(data)) from None",
         ]
-        pieces = [f for f in fields if f[0].startswith("p")]
+        checks: list[str] = []
         out = []
         for i, s in enumerate(self.signals):
-            v = f"v{i}"
-            if f"d_{s.name}" in direct_names:
-                lines.append(f"    {v} = d_{s.name}")
+            full_lo = -(1 << (s.length - 1)) if s.is_signed else 0
+            full_hi = (1 << (s.length - 1)) - 1 if s.is_signed else (1 << s.length) - 1
+            needs_var = s.is_float or s.is_signed or (s.raw_min, s.raw_max) != (full_lo, full_hi)
+            if f"d_{s.name}" in direct:
+                v = f"d_{s.name}"
+            elif not needs_var:
+                v = f"({self._piece_expr(s, pieces)})"  # used once: inline in the result
             else:
-                # the pieces of the run that hold this signal, joined into one integer
-                parts = [
-                    (name, first, width) for name, first, width in pieces
-                    if first < s.start + s.length and first + width > s.start
-                ]
-                base = parts[0][1]
-                joined = " | ".join(
-                    name if first == base else f"({name} << {first - base})"
-                    for name, first, width in parts
-                )
-                shift = s.start - base
-                expr = f"({joined})" if len(parts) > 1 else joined
-                if shift:
-                    expr = f"({expr} >> {shift})"
-                lines.append(f"    {v} = {expr} & {s.mask:#x}")
+                v = f"v{i}"
+                lines.append(f"    {v} = {self._piece_expr(s, pieces)}")
                 if s.is_float:
                     packer = "_F32" if s.length == 32 else "_F64"
                     lines.append(
-                        f"    {v} = {packer}.unpack({v}.to_bytes({s.length // 8}, 'little'))[0]"
-                    )
+                        f"    {v} = {packer}.unpack({v}.to_bytes({s.length // 8}, 'little'))[0]")
                 elif s.is_signed:
                     lines.append(
-                        f"    if {v} & {1 << (s.length - 1):#x}: {v} -= {1 << s.length:#x}"
-                    )
+                        f"    if {v} & {1 << (s.length - 1):#x}: {v} -= {1 << s.length:#x}")
             if s.is_float:
-                if s.minimum is not None and s.maximum is not None:
-                    lines.append(f"    if strict and not ({s.minimum!r} <= {v} <= {s.maximum!r}):")
-                    lines.append(
-                        f"        raise SignalRangeError('{self.name}.{s.name} = %r is outside "
-                        f"[{s.minimum}, {s.maximum}]' % {v})"
-                    )
+                checks.append(f"not ({s.minimum!r} <= {v} <= {s.maximum!r})")
                 out.append(f"'{s.name}': {v}")
                 continue
-            full_lo = -(1 << (s.length - 1)) if s.is_signed else 0
-            full_hi = (1 << (s.length - 1)) - 1 if s.is_signed else (1 << s.length) - 1
-            if (s.raw_min, s.raw_max) != (full_lo, full_hi):
-                checks = []
-                if s.raw_min != full_lo:
-                    checks.append(f"{v} < {s.raw_min}")
-                if s.raw_max != full_hi:
-                    checks.append(f"{v} > {s.raw_max}")
-                lines.append(f"    if strict and ({' or '.join(checks)}):")
-                unit = s.unit.replace("%", "%%").replace("'", "")
-                lines.append(
-                    f"        raise SignalRangeError('{self.name}.{s.name} = %r is outside "
-                    f"[{s.minimum}, {s.maximum}] {unit}' % ({v} * {s.scale!r} + {s.offset!r}))"
-                )
+            if s.raw_min != full_lo:
+                checks.append(f"{v} < {s.raw_min}")
+            if s.raw_max != full_hi:
+                checks.append(f"{v} > {s.raw_max}")
             if s.kind == "identity":
                 out.append(f"'{s.name}': {v}")
             elif s.offset == 0 and s.scale > 0:
@@ -330,62 +313,103 @@ class MessageCodec:
                 out.append(f"'{s.name}': {v} * {s.scale!r}")
             else:
                 out.append(f"'{s.name}': {v} * {s.scale!r} + {s.offset!r}")
+        if checks:
+            lines.append(f"    if strict and ({' or '.join(checks)}):")
+            lines.append("        _out_of_range(codec, decode_loose(data))")
         lines.append("    return {" + ", ".join(out) + "}")
+        # the same body returning (name, values), for Codec.decode's hot path
+        named = [ln.replace("def decode(", "def decode_named(") for ln in lines]
+        named[-1] = named[-1].replace("    return {", f"    return '{self.name}', {{", 1)
+        lines += named
         namespace: dict[str, Any] = {
             "FrameLengthError": FrameLengthError,
-            "SignalRangeError": SignalRangeError,
+            "_StructError": struct.error,
             "_F32": _F32,
             "_F64": _F64,
-            "_S": struct.Struct(fmt),
+            "_unpack": struct.Struct(fmt).unpack,
+            "_out_of_range": _out_of_range,
+            "codec": self,
         }
         self._decode_source = "\n".join(lines)
         exec(compile(self._decode_source, f"<lowerbase codec {self.name}.decode>", "exec"),
              namespace)
-        return namespace["decode"]
+        decode = namespace["decode"]
+        namespace["decode_loose"] = lambda data: decode(data, False)
+        self._decode_named = namespace["decode_named"]
+        return decode
 
     def _compile_encode(self) -> Callable[[Mapping[str, Any]], bytes]:
-        lines = ["def encode(values):", "    raw = 0"]
+        """Generate ``encode(values)``: cantools' rounding, raw range checks, one struct pack."""
+        fmt, fields = self._layout()
+        n = len(self.signals)
+        lines = [
+            "def encode(values):",
+            f"    if len(values) != {n}:",
+            "        _keys(codec, values)",
+            "    try:",
+        ]
+        lines += [f"        v{i} = values['{s.name}']" for i, s in enumerate(self.signals)]
+        lines += ["    except KeyError:", "        _keys(codec, values)"]
         for i, s in enumerate(self.signals):
-            v = f"v{i}"
-            lines.append(f"    {v} = values['{s.name}']")
-            lines.append(f"    if {v}.__class__ is not int and {v}.__class__ is not float:")
+            v, r = f"v{i}", f"r{i}"
+            lines.append(f"    if {v}.__class__ is not float and {v}.__class__ is not int:")
             lines.append(f"        {v} = _number(codec, '{s.name}', {v})")
             if s.is_float:
                 lines.append(f"    if not ({s.minimum!r} <= {v} <= {s.maximum!r}):")
                 lines.append(f"        _range(codec, '{s.name}', {v})")
-                packer = "_F32" if s.length == 32 else "_F64"
-                lines.append(f"    r = int.from_bytes({packer}.pack({v}), 'little')")
-            else:
-                if s.kind == "identity":
-                    lines.append(f"    if {v}.__class__ is float:")
-                    lines.append(f"        if {v} != {v} or {v} in (_INF, -_INF):")
-                    lines.append(f"            _range(codec, '{s.name}', {v})")
-                    lines.append(f"        r = round({v})")
-                    lines.append("    else:")
-                    lines.append(f"        r = {v}")
-                elif s.kind == "int":
-                    lines.append(f"    if {v} != {v} or {v} in (_INF, -_INF):")
-                    lines.append(f"        _range(codec, '{s.name}', {v})")
-                    lines.append(f"    q, m = divmod({v} - {s.offset!r}, {s.scale!r})")
-                    exact = f"({v} - {s.offset!r}) / {s.scale!r}"
-                    lines.append(f"    r = round(q if m == 0 else {exact})")
+                if f"d_{s.name}" not in {f[0] for f in fields}:
+                    packer = "_F32" if s.length == 32 else "_F64"
+                    lines.append(f"    {r} = int.from_bytes({packer}.pack({v}), 'little')")
                 else:
-                    lines.append(f"    if {v} != {v} or {v} in (_INF, -_INF):")
-                    lines.append(f"        _range(codec, '{s.name}', {v})")
-                    lines.append(f"    r = round(({v} - {s.offset!r}) / {s.scale!r})")
-                lines.append(f"    if not ({s.raw_min} <= r <= {s.raw_max}):")
-                lines.append(f"        _range(codec, '{s.name}', {v})")
-            lines.append(f"    raw |= (r & {s.mask:#x}) << {s.start}")
-        lines.append(f"    return raw.to_bytes({self.length}, 'little')")
+                    lines.append(f"    {r} = {v}")
+                continue
+            lines.append("    try:")
+            if s.kind == "identity":
+                lines.append(f"        {r} = {v} if {v}.__class__ is int else round({v})")
+            elif s.kind == "int":
+                lines.append(f"        q, m = divmod({v} - {s.offset!r}, {s.scale!r})")
+                lines.append(
+                    f"        {r} = round(q if m == 0 else ({v} - {s.offset!r}) / {s.scale!r})")
+            elif s.offset == 0:
+                lines.append(f"        {r} = round({v} / {s.scale!r})")
+            else:
+                lines.append(f"        {r} = round(({v} - {s.offset!r}) / {s.scale!r})")
+            lines.append("    except (ValueError, OverflowError):")  # NaN, infinities
+            lines.append(f"        _range(codec, '{s.name}', {v})")
+            lines.append(f"    if {r} < {s.raw_min} or {r} > {s.raw_max}:")
+            lines.append(f"        _range(codec, '{s.name}', {v})")
+        args = []
+        for name, first, width in fields:
+            if name.startswith("d_"):
+                i = next(k for k, s in enumerate(self.signals) if f"d_{s.name}" == name)
+                args.append(f"r{i}")
+                continue
+            terms = []
+            for i, s in enumerate(self.signals):
+                if f"d_{s.name}" in {f[0] for f in fields}:
+                    continue
+                if s.start >= first + width or s.start + s.length <= first:
+                    continue
+                # the part of signal i that falls into this piece
+                shift = s.start - first
+                term = f"(r{i} & {s.mask:#x})" if s.is_signed or s.is_float else f"r{i}"
+                terms.append(f"({term} << {shift})" if shift > 0 else
+                             (f"({term} >> {-shift})" if shift < 0 else term))
+            expr = " | ".join(terms) if terms else "0"
+            args.append(f"({expr}) & {(1 << width) - 1:#x}")
+        lines.append(f"    return _S.pack({', '.join(args)})")
         namespace: dict[str, Any] = {
             "_F32": _F32,
             "_F64": _F64,
-            "_INF": math.inf,
+            "_S": struct.Struct(fmt),
             "_number": _to_number,
             "_range": _range_error,
+            "_keys": _keys_error,
             "codec": self,
         }
-        exec(compile("\n".join(lines), f"<lowerbase codec {self.name}.encode>", "exec"), namespace)
+        self._encode_source = "\n".join(lines)
+        exec(compile(self._encode_source, f"<lowerbase codec {self.name}.encode>", "exec"),
+             namespace)
         return namespace["encode"]
 
     def __repr__(self) -> str:
@@ -412,6 +436,28 @@ def _to_number(codec: MessageCodec, name: str, value: Any) -> int | float:
         ) from None
 
 
+def _keys_error(codec: MessageCodec, values: Mapping[str, Any]) -> None:
+    missing = sorted(codec.signal_names - values.keys())
+    unknown = sorted(set(values) - codec.signal_names)
+    raise EncodeError(
+        f"{codec.name}: "
+        + (f"missing signals {missing}" if missing else "")
+        + ("; " if missing and unknown else "")
+        + (f"unknown signals {unknown}" if unknown else "")
+    )
+
+
+def _out_of_range(codec: MessageCodec, values: Signals) -> None:
+    """Raise for the first signal of a decoded payload that is outside its range."""
+    for s in codec.signals:
+        v = values[s.name]
+        if not (s.minimum <= v <= s.maximum):  # type: ignore[operator]
+            raise SignalRangeError(
+                f"{codec.name}.{s.name} = {v!r} is outside [{s.minimum}, {s.maximum}] {s.unit}"
+                .rstrip())
+    raise AssertionError("no signal out of range")  # pragma: no cover
+
+
 def _range_error(codec: MessageCodec, name: str, value: float) -> None:
     s = codec.signal(name)
     raise SignalRangeError(
@@ -433,6 +479,7 @@ class Codec:
         )
         self._by_name = {m.name: m for m in self.messages}
         self._by_id = {m.frame_id: m for m in self.messages}
+        self._decoders = {m.frame_id: m._decode_named for m in self.messages}
 
     def __iter__(self) -> Iterator[MessageCodec]:
         return iter(self.messages)
@@ -452,17 +499,25 @@ class Codec:
         return found
 
     def encode(self, name: str, values: Mapping[str, Any], *, strict: bool = True) -> bytes:
-        return self.message(name).encode(values, strict=strict)
+        msg = self._by_name.get(name)
+        if msg is None or not strict:
+            return self.message(name).encode(values, strict=strict)
+        return msg._encode(values)
 
     def decode(
         self, frame_id: int, data: bytes | bytearray | memoryview, *,
         decode_choices: bool = False, strict: bool = True,
     ) -> tuple[str, Signals]:
         """Decode a frame; returns (message name, signals)."""
-        msg = self._by_id.get(frame_id)
-        if msg is None:
-            raise UnknownMessageError(f"the catalog has no message with ID {frame_id:#05x}")
-        return msg.name, msg.decode(data, decode_choices=decode_choices, strict=strict)
+        try:
+            decode = self._decoders[frame_id]
+        except KeyError:
+            raise UnknownMessageError(
+                f"the catalog has no message with ID {frame_id:#05x}") from None
+        if decode_choices:
+            msg = self._by_id[frame_id]
+            return msg.name, msg.decode(data, decode_choices=True, strict=strict)
+        return decode(data, strict)
 
 
 @cache

@@ -1,0 +1,108 @@
+"""Shared helpers of the driver tests: ROS availability and the generated woosh_msgs.
+
+``require_ros()`` skips a test when ROS1's Python side is missing, with the reason, except
+under ``CI=true``, where a missing ROS is a failure: CI installs it (scripts/install-ros.sh) and
+must not go green by skipping. Use it directly or through the ``ros`` / ``woosh_msgs`` fixtures.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+ROS_MODULES = (
+    "rospy",
+    "genpy",
+    "genmsg",
+    "std_msgs.msg",
+    "geometry_msgs.msg",
+    "actionlib_msgs.msg",
+)
+
+
+def is_ci() -> bool:
+    """True under a CI run (``CI=true`` or ``CI=1``)."""
+    return os.environ.get("CI", "").lower() in ("true", "1")
+
+
+def ros_missing_reason(modules: tuple[str, ...] = ROS_MODULES) -> str | None:
+    """Why ROS is unusable here, or None when every module in ``modules`` imports."""
+    missing = []
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except ImportError as exc:
+            missing.append(f"{name} ({exc})")
+    if not missing:
+        return None
+    return (
+        "ROS1 Python packages missing: "
+        + ", ".join(missing)
+        + "; run scripts/install-ros.sh as root or source /opt/ros/noetic/setup.bash"
+    )
+
+
+def require_ros(modules: tuple[str, ...] = ROS_MODULES) -> None:
+    """Skip the calling test when ROS is missing; fail instead under CI=true."""
+    reason = ros_missing_reason(modules)
+    if reason is None:
+        return
+    if is_ci():
+        pytest.fail(f"CI=true requires ROS: {reason}", pytrace=False)
+    pytest.skip(reason)
+
+
+@pytest.fixture
+def ros() -> None:
+    """Skip (fail under CI) unless rospy, genpy and the standard messages import."""
+    require_ros()
+
+
+def _is_woosh(module_name: str) -> bool:
+    return module_name == "woosh_msgs" or module_name.startswith("woosh_msgs.")
+
+
+@pytest.fixture(scope="session")
+def woosh_msgs_build(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """woosh_msgs generated into a fresh directory that is put first on ``sys.path``.
+
+    A woosh_msgs already importable (a venv .pth to build/ros) is hidden for the session so
+    that the tests check what this checkout generates.
+    """
+    require_ros()
+    from lowerbase.driver import msggen
+
+    out = tmp_path_factory.mktemp("ros")
+    msggen.generate(out)
+    saved = {k: v for k, v in sys.modules.items() if _is_woosh(k)}
+    for k in saved:
+        del sys.modules[k]
+    sys.path.insert(0, str(out))
+    importlib.invalidate_caches()
+    try:
+        yield out
+    finally:
+        sys.path.remove(str(out))
+        for k in [k for k in sys.modules if _is_woosh(k)]:
+            del sys.modules[k]
+        sys.modules.update(saved)
+
+
+@pytest.fixture(scope="session")
+def woosh_msgs(woosh_msgs_build: Path) -> ModuleType:
+    """The generated ``woosh_msgs.msg`` module."""
+    module = importlib.import_module("woosh_msgs.msg")
+    assert Path(module.__file__ or "").is_relative_to(woosh_msgs_build), module.__file__
+    return module
+
+
+@pytest.fixture(scope="session")
+def woosh_srvs(woosh_msgs_build: Path) -> ModuleType:
+    """The generated ``woosh_msgs.srv`` module."""
+    return importlib.import_module("woosh_msgs.srv")

@@ -67,6 +67,8 @@ IMU_FROZEN_SAMPLES = 20  #: identical consecutive samples -> IMU fault
 STANDBY_HINT_TIME = 1.0  #: [s] COMMAND_IN_STANDBY stays set after the last such command
 STATE_SAVE_PERIOD = 60.0  #: [s] odometer and boot counter persisted at least this often
 
+#: messages sent as several frames per cycle that share the cycle's counter (the catalog says)
+SHARED_COUNTER = frozenset({"WheelFeedback"})
 LED_DEFAULT = {"Urgency": 0, "Abnormal": 0, "Normal": 0xA3, "Color": 0xFFFFFF}  # Idle, white
 VALID_LED_NORMAL = frozenset(default_codec().message("LedCommand").signal("Normal").choices)
 
@@ -155,6 +157,9 @@ class Mcu:
         self._watchdog = False
         self._speed_limited = False
         self._next_due = {m.name: now + (m.cycle_time or 0.0) for m in self._periodic}
+        # like a CANopen boot-up message: the first frame after a boot is the Heartbeat with
+        # the new BootCounter, so the upper side knows before any counter restarts at zero
+        self._next_due["Heartbeat"] = now
         self._next_any_due = min(self._next_due.values())
         self._motors = {
             side: WheelMotor(self.profile.motor, WheelGeometry.from_chassis(self.chassis, side))
@@ -582,7 +587,13 @@ class Mcu:
             period = msg.cycle_time or 0.0
             missed = max(0, math.floor((now - due) / period)) if period else 0
             self._next_due[msg.name] = due + (missed + 1) * period
-            for values in self._build(msg):
+            rows = self._build(msg)
+            if msg.name in SHARED_COUNTER and rows and msg.has_counter:
+                counter = self._counters[msg.name]  # one counter for all rows of a cycle
+                self._counters[msg.name] = (counter + 1) & 0xF
+                for values in rows:
+                    values["Counter"] = counter
+            for values in rows:
                 self._emit(msg.name, values)
         self._next_any_due = min(self._next_due.values())
 
@@ -635,7 +646,7 @@ class Mcu:
 
     def _emit(self, name: str, values: dict[str, Any]) -> None:
         msg = self.codec.message(name)
-        if msg.has_counter:
+        if msg.has_counter and "Counter" not in values:
             values["Counter"] = self._counters[name]
             self._counters[name] = (self._counters[name] + 1) & 0xF
         data = msg.encode(values)

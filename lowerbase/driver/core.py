@@ -1,0 +1,390 @@
+"""driver_base without ROS: frames in, chassis state out, commands back.
+
+``DriverCore`` is everything the ROS node does except talking to ROS: it decodes the lower
+computer's frames, reads the parameters from the lower computer at start (and again after a
+reboot, seen as a changed Heartbeat BootCounter), enables CAN control, integrates wheel
+odometry (/odom_raw) and runs the EKF (/odom), keeps the IMU, battery, BMS, parameter,
+version and status state, and turns twists and LED requests into frames. The ROS node, the
+benches and the demo all drive this one class; time comes from the injected clock.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from lowerbase.bms.frames import BmsFrameAccumulator
+from lowerbase.clock import Clock
+from lowerbase.driver.ekf import EkfNoise, PlanarEkf
+from lowerbase.driver.odometry import OdometryNoise, OdometryParameters, WheelOdometry
+from lowerbase.errors import LowerbaseError, ProtocolError
+from lowerbase.protocol.codec import Codec, default_codec
+
+log = logging.getLogger(__name__)
+
+#: the woosh_msgs/Parameter fields the odometry needs before it can run
+ODOMETRY_PARAMETERS = ("wheelPerimeter", "wheelDistant", "ratioLeft", "ratioRight",
+                       "pulsePerCircle")
+VERSION_FIELDS = {1: "hardwareVersion", 2: "softwareVersion", 3: "IAPSoftwareVersion",
+                  4: "movebaseType"}
+
+
+class LinkState(enum.Enum):
+    WAITING = "waiting"  #: nothing heard from the lower computer yet
+    CONFIGURING = "configuring"  #: reading parameters
+    READY = "ready"  #: parameters read, odometry running, control enabled
+    LOST = "lost"  #: no Heartbeat within link_timeout
+
+
+@dataclass(frozen=True)
+class DriverConfig:
+    """Tuning of the driver core (the ROS node sets these from ROS parameters)."""
+
+    command_rate: float = 50.0  #: [Hz] MotionCommand rate while the last twist is fresh
+    command_timeout: float = 0.5  #: [s] a twist older than this is stale: stop sending
+    link_timeout: float = 1.5  #: [s] no Heartbeat this long: the link is lost
+    request_retry: float = 0.5  #: [s] parameter/version requests repeated this often
+    auto_enable: bool = True  #: enable CAN control once configured (and after a reboot)
+    malformed_log_period: float = 5.0  #: [s] malformed frames are logged at most this often
+    odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
+    ekf_noise: EkfNoise = field(default_factory=EkfNoise)
+    gyro_sigma: float | None = None  #: [rad/s] per-sample gyro noise for the EKF (None: ekf's)
+
+    def __post_init__(self) -> None:
+        for name in ("command_rate", "command_timeout", "link_timeout", "request_retry"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise LowerbaseError(f"driver {name} must be > 0, got {value!r}")
+
+
+Send = Callable[[int, bytes], None]
+Listener = Callable[[str, "DriverCore"], None]
+
+
+class DriverCore:
+    """See the module docstring. Feed ``on_frame``; call ``tick`` at least at command_rate."""
+
+    def __init__(
+        self, send: Send, clock: Clock, config: DriverConfig | None = None,
+        codec: Codec | None = None,
+    ) -> None:
+        self._send = send
+        self.clock = clock
+        self.config = config or DriverConfig()
+        self.codec = codec or default_codec()
+        self.stats: Counter[str] = Counter()
+        self.listeners: list[Listener] = []
+        self._counters: Counter[str] = Counter()
+        self._param_names = self.codec.message("ParameterRequest").signal("Index").choices
+        self.state = LinkState.WAITING
+        self.boot_counter: int | None = None
+        self.reboots = 0
+        self.parameters: dict[str, float] = {}
+        self.versions: dict[str, str] = {}
+        self._version_parts: dict[int, dict[int, bytes]] = {}
+        self.odometry: WheelOdometry | None = None
+        self.ekf = PlanarEkf(self.config.ekf_noise)
+        self.imu: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+        self.imu_stamp = 0.0
+        self.bms = BmsFrameAccumulator()
+        self.status_code = 0
+        self.system_status: dict[str, Any] = {}
+        self.measured_twist = (0.0, 0.0)
+        self.odometer = 0.0
+        self.leds: dict[tuple[int, int], dict[str, int]] = {}
+        self._wheels: dict[int, tuple[int, int]] = {}
+        self._last_heartbeat = -math.inf
+        self._last_request = -math.inf
+        self._twist: tuple[float, float, bool] | None = None
+        self._twist_stamp = -math.inf
+        self._next_command = -math.inf
+        self._stale_sent = True
+        self._last_malformed_log = -math.inf
+        self._malformed_since_log = 0
+
+    # -- inputs from the upper side ------------------------------------------------------------
+
+    def set_twist(self, linear: float, angular: float, smoothed: bool = False) -> bool:
+        """A twist from /base_cmd_vel (raw) or /smooth_cmd_vel (smoothed). False if refused."""
+        if not (math.isfinite(linear) and math.isfinite(angular)):
+            self.stats["twist_rejected"] += 1
+            log.warning("ignored a twist with NaN or infinity (%r, %r)", linear, angular)
+            return False
+        mc = self.codec.message("MotionCommand")
+        lo_v, hi_v = mc.signal("Linear").minimum, mc.signal("Linear").maximum
+        lo_w, hi_w = mc.signal("Angular").minimum, mc.signal("Angular").maximum
+        assert lo_v is not None and hi_v is not None and lo_w is not None and hi_w is not None
+        clipped = (min(max(linear, lo_v), hi_v), min(max(angular, lo_w), hi_w))
+        if clipped != (linear, angular):
+            self.stats["twist_clipped"] += 1
+        now = self.clock.now()
+        self._twist = (clipped[0], clipped[1], smoothed)
+        self._twist_stamp = now
+        self._stale_sent = False
+        self._send_motion()  # a new twist goes out at once: latency matters
+        return True
+
+    def set_led(self, strip: int, submodule: int, urgency: int, abnormal: int, normal: int,
+                color: int) -> bool:
+        """woosh_msgs/LED on rgbled (strip 0) or rgbled_shelf (strip 1). False if invalid."""
+        try:
+            self._emit("LedCommand", {"Strip": strip, "Submodule": submodule,
+                                      "Urgency": urgency, "Abnormal": abnormal,
+                                      "Normal": normal, "Color": color})
+        except ProtocolError as exc:
+            self.stats["led_rejected"] += 1
+            log.warning("ignored an LED request: %s", exc)
+            return False
+        return True
+
+    def control(self, command: str) -> None:
+        """Send a ControlCommand by name (EnableCanControl, EStopSet, FaultClear, ...)."""
+        self._emit("ControlCommand", {"Command": command})
+
+    def write_parameter(self, name: str, value: float) -> None:
+        index = next(i for i, n in self._param_names.items() if n == name)
+        self._emit("ParameterRequest", {"Index": index, "Op": 1, "Value": value})
+
+    # -- frames from the lower computer ------------------------------------------------------
+
+    def on_frame(self, frame_id: int, data: bytes, stamp: float | None = None) -> None:
+        """Handle one frame. Unknown and malformed frames are counted and logged, not raised."""
+        now = self.clock.now() if stamp is None else stamp
+        self.stats["frames"] += 1
+        try:
+            name, values = self.codec.decode(frame_id, data)
+        except ProtocolError as exc:
+            self._malformed(frame_id, exc, now)
+            return
+        msg = self.codec.message(frame_id)
+        if "Lower" not in msg.senders:
+            return  # our own commands, heard back on a shared bus
+        handler = getattr(self, f"_on_{name}", None)
+        if handler is not None:
+            handler(values, now)
+        if self.state == LinkState.LOST:
+            self.state = LinkState.CONFIGURING if self.odometry is None else LinkState.READY
+            log.info("lower computer link is back")
+            self._notify("link")
+
+    def _malformed(self, frame_id: int, exc: Exception, now: float) -> None:
+        self.stats["malformed"] += 1
+        self._malformed_since_log += 1
+        if now - self._last_malformed_log >= self.config.malformed_log_period:
+            log.warning("%d malformed frame(s) dropped, latest ID 0x%03X: %s",
+                        self._malformed_since_log, frame_id, exc)
+            self._last_malformed_log = now
+            self._malformed_since_log = 0
+
+    def _on_Heartbeat(self, v: dict[str, Any], now: float) -> None:
+        self._last_heartbeat = now
+        boot = int(v["BootCounter"])
+        if self.boot_counter is None:
+            self.boot_counter = boot
+            self._configure("first contact")
+        elif boot != self.boot_counter:
+            self.boot_counter = boot
+            self.reboots += 1
+            log.warning("the lower computer rebooted (boot #%d): reading parameters again", boot)
+            self._configure("reboot")
+
+    def _configure(self, why: str) -> None:
+        self.state = LinkState.CONFIGURING
+        self.parameters = {}
+        self.versions = {}
+        self._version_parts = {}
+        self._wheels = {}
+        if self.odometry is not None:
+            self.odometry.reset_baseline()  # counters restart at 0 after a reboot
+        self._last_request = -math.inf
+        self._notify("configuring")
+        log.info("configuring (%s)", why)
+
+    def _on_ParameterResponse(self, v: dict[str, Any], now: float) -> None:
+        name = self._param_names.get(int(v["Index"]))
+        if name is None:
+            return
+        if int(v["Result"]) != 0:
+            self.stats["parameter_nack"] += 1
+            log.warning("parameter %s: nack %d", name, int(v["Result"]))
+        self.parameters[name] = float(v["Value"])
+        if self.state == LinkState.CONFIGURING and set(self._param_names.values()) <= set(
+            self.parameters
+        ):
+            self._configured()
+        elif self.state == LinkState.READY:
+            self._apply_parameters()
+        self._notify("parameters")
+
+    def _configured(self) -> None:
+        self._apply_parameters()
+        self.state = LinkState.READY
+        log.info("lower computer configured: %s", ", ".join(
+            f"{k}={self.parameters[k]:g}" for k in ODOMETRY_PARAMETERS))
+        if self.config.auto_enable:
+            self.control("EnableCanControl")
+        self._notify("ready")
+
+    def _apply_parameters(self) -> None:
+        params = OdometryParameters.from_lower_computer(self.parameters)
+        # a count jump faster than the drive train can turn is a counter reset, not motion
+        top_rpm = self.parameters.get("maxRPM", 3000.0)
+        ratio = min(params.ratio_left, params.ratio_right)
+        max_wheel_speed = 1.5 * top_rpm / 60.0 / ratio * params.wheel_perimeter
+        if self.odometry is None:
+            self.odometry = WheelOdometry(params, self.config.odometry_noise,
+                                          max_wheel_speed=max_wheel_speed)
+        else:
+            self.odometry.max_wheel_speed = max_wheel_speed
+            if self.odometry.params != params:
+                self.odometry.params = params
+                self.odometry.reset_baseline()
+
+    def _on_VersionResponse(self, v: dict[str, Any], now: float) -> None:
+        field_no = int(v["Field"])
+        parts = self._version_parts.setdefault(field_no, {})
+        parts[int(v["Sequence"])] = int(v["Text"]).to_bytes(6, "little")
+        if int(v["Last"]) and len(parts) == int(v["Sequence"]) + 1:
+            text = b"".join(parts[i] for i in range(len(parts))).rstrip(b"\0")
+            self.versions[VERSION_FIELDS[field_no]] = text.decode("ascii", "replace")
+            self._version_parts.pop(field_no, None)
+            self._notify("information")
+
+    def _on_WheelFeedback(self, v: dict[str, Any], now: float) -> None:
+        self._wheels[int(v["Wheel"])] = (int(v["Counter"]), int(v["Count"]))
+        left, right = self._wheels.get(0), self._wheels.get(1)
+        if left is None or right is None or left[0] != right[0] or self.odometry is None:
+            return  # wait for both wheels of the same cycle
+        self._wheels = {}
+        odo = self.odometry
+        if not odo.update(left[1], right[1], now):
+            return
+        cov = odo.twist_covariance
+        self.ekf.update_wheels(odo.linear, odo.angular, (cov[0], cov[1], cov[2], cov[3]),
+                               stamp=now)
+        self._notify("odometry")
+
+    def _on_ImuGyro(self, v: dict[str, Any], now: float) -> None:
+        gyro = (float(v["X"]), float(v["Y"]), float(v["Z"]))
+        accel = self.imu[1] if self.imu is not None else (0.0, 0.0, 0.0)
+        self.imu = (gyro, accel)
+        self.imu_stamp = now
+        if self.odometry is not None:
+            self.ekf.update_gyro(gyro[2], stamp=now, sigma=self.config.gyro_sigma)
+
+    def _on_ImuAccel(self, v: dict[str, Any], now: float) -> None:
+        gyro = self.imu[0] if self.imu is not None else (0.0, 0.0, 0.0)
+        self.imu = (gyro, (float(v["X"]), float(v["Y"]), float(v["Z"])))
+        self.imu_stamp = now
+        self._notify("imu")
+
+    def _on_MotionState(self, v: dict[str, Any], now: float) -> None:
+        self.measured_twist = (float(v["Linear"]), float(v["Angular"]))
+        self._notify("twist")
+
+    def _on_Odometer(self, v: dict[str, Any], now: float) -> None:
+        self.odometer = float(v["Distance"])
+        self._notify("odometer")
+
+    def _on_StatusCode(self, v: dict[str, Any], now: float) -> None:
+        self.status_code = int(v["Code"])
+        self._notify("status_code")
+
+    def _on_SystemStatus(self, v: dict[str, Any], now: float) -> None:
+        previous = self.system_status.get("RobotState")
+        self.system_status = v
+        # back in standby on its own (e.g. after an e-stop release) is not re-enabled here:
+        # that is the operator's decision; only a reboot is
+        if previous is not None and previous != v["RobotState"]:
+            self._notify("system_status")
+
+    def _on_LedState(self, v: dict[str, Any], now: float) -> None:
+        self.leds[(int(v["Strip"]), int(v["Submodule"]))] = {
+            k: int(v[k]) for k in ("Urgency", "Abnormal", "Normal", "Color")}
+
+    def _bms(self, name: str, v: dict[str, Any], now: float) -> None:
+        if self.bms.update(name, v):
+            self._notify("battery")
+
+    def _on_BmsPack(self, v: dict[str, Any], now: float) -> None:
+        self._bms("BmsPack", v, now)
+
+    def _on_BmsCell(self, v: dict[str, Any], now: float) -> None:
+        self._bms("BmsCell", v, now)
+
+    def _on_BmsCapacity(self, v: dict[str, Any], now: float) -> None:
+        self._bms("BmsCapacity", v, now)
+
+    def _on_BmsStatus(self, v: dict[str, Any], now: float) -> None:
+        self._bms("BmsStatus", v, now)
+
+    def _on_BmsLife(self, v: dict[str, Any], now: float) -> None:
+        self._bms("BmsLife", v, now)
+
+    # -- periodic work -----------------------------------------------------------------------
+
+    def tick(self) -> None:
+        """Send what is due: motion commands, configuration requests; watch the link."""
+        now = self.clock.now()
+        silent = now - self._last_heartbeat > self.config.link_timeout
+        if silent and self.state not in (LinkState.WAITING, LinkState.LOST):
+            self.state = LinkState.LOST
+            self.stats["link_lost"] += 1
+            log.warning("lower computer link lost: no Heartbeat for %.1f s",
+                        now - self._last_heartbeat)
+            self._notify("link")
+        if self.state == LinkState.CONFIGURING and now - self._last_request >= \
+                self.config.request_retry:
+            self._last_request = now
+            for index, name in self._param_names.items():
+                if name not in self.parameters:
+                    self._emit("ParameterRequest", {"Index": index, "Op": 0, "Value": 0.0})
+            if len(self.versions) < len(VERSION_FIELDS):
+                self._emit("VersionRequest", {"Field": 0})
+        if self._twist is None:
+            return
+        fresh = now - self._twist_stamp < self.config.command_timeout
+        if fresh and now >= self._next_command - 1e-9:
+            self._send_motion()
+        elif not fresh and not self._stale_sent:
+            self._stale_sent = True
+            self._twist = (0.0, 0.0, self._twist[2])
+            self._send_motion()  # one explicit stop; the lower computer's watchdog backs it up
+            self._twist = None
+            self.stats["twist_stale"] += 1
+
+    def _send_motion(self) -> None:
+        assert self._twist is not None
+        v, w, smoothed = self._twist
+        self._emit("MotionCommand", {"Linear": v, "Angular": w,
+                                     "Mode": "Smoothed" if smoothed else "Raw"})
+        self._next_command = self.clock.now() + 1.0 / self.config.command_rate
+
+    def _emit(self, name: str, values: dict[str, Any]) -> None:
+        msg = self.codec.message(name)
+        if msg.has_counter:
+            values["Counter"] = self._counters[name] & 0xF
+            self._counters[name] += 1
+        data = msg.encode(values)
+        self.stats[f"tx_{name}"] += 1
+        self._send(msg.frame_id, data)
+
+    def _notify(self, what: str) -> None:
+        for listener in self.listeners:
+            listener(what, self)
+
+    # -- views -------------------------------------------------------------------------------
+
+    @property
+    def link_up(self) -> bool:
+        return self.state in (LinkState.CONFIGURING, LinkState.READY)
+
+    def information(self) -> dict[str, Any]:
+        """woosh_msgs/Information fields (without header)."""
+        return {**{name: self.versions.get(name, "") for name in VERSION_FIELDS.values()},
+                "parameter": dict(self.parameters)}

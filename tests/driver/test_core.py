@@ -1,0 +1,125 @@
+"""The ROS-free driver core against the emulated lower computer, on simulated time."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import pytest
+
+from lowerbase.bench.simloop import SimLoop
+from lowerbase.driver.core import DriverConfig, LinkState
+from lowerbase.firmware_model.profile import load_profile
+from lowerbase.protocol.status_codes import StatusBit
+
+
+def ready(loop: SimLoop) -> bool:
+    return loop.driver.state == LinkState.READY and loop.mcu.state.name == "ACTIVE"
+
+
+def test_reads_parameters_from_the_lower_computer_and_enables_control() -> None:
+    p = load_profile()
+    p = p.replace(chassis=dataclasses.replace(p.chassis, wheel_distant=0.55, ratio_left=25.0,
+                                              ratio_right=25.0))
+    loop = SimLoop(p)
+    assert loop.run_until(ready, timeout=3.0)
+    assert loop.driver.parameters["wheelDistant"] == pytest.approx(0.55)
+    assert loop.driver.odometry is not None
+    assert loop.driver.odometry.params.ratio_left == pytest.approx(25.0)
+    assert loop.driver.versions["movebaseType"] == p.identity.movebase_type
+    assert loop.driver.information()["hardwareVersion"] == p.identity.hardware_version
+
+
+def test_twist_moves_the_robot_and_odometry_follows_the_truth() -> None:
+    loop = SimLoop()
+    assert loop.run_until(ready, timeout=3.0)
+    loop.drive(0.5, 0.0, 4.0)
+    odo = loop.driver.odometry
+    assert odo is not None
+    truth = loop.mcu.truth
+    assert truth.x > 1.5
+    assert odo.x == pytest.approx(truth.x, rel=0.01)
+    ex, ey, _ = loop.driver.ekf.pose
+    assert math.hypot(ex - truth.x, ey - truth.y) < 0.05
+    assert loop.driver.measured_twist[0] == pytest.approx(0.5, abs=0.02)
+
+
+def test_stale_twist_stops_sending_and_the_robot_stops() -> None:
+    loop = SimLoop()
+    assert loop.run_until(ready, timeout=3.0)
+    loop.drive(0.4, 0.0, 1.0)
+    sent = loop.driver.stats["tx_MotionCommand"]
+    loop.run(2.0)
+    assert loop.driver.stats["twist_stale"] == 1
+    # one explicit stop after the timeout, then silence
+    assert loop.driver.stats["tx_MotionCommand"] <= sent + 0.5 * 50 + 2
+    assert loop.mcu.truth.v == pytest.approx(0.0, abs=1e-6)
+
+
+def test_reboot_is_detected_parameters_reread_and_control_reenabled() -> None:
+    loop = SimLoop()
+    assert loop.run_until(ready, timeout=3.0)
+    loop.drive(0.3, 0.0, 1.0)
+    x_before = loop.driver.odometry.x  # type: ignore[union-attr]
+    loop.driver.control("Reboot")
+    loop.run(0.6)  # the first Heartbeat after the reboot carries the new BootCounter
+    assert loop.driver.reboots == 1
+    assert loop.run_until(ready, timeout=3.0)
+    assert loop.driver.reboots == 1
+    loop.drive(0.3, 0.0, 1.0)
+    odo = loop.driver.odometry
+    assert odo is not None and odo.x > x_before + 0.2  # continues, no jump from zeroed counters
+    assert odo.x == pytest.approx(loop.mcu.truth.x, abs=0.05)
+
+
+def test_link_loss_and_return() -> None:
+    loop = SimLoop(faults=["silence@3+3"])
+    assert loop.run_until(ready, timeout=3.0)
+    assert loop.run_until(lambda lp: lp.driver.state == LinkState.LOST, timeout=6.0)
+    assert 4.0 <= loop.now <= 3.0 + 1.5 + 0.5 + 0.1  # link_timeout after the last Heartbeat
+    assert loop.driver.stats["link_lost"] == 1
+    assert loop.run_until(lambda lp: lp.driver.state == LinkState.READY, timeout=3.0)
+    assert loop.now < 6.0 + 0.6
+
+
+def test_malformed_frames_are_counted_not_fatal() -> None:
+    loop = SimLoop(faults=["corrupt:0.2"])
+    loop.run(3.0)
+    assert loop.driver.stats["malformed"] > 10
+    assert loop.driver.state in (LinkState.READY, LinkState.CONFIGURING)
+
+
+def test_nan_twist_is_refused() -> None:
+    loop = SimLoop()
+    assert loop.run_until(ready, timeout=3.0)
+    assert not loop.driver.set_twist(math.nan, 0.0)
+    assert loop.driver.set_twist(10.0, 0.0)  # clipped to the catalog range, then the MCU limits
+    assert loop.driver.stats["twist_clipped"] == 1
+
+
+def test_battery_and_status_reach_the_driver() -> None:
+    loop = SimLoop(soc=15.0)
+    loop.run(3.0)
+    battery = loop.driver.bms.battery_fields()
+    assert battery is not None
+    assert battery["batteryPercentage"] == 15
+    assert loop.driver.status_code & StatusBit.LOW_BATTERY
+
+
+def test_ekf_beats_wheel_odometry_with_slip_and_radius_error() -> None:
+    p = load_profile()
+    p = p.replace(truth=dataclasses.replace(p.truth, right_radius_error=0.01,
+                                            slip_rate_per_km=40.0, slip_fraction=0.5,
+                                            slip_duration=0.3))
+    loop = SimLoop(p, driver_config=DriverConfig(gyro_sigma=5e-4))
+    assert loop.run_until(ready, timeout=3.0)
+    loop.run(2.0)  # standstill: the EKF learns the gyro bias
+    for _ in range(4):
+        loop.drive(0.8, 0.0, 6.0)
+        loop.drive(0.0, 0.6, math.pi / 2 / 0.6 + 0.3)
+    truth = loop.mcu.truth
+    odo = loop.driver.odometry
+    assert odo is not None
+    raw_heading = abs(math.remainder(odo.yaw_unwrapped - truth.yaw, math.tau))
+    ekf_heading = abs(math.remainder(loop.driver.ekf.yaw_unwrapped - truth.yaw, math.tau))
+    assert ekf_heading < raw_heading / 2

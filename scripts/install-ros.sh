@@ -9,6 +9,8 @@
 set -euo pipefail
 
 PACKAGES=(
+    # the project's virtual environment is made with Debian's python3 (the one ROS is built for)
+    python3-venv
     ros-core
     python3-rospy
     python3-genpy

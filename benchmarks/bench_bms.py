@@ -1,6 +1,6 @@
 """BMS benchmarks: a full discharge on simulated time, and Modbus TCP/RTU request rates.
 
-``run()`` returns rows ``{"name", "value", "unit"}``; ``python benchmarks/bench_bms.py``
+``run()`` returns :class:`~benchmarks.common.Row` rows; ``python -m benchmarks.bench_bms``
 prints them. Network use is loopback (127.0.0.1) and a pseudo-terminal pair only.
 """
 
@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import socket
 import time
+
+from benchmarks.common import Row
 
 
 def _free_port() -> int:
@@ -64,11 +66,12 @@ def bench_modbus(seconds: float = 2.0) -> list[dict]:
     return rows
 
 
-def run() -> list[dict]:
+def run(quick: bool = False) -> list[Row]:
     """Every BMS benchmark row."""
-    return [bench_full_discharge(), *bench_modbus()]
+    rows = [bench_full_discharge(), *bench_modbus(0.5 if quick else 2.0)]
+    return [Row("bms", r["name"], float(r["value"]), r["unit"]) for r in rows]
 
 
 if __name__ == "__main__":
     for row in run():
-        print(f"{row['name']:<60} {row['value']:>10} {row['unit']}")
+        print(f"{row.name:<60} {row.value:>10} {row.unit}")

@@ -1,0 +1,124 @@
+"""The emulated lower computer: simulated-clock speed, chassis per core, real-time jitter."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import time
+from collections import defaultdict
+
+import can
+
+from benchmarks.common import Row, percentile
+from lowerbase.bms.adapter import McuBmsAdapter
+from lowerbase.clock import SimClock
+from lowerbase.firmware_model.mcu import Command, Mcu
+from lowerbase.firmware_model.profile import load_profile
+from lowerbase.firmware_model.sim import SimRig
+from lowerbase.protocol.codec import default_codec
+from lowerbase.transport import open_bus
+
+GROUP = "239.74.163.98"
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def sim_speed(seconds: float) -> float:
+    """Chassis seconds per wall second: one MCU with its BMS, driving, every frame encoded."""
+    p = load_profile()
+    rig = SimRig(p, bms=McuBmsAdapter.from_battery_table(p.battery), keep=False)
+    rig.enable()
+    t0 = time.perf_counter()
+    rig.drive(0.6, 0.2, seconds)
+    return seconds / (time.perf_counter() - t0)
+
+
+def chassis_per_core(seconds: float) -> tuple[float, float]:
+    """(chassis one core can run in real time, frames/s each) with every frame sent to a real
+    udp_multicast bus (hop limit 0), measured on the simulated clock."""
+    p = load_profile()
+    bus = open_bus(interface="udp_multicast", channel=GROUP, port=_free_port(), hop_limit=0)
+    sent = 0
+
+    def send(frame_id: int, data: bytes) -> None:
+        nonlocal sent
+        bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False))
+        sent += 1
+
+    clock = SimClock()
+    mcu = Mcu(p, clock, send, bms=McuBmsAdapter.from_battery_table(p.battery))
+    steps = round(seconds / mcu.dt)
+    t0 = time.perf_counter()
+    for k in range(steps):
+        if k == 70:  # after the boot
+            mcu.control(Command.ENABLE_CAN_CONTROL)
+        if k % 4 == 0:
+            mcu.command(0.6, 0.2)
+        mcu.step()
+        clock.advance(mcu.dt)
+    wall = time.perf_counter() - t0
+    bus.shutdown()
+    return seconds / wall, sent / seconds
+
+
+def jitter(seconds: float) -> list[Row]:
+    """Period jitter of each periodic frame of `lowerbase emulate` in real time."""
+    port = _free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "lowerbase", "emulate", "-i", "udp_multicast", "-c", GROUP,
+         "--bus-kwargs", f"port={port}", "hop_limit=0", "--duration", str(seconds + 3)],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    assert proc.stdout is not None
+    proc.stdout.readline()  # "lower computer on ..."
+    bus = open_bus(interface="udp_multicast", channel=GROUP, port=port, hop_limit=0)
+    codec = default_codec()
+    stamps: dict[str, list[float]] = defaultdict(list)
+    end = time.monotonic() + seconds + 1.0
+    start = time.monotonic() + 1.0  # skip the boot
+    while time.monotonic() < end:
+        msg = bus.recv(0.5)
+        if msg is None or msg.arbitration_id not in codec or time.monotonic() < start:
+            continue
+        m = codec.message(msg.arbitration_id)
+        if not m.is_periodic or "Lower" not in m.senders:
+            continue
+        key = m.name
+        if m.name == "WheelFeedback":
+            key += "/" + ("left" if msg.data[7] & 1 == 0 else "right")
+        elif m.name == "LedState":
+            key += f"/{msg.data[0]:02x}"
+        stamps[key].append(msg.timestamp)
+    bus.shutdown()
+    proc.wait(timeout=10)
+    rows = []
+    for key in sorted(stamps):
+        name = key.split("/")[0]
+        if name == "LedState" and not key.endswith("/02"):
+            continue  # one submodule stands for the 16
+        cycle = codec.message(name).cycle_time or 0.0
+        ts = stamps[key]
+        dev = [abs((b - a) - cycle) * 1e3 for a, b in zip(ts, ts[1:], strict=False)]
+        if not dev:
+            continue
+        rows.append(Row("jitter", f"{key} ({cycle * 1e3:g} ms) p50/p99/max",
+                        percentile(dev, 50), "ms",
+                        f"p99 {percentile(dev, 99):.2f} ms, max {max(dev):.2f} ms, "
+                        f"{len(ts)} frames"))
+    return rows
+
+
+def run(quick: bool = False) -> list[Row]:
+    speed = sim_speed(20.0 if quick else 120.0)
+    per_core, fps = chassis_per_core(10.0 if quick else 60.0)
+    rows = [
+        Row("emulator", "simulated clock, one chassis", speed, "x real time",
+            "target >= 1000x; MCU + BMS at 200 Hz, all frames encoded, no bus"),
+        Row("emulator", "chassis per core in real time", per_core, "chassis",
+            f"target >= 50; all frames ({fps:.0f}/s each) sent on udp_multicast"),
+    ]
+    return rows + jitter(5.0 if quick else 30.0)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import socket
 import subprocess
 import sys
@@ -102,7 +103,7 @@ def jitter(seconds: float) -> list[Row]:
             continue  # one submodule stands for the 16
         cycle = codec.message(name).cycle_time or 0.0
         ts = stamps[key]
-        dev = [abs((b - a) - cycle) * 1e3 for a, b in zip(ts, ts[1:], strict=False)]
+        dev = [abs((b - a) - cycle) * 1e3 for a, b in itertools.pairwise(ts)]
         if not dev:
             continue
         rows.append(Row("jitter", f"{key} ({cycle * 1e3:g} ms) p50/p99/max",

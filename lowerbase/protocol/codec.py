@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import cantools
 from cantools.database.conversion import (
@@ -41,6 +41,13 @@ DBC_PATH = Path(__file__).with_name("chassis.dbc")
 
 SignalValue = int | float | str
 Signals = dict[str, SignalValue]
+
+
+class DecodeFunction(Protocol):
+    def __call__(
+        self, frame_id: int, data: bytes | bytearray | memoryview, *,
+        decode_choices: bool = False, strict: bool = True,
+    ) -> tuple[str, Signals]: ...
 
 _F32 = struct.Struct("<f")
 _F64 = struct.Struct("<d")
@@ -480,6 +487,8 @@ class Codec:
         self._by_name = {m.name: m for m in self.messages}
         self._by_id = {m.frame_id: m for m in self.messages}
         self._decoders = {m.frame_id: m._decode_named for m in self.messages}
+        #: ``decode(frame_id, data, *, decode_choices=False, strict=True) -> (name, signals)``
+        self.decode: DecodeFunction = self._make_decode()
 
     def __iter__(self) -> Iterator[MessageCodec]:
         return iter(self.messages)
@@ -504,20 +513,31 @@ class Codec:
             return self.message(name).encode(values, strict=strict)
         return msg._encode(values)
 
-    def decode(
-        self, frame_id: int, data: bytes | bytearray | memoryview, *,
-        decode_choices: bool = False, strict: bool = True,
+    def _decode_slow(
+        self, frame_id: int, data: bytes | bytearray | memoryview, decode_choices: bool,
+        strict: bool,
     ) -> tuple[str, Signals]:
-        """Decode a frame; returns (message name, signals)."""
-        try:
-            decode = self._decoders[frame_id]
-        except KeyError:
-            raise UnknownMessageError(
-                f"the catalog has no message with ID {frame_id:#05x}") from None
-        if decode_choices:
-            msg = self._by_id[frame_id]
-            return msg.name, msg.decode(data, decode_choices=True, strict=strict)
-        return decode(data, strict)
+        msg = self._by_id.get(frame_id)
+        if msg is None:
+            raise UnknownMessageError(f"the catalog has no message with ID {frame_id:#05x}")
+        return msg.name, msg.decode(data, decode_choices=decode_choices, strict=strict)
+
+    def _make_decode(self) -> DecodeFunction:
+        # a plain function held by the instance: no method binding, one dict lookup, one call
+        get = self._decoders.get
+        slow = self._decode_slow
+
+        def decode(
+            frame_id: int, data: bytes | bytearray | memoryview, *,
+            decode_choices: bool = False, strict: bool = True,
+        ) -> tuple[str, Signals]:
+            """Decode a frame; returns (message name, signals)."""
+            fast = get(frame_id)
+            if fast is None or decode_choices:
+                return slow(frame_id, data, decode_choices, strict)
+            return fast(data, strict)
+
+        return decode
 
 
 @cache

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import os
-import select
+import queue
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -46,7 +47,7 @@ def bus_cli_args(config: dict[str, Any]) -> list[str]:
 
 
 class Proc:
-    """A lowerbase subprocess whose stdout is read line by line with a deadline."""
+    """A lowerbase subprocess whose stdout is collected line by line by a reader thread."""
 
     def __init__(self, args: list[str], env: dict[str, str] | None = None) -> None:
         self.popen = subprocess.Popen(
@@ -55,21 +56,30 @@ class Proc:
             env={**os.environ, **(env or {})},
         )
         self.lines: list[str] = []
+        self._queue: queue.Queue[str | None] = queue.Queue()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.popen.stdout is not None
+        for line in self.popen.stdout:
+            self._queue.put(line)
+        self._queue.put(None)
 
     def wait_for(self, text: str, timeout: float = 20.0) -> str:
-        assert self.popen.stdout is not None
+        """The first stdout line (from now on) containing ``text``; AssertionError after
+        ``timeout`` [s] or when the process ends first."""
         deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            ready, _, _ = select.select([self.popen.stdout], [], [], 0.2)
-            if ready:
-                line = self.popen.stdout.readline()
-                if not line:
-                    break
-                self.lines.append(line)
-                if text in line:
-                    return line
-            elif self.popen.poll() is not None:
+        while (remaining := deadline - time.monotonic()) > 0:
+            try:
+                line = self._queue.get(timeout=remaining)
+            except queue.Empty:
                 break
+            if line is None:
+                break
+            self.lines.append(line)
+            if text in line:
+                return line
         done = self.popen.poll() is not None
         err = self.popen.stderr.read() if done and self.popen.stderr else ""
         raise AssertionError(f"{text!r} not printed; stdout={self.lines!r} stderr={err!r}")

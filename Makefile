@@ -47,7 +47,7 @@ demo: env
 	$(PY) -m lowerbase demo
 
 bench: env
-	$(PY) -m benchmarks
+	$(PY) -m benchmarks --write docs/benchmarks.md
 
 docs: env
 	$(PY) -m lowerbase dbc --export-docs docs/protocol.md

@@ -391,3 +391,25 @@ def test_imu_frames_exact_without_noise() -> None:
     accel = rig.last("ImuAccel")
     assert gyro["Z"] == pytest.approx(0.5, abs=1e-4)
     assert accel["Z"] == pytest.approx(rig.profile.imu.gravity, abs=1e-3)
+
+
+def test_led_commands_show_in_led_state() -> None:
+    rig = SimRig()
+    rig.run(0.4)
+    rig.send("LedCommand", Strip="Shelf", Submodule="All", Urgency=0, Abnormal=0xFF,
+             Normal=0, Color=0xFF0000)
+    rig.send("LedCommand", Strip="Body", Submodule=3, Urgency=0, Abnormal=0, Normal=0x80,
+             Color=0x00FF00)
+    rig.send("LedCommand", Strip="Body", Submodule=4, Urgency=0x12, Abnormal=0, Normal=0x80,
+             Color=0x0000FF)  # urgency must be 0x00 or 0xFF: ignored
+    rig.send("LedCommand", Strip="Body", Submodule=5, Urgency=0, Abnormal=0, Normal=0x77,
+             Color=0x0000FF)  # not a code of the seed's table: ignored
+    rig.run(1.1)
+    shown = {(f.values["Strip"], f.values["Submodule"]): f.values
+             for f in rig.frames("LedState", since=rig.now - 1.0)}
+    assert len(shown) == 16
+    assert all(shown[(1, sub)]["Color"] == 0xFF0000 and shown[(1, sub)]["Abnormal"] == 0xFF
+               for sub in range(1, 9))
+    assert shown[(0, 3)]["Normal"] == 0x80 and shown[(0, 3)]["Color"] == 0x00FF00
+    assert shown[(0, 4)]["Normal"] == 0xA3 and shown[(0, 5)]["Normal"] == 0xA3  # unchanged
+    assert rig.mcu.stats["rx_led_invalid"] == 2

@@ -6,10 +6,14 @@ import dataclasses
 import math
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from lowerbase.bench.simloop import SimLoop
-from lowerbase.driver.core import DriverConfig, LinkState
+from lowerbase.clock import SimClock
+from lowerbase.driver.core import DriverConfig, DriverCore, LinkState
 from lowerbase.firmware_model.profile import load_profile
+from lowerbase.protocol.codec import default_codec
 from lowerbase.protocol.status_codes import StatusBit
 
 
@@ -123,3 +127,18 @@ def test_ekf_beats_wheel_odometry_with_slip_and_radius_error() -> None:
     raw_heading = abs(math.remainder(odo.yaw_unwrapped - truth.yaw, math.tau))
     ekf_heading = abs(math.remainder(loop.driver.ekf.yaw_unwrapped - truth.yaw, math.tau))
     assert ekf_heading < raw_heading / 2
+
+
+_IDS = [m.frame_id for m in default_codec()]
+
+
+@settings(max_examples=300, deadline=None)
+@given(frames=st.lists(st.tuples(st.one_of(st.sampled_from(_IDS), st.integers(0, 0x7FF)),
+                                 st.binary(max_size=8)), max_size=30))
+def test_fuzz_random_frames_never_crash_the_driver(frames: list[tuple[int, bytes]]) -> None:
+    sent: list[tuple[int, bytes]] = []
+    core = DriverCore(lambda i, d: sent.append((i, d)), SimClock())
+    for frame_id, data in frames:
+        core.on_frame(frame_id, data)
+        core.tick()
+    assert core.stats["frames"] == len(frames)

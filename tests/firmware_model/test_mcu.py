@@ -10,6 +10,8 @@ import os
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from lowerbase.errors import ConfigError
 from lowerbase.firmware_model.faults import parse_fault
@@ -413,3 +415,19 @@ def test_led_commands_show_in_led_state() -> None:
     assert shown[(0, 3)]["Normal"] == 0x80 and shown[(0, 3)]["Color"] == 0x00FF00
     assert shown[(0, 4)]["Normal"] == 0xA3 and shown[(0, 5)]["Normal"] == 0xA3  # unchanged
     assert rig.mcu.stats["rx_led_invalid"] == 2
+
+
+_IDS = [m.frame_id for m in default_codec()]
+
+
+@settings(max_examples=300, deadline=None)
+@given(frames=st.lists(st.tuples(st.one_of(st.sampled_from(_IDS), st.integers(0, 0x7FF)),
+                                 st.binary(max_size=8)), max_size=20))
+def test_fuzz_random_frames_never_crash_the_mcu(frames: list[tuple[int, bytes]]) -> None:
+    rig = SimRig()
+    rig.run(0.35)
+    for frame_id, data in frames:
+        rig.mcu.receive(frame_id, data)
+        rig.step()
+    rig.run(0.1)
+    assert rig.mcu.stats["rx_frames"] == len(frames)

@@ -24,8 +24,11 @@ from lowerbase.driver.ekf import EkfNoise, PlanarEkf
 from lowerbase.driver.odometry import OdometryNoise, OdometryParameters, WheelOdometry
 from lowerbase.errors import LowerbaseError, ProtocolError
 from lowerbase.protocol.codec import Codec, default_codec
+from lowerbase.protocol.status_codes import StatusBit
 
 log = logging.getLogger(__name__)
+
+_IMU_FAULT = int(StatusBit.IMU_FAULT)
 
 #: the woosh_msgs/Parameter fields the odometry needs before it can run
 ODOMETRY_PARAMETERS = ("wheelPerimeter", "wheelDistant", "ratioLeft", "ratioRight",
@@ -264,9 +267,10 @@ class DriverCore:
         odo = self.odometry
         if not odo.update(left[1], right[1], now):
             return
-        cov = odo.twist_covariance
-        self.ekf.update_wheels(odo.linear, odo.angular, (cov[0], cov[1], cov[2], cov[3]),
-                               stamp=now)
+        # The EKF weighs the wheels with its own model of their errors (EkfNoise.wheel_*):
+        # radius and track errors and slip, which /odom_raw's quantisation-based twist
+        # covariance does not contain; with that one the wheels would outvote the gyro.
+        self.ekf.update_wheels(odo.linear, odo.angular, stamp=now)
         self._notify("odometry")
 
     def _on_ImuGyro(self, v: dict[str, Any], now: float) -> None:
@@ -274,7 +278,9 @@ class DriverCore:
         accel = self.imu[1] if self.imu is not None else (0.0, 0.0, 0.0)
         self.imu = (gyro, accel)
         self.imu_stamp = now
-        if self.odometry is not None:
+        if self.odometry is not None and not self.status_code & _IMU_FAULT:
+            # the gyro is the EKF's yaw-rate reference; once the lower computer flags the
+            # IMU as faulty (frozen output) the EKF runs on the wheels alone
             self.ekf.update_gyro(gyro[2], stamp=now, sigma=self.config.gyro_sigma)
 
     def _on_ImuAccel(self, v: dict[str, Any], now: float) -> None:
@@ -379,6 +385,11 @@ class DriverCore:
             listener(what, self)
 
     # -- views -------------------------------------------------------------------------------
+
+    @property
+    def commanding(self) -> bool:
+        """True while a twist is being sent (fresh, or its final stop not sent yet)."""
+        return self._twist is not None
 
     @property
     def link_up(self) -> bool:

@@ -106,3 +106,96 @@ def woosh_msgs(woosh_msgs_build: Path) -> ModuleType:
 def woosh_srvs(woosh_msgs_build: Path) -> ModuleType:
     """The generated ``woosh_msgs.srv`` module."""
     return importlib.import_module("woosh_msgs.srv")
+
+
+# -- a ROS master of the tests' own -------------------------------------------------------------
+
+
+class RosMaster:
+    """A ``rosmaster --core`` on 127.0.0.1 and a free port, with an environment that points
+    ROS clients (subprocesses) at it and keeps their files under ``home``."""
+
+    def __init__(self, home: Path, share_dirs: list[Path], python_dirs: list[Path]) -> None:
+        import socket
+        import subprocess
+
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            s.bind(("127.0.0.1", 0))
+            self.port = int(s.getsockname()[1])
+        self.uri = f"http://127.0.0.1:{self.port}"
+        home.mkdir(parents=True, exist_ok=True)
+        package_path = [str(p) for p in share_dirs]
+        if os.environ.get("ROS_PACKAGE_PATH"):
+            package_path.append(os.environ["ROS_PACKAGE_PATH"])
+        python_path = [str(p) for p in python_dirs]
+        if os.environ.get("PYTHONPATH"):
+            python_path.append(os.environ["PYTHONPATH"])
+        #: what a ROS client process needs (merge into os.environ)
+        self.env = {
+            "ROS_MASTER_URI": self.uri,
+            "ROS_IP": "127.0.0.1",
+            "ROS_HOME": str(home),
+            "ROS_LOG_DIR": str(home / "log"),
+            "ROS_PACKAGE_PATH": os.pathsep.join(package_path),
+            "PYTHONPATH": os.pathsep.join(python_path),
+            "PYTHONUNBUFFERED": "1",
+        }
+        self.env.pop("ROS_HOSTNAME", None)
+        self.proc = subprocess.Popen(
+            ["rosmaster", "--core", "-p", str(self.port)],
+            env={**os.environ, **self.env}, stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        self._wait_online(timeout=15.0)
+
+    def _wait_online(self, timeout: float) -> None:
+        import time
+        import xmlrpc.client
+
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"rosmaster exited with {self.proc.returncode}")
+            try:
+                code, _, _ = xmlrpc.client.ServerProxy(self.uri).getPid("/pytest")
+                if code == 1:
+                    return
+            except OSError:
+                pass
+            time.sleep(0.05)
+        self.stop()
+        raise RuntimeError(f"rosmaster on port {self.port} did not come up in {timeout} s")
+
+    def stop(self) -> None:
+        import subprocess
+
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+@pytest.fixture(scope="module")
+def ros_master(
+    tmp_path_factory: pytest.TempPathFactory, woosh_msgs_build: Path
+) -> Iterator[RosMaster]:
+    """A private rosmaster for the module; its ``env`` finds woosh_msgs and lowerbase_driver."""
+    import shutil
+
+    require_ros((*ROS_MODULES, "rosgraph", "rosbag"))
+    if shutil.which("rosmaster") is None:
+        reason = "rosmaster is not on PATH; run scripts/install-ros.sh as root"
+        if is_ci():
+            pytest.fail(f"CI=true requires ROS: {reason}", pytrace=False)
+        pytest.skip(reason)
+    driver_package = Path(__file__).resolve().parents[2] / "lowerbase" / "driver"
+    master = RosMaster(tmp_path_factory.mktemp("ros_home"),
+                       share_dirs=[woosh_msgs_build / "share", driver_package],
+                       python_dirs=[woosh_msgs_build])
+    try:
+        yield master
+    finally:
+        master.stop()

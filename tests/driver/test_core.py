@@ -142,3 +142,14 @@ def test_fuzz_random_frames_never_crash_the_driver(frames: list[tuple[int, bytes
         core.on_frame(frame_id, data)
         core.tick()
     assert core.stats["frames"] == len(frames)
+
+
+def test_a_frozen_imu_is_no_longer_fused() -> None:
+    loop = SimLoop(faults=["imu-freeze@3"])
+    assert loop.run_until(ready, timeout=3.0)
+    loop.drive(0.3, 0.2, 4.0)
+    assert loop.driver.status_code & StatusBit.IMU_FAULT
+    fused = loop.driver.ekf.statistics.get("gyro.accepted", 0)
+    loop.drive(0.3, 0.2, 1.0)
+    assert loop.driver.ekf.statistics.get("gyro.accepted", 0) == fused
+    assert loop.driver.odometry is not None

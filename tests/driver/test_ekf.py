@@ -104,8 +104,13 @@ def test_gyro_measures_rate_plus_bias_and_innovation_is_inspectable() -> None:
     assert ekf.innovation.shape == (1, 1) and ekf.innovation[0, 0] == pytest.approx(0.05)
     np.testing.assert_allclose(ekf.kf.y, ekf.innovation)
     w, b = ekf.x[W], ekf.x[B]
-    assert w + b == pytest.approx(0.05, abs=1e-4)  # split between rate and bias by their priors
-    assert w == pytest.approx(b, rel=1e-9)  # equal initial sigmas
+    # not at standstill: the bias is a consider state (its value stays, its uncertainty
+    # counts), so the rate takes its share of the innovation and the bias none
+    assert b == 0.0
+    s = float(ekf.innovation_covariance[0, 0])
+    p_ww = s - float(ekf.P[B, B]) - 0.002**2 - 0.0  # S = P_ww + P_bb + R (P_bb unchanged)
+    assert 0.0 < w < 0.05
+    assert w == pytest.approx(0.05 * p_ww / s, rel=0.05)
 
 
 def test_standstill_makes_the_gyro_measure_pure_bias() -> None:
@@ -176,12 +181,29 @@ def test_linear_only_outlier_keeps_the_yaw_rate() -> None:
     assert ekf.update_wheels(2.0, 0.0) is Gate.LINEAR_REJECTED
 
 
-def test_gyro_spike_is_rejected_and_lock_out_is_prevented() -> None:
+def test_gyro_is_the_yaw_rate_reference_by_default() -> None:
+    # a wheel that slips makes the true yaw rate jump; only the gyro sees it, so it is not gated
     ekf = _settled()
+    t = ekf.stamp
+    gates = [ekf.update_gyro(0.8, stamp=t + 0.01 * (k + 1)) for k in range(10)]
+    assert gates == [Gate.ACCEPTED] * 10
+    assert ekf.twist[1] == pytest.approx(0.8, abs=0.05)  # followed within 0.1 s
+    # and the wheels that still claim straight motion are the outlier now
+    assert ekf.update_wheels(0.5, 0.0, stamp=t + 0.11) is Gate.ANGULAR_REJECTED
+
+
+def test_gated_gyro_spike_is_rejected_and_lock_out_is_prevented() -> None:
+    ekf = PlanarEkf(EkfNoise(gate_gyro=True))
+    ekf.reset()
+    ekf.kf.P[B, B] = 1e-8
+    for k in range(200):
+        ekf.update_gyro(0.0, stamp=k * 0.01)
+        if k % 2 == 0:
+            ekf.update_wheels(0.5, 0.0, stamp=k * 0.01)
     assert ekf.update_gyro(2.0) is Gate.REJECTED
     assert abs(ekf.twist[1]) < 1e-3
     # a gyro that really moved on is accepted again after too many rejections in a row
-    noise = EkfNoise(max_consecutive_rejections=5)
+    noise = EkfNoise(max_consecutive_rejections=5, gate_gyro=True)
     ekf = PlanarEkf(noise)
     ekf.kf.P[W, W] = ekf.kf.P[B, B] = 1e-10
     gates = [ekf.update_gyro(1.0) for _ in range(7)]

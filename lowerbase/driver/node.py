@@ -1,0 +1,471 @@
+"""driver_base: the ROS1 node of the upper computer, a thin rospy layer over DriverCore.
+
+Threads (one lock, held around every DriverCore call):
+
+* the reader thread takes frames off the bus (or a replayed log) and feeds
+  ``DriverCore.on_frame``; the core's listeners publish what a frame completed (/odom_raw,
+  /odom and the TF on each wheel sample, /imu/data_raw, odom_twist, odometer, status_code);
+* the main thread calls ``DriverCore.tick`` every 1/command_rate seconds (motion commands,
+  configuration requests, link watchdog) and publishes what is better sent once per burst
+  (/battery and /driver_base/bms, the latched /driver_base/parameter and /information, and
+  ``~link_state``);
+* rospy's subscriber threads hand /base_cmd_vel, /smooth_cmd_vel, rgbled and rgbled_shelf to
+  ``set_twist`` / ``set_led``.
+
+Stamps are ``rospy.Time.now()`` when the frame was handled; DriverCore's own timeouts run on
+a :class:`~lowerbase.clock.RealClock`. A bus that fails (a USB adapter unplugged) is closed and
+reopened every second, while the core reports the lost link; nothing here raises on bad input
+from the wire. Run it with ``lowerbase driver`` (see docs/driver.md) or roslaunch
+(``lowerbase/driver/launch/driver_base.launch``); ``python -m lowerbase.driver.node ARGS`` is
+the same as ``lowerbase driver ARGS``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+from lowerbase.clock import Clock, RealClock
+from lowerbase.driver.core import DriverConfig, DriverCore, LinkState
+from lowerbase.driver.settings import NodeSettings
+from lowerbase.errors import ConfigError, RosUnavailableError, TransportError
+
+log = logging.getLogger(__name__)
+
+NODE_NAME = "driver_base"
+ROS_HINT = "run make env (Debian) or source /opt/ros/noetic/setup.bash"
+#: python-can log formats that --replay reads (can.LogReader picks the reader by suffix)
+REPLAY_SUFFIXES = (".log", ".asc", ".blf", ".csv", ".trc", ".mf4")
+
+FrameSink = Callable[[int, bytes], None]
+
+
+def import_ros() -> tuple[ModuleType, ModuleType]:
+    """(rospy, lowerbase.driver.ros_io); RosUnavailableError with one clear line if missing."""
+    try:
+        import rospy
+
+        from lowerbase.driver import ros_io
+    except ImportError as exc:
+        name = getattr(exc, "name", "") or ""
+        if name.startswith("woosh_msgs"):
+            raise RosUnavailableError(
+                "woosh_msgs is not generated: run make env, or python -m lowerbase.driver.msggen "
+                "build/ros --pth <site-packages>") from None
+        raise RosUnavailableError(f"ROS is not installed ({exc}): {ROS_HINT}") from None
+    return rospy, ros_io
+
+
+class Throttle:
+    """Lets a topic through at most ``rate`` [Hz] on average (0: always).
+
+    A sample is accepted from half a period before it is due, so the jitter of a source that
+    runs at exactly ``rate`` does not drop every other sample.
+    """
+
+    def __init__(self, rate: float) -> None:
+        self.period = 1.0 / rate if rate > 0 else 0.0
+        self._due = -math.inf
+
+    def ready(self, now: float) -> bool:
+        if self.period == 0.0:
+            return True
+        if now < self._due - 0.5 * self.period:
+            return False
+        self._due = max(self._due + self.period, now + 0.5 * self.period)
+        return True
+
+
+# -- links to the lower computer ---------------------------------------------------------------
+
+
+class BusLink:
+    """A python-can bus that is reopened after it fails (a serial adapter unplugged...)."""
+
+    def __init__(self, config: dict[str, Any], reopen_period: float = 1.0) -> None:
+        from lowerbase.transport import describe, open_bus
+
+        self.config = config
+        self.reopen_period = reopen_period
+        self.description = describe(config)
+        self._open_bus = open_bus
+        self._bus: Any = open_bus(config)  # the first failure is the user's: raise it
+        self._last_error_log = -math.inf
+        self.tx_errors = 0
+        self.rx_errors = 0
+
+    def send(self, frame_id: int, data: bytes) -> None:
+        import can
+
+        bus = self._bus
+        if bus is None:
+            self.tx_errors += 1
+            return
+        try:
+            bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False))
+        except (can.CanError, OSError, ValueError) as exc:
+            self.tx_errors += 1
+            self._log_error(f"transmit failed: {exc}")
+
+    def _log_error(self, text: str) -> None:
+        now = time.monotonic()
+        if now - self._last_error_log >= 5.0:
+            self._last_error_log = now
+            log.warning("%s (%s)", text, self.description)
+
+    def run_reader(self, on_frame: FrameSink, stop: threading.Event) -> None:
+        """Feed ``on_frame`` until ``stop`` is set; reopen the bus after an error."""
+        import can
+
+        while not stop.is_set():
+            bus = self._bus
+            if bus is None:
+                try:
+                    self._bus = self._open_bus(self.config)
+                    log.info("bus reopened: %s", self.description)
+                except TransportError as exc:
+                    self._log_error(str(exc))
+                    stop.wait(self.reopen_period)
+                continue
+            try:
+                msg = bus.recv(0.1)
+            except (can.CanError, OSError, ValueError) as exc:
+                self.rx_errors += 1
+                self._log_error(f"receive failed, reopening the bus: {exc}")
+                self._bus = None
+                with contextlib.suppress(Exception):
+                    bus.shutdown()
+                stop.wait(self.reopen_period)
+                continue
+            if msg is None or msg.is_error_frame or msg.is_remote_frame:
+                continue
+            on_frame(msg.arbitration_id, bytes(msg.data))
+
+    def close(self) -> None:
+        bus, self._bus = self._bus, None
+        if bus is not None:
+            with contextlib.suppress(Exception):
+                bus.shutdown()
+
+
+class ReplayLink:
+    """Frames from a python-can log file (.log, .asc, .blf, ...) with their original timing.
+
+    What the driver sends goes nowhere (it is counted): a replay reproduces what the driver
+    made of a recorded run, it does not drive anything.
+    """
+
+    def __init__(self, path: str | Path, *, finished: Callable[[], None] | None = None) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise ConfigError(f"--replay: no such file: {self.path}")
+        if self.path.suffix.lower() not in REPLAY_SUFFIXES:
+            raise ConfigError(f"--replay: {self.path.name}: not a python-can log "
+                              f"({', '.join(REPLAY_SUFFIXES)})")
+        self.description = f"replay of {self.path}"
+        self.finished = finished
+        self.sent = 0
+        self.frames = 0
+
+    def send(self, frame_id: int, data: bytes) -> None:
+        self.sent += 1
+
+    def run_reader(self, on_frame: FrameSink, stop: threading.Event) -> None:
+        import can
+
+        try:
+            with can.LogReader(str(self.path)) as reader:
+                for msg in can.MessageSync(reader, timestamps=True, skip=5.0):
+                    if stop.is_set():
+                        return
+                    if msg.is_error_frame or msg.is_remote_frame:
+                        continue
+                    self.frames += 1
+                    on_frame(msg.arbitration_id, bytes(msg.data))
+        except Exception as exc:  # a truncated or garbled log: say so, do not crash the node
+            log.error("replay of %s stopped: %s", self.path, exc)
+        log.info("replay finished: %d frames from %s", self.frames, self.path)
+        if self.finished is not None:
+            self.finished()
+
+    def close(self) -> None:
+        pass
+
+
+# -- the node ----------------------------------------------------------------------------------
+
+
+class _ToRosout(logging.Handler):
+    """Hands lowerbase's log records to rospy's ``rosout`` logger (console and /rosout)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        logging.getLogger("rosout").handle(record)
+
+
+class DriverNode:
+    """Publishers, subscribers and the tick loop around one :class:`DriverCore`."""
+
+    def __init__(
+        self, settings: NodeSettings, config: DriverConfig, link: Any,
+        clock: Clock | None = None,
+    ) -> None:
+        self.rospy, self.io = import_ros()
+        self.settings = settings
+        self.link = link
+        self.lock = threading.RLock()
+        self.stop = threading.Event()
+        self.core = DriverCore(link.send, clock or RealClock(self.stop), config)
+        self.core.listeners.append(self._on_event)
+        self._throttles = {k: Throttle(r) for k, r in settings.rates.items()}
+        self._battery_dirty = False
+        self._info_dirty = False
+        self._published_state: LinkState | None = None
+        self._pubs: dict[str, Any] = {}
+        self._subs: list[Any] = []
+        self._tf: Any = None
+        self._reader: threading.Thread | None = None
+
+    # -- set-up ------------------------------------------------------------------------------
+
+    def advertise(self) -> None:
+        """Create the publishers and subscribers named in the settings (after init_node)."""
+        rospy, io = self.rospy, self.io
+        specs: dict[str, tuple[Any, bool, int]] = {
+            "odom_raw": (io.Odometry, False, 10), "odom": (io.Odometry, False, 10),
+            "imu": (io.Imu, False, 20), "odom_twist": (io.Twist, False, 10),
+            "odometer": (io.Float64, False, 5), "battery": (io.Battery, False, 2),
+            "bms": (io.BMS, False, 2), "parameter": (io.Parameter, True, 1),
+            "information": (io.Information, True, 1), "status_code": (io.UInt64, False, 5),
+            "link_state": (io.String, True, 1),
+        }
+        topics = self.settings.topics
+        for key, (cls, latch, depth) in specs.items():
+            if topics[key]:
+                self._pubs[key] = rospy.Publisher(topics[key], cls, queue_size=depth,
+                                                  latch=latch)
+        if self.settings.publish_tf:
+            import tf2_ros
+
+            self._tf = tf2_ros.TransformBroadcaster()
+        subs: list[tuple[str, Any, Callable[[Any], None]]] = [
+            ("base_cmd_vel", io.Twist, lambda m: self._on_twist(m, False)),
+            ("smooth_cmd_vel", io.Twist, lambda m: self._on_twist(m, True)),
+            ("rgbled", io.LED, lambda m: self._on_led(m, 0)),
+            ("rgbled_shelf", io.LED, lambda m: self._on_led(m, 1)),
+        ]
+        for key, cls, callback in subs:
+            if topics[key]:
+                self._subs.append(rospy.Subscriber(topics[key], cls, callback, queue_size=10))
+
+    # -- ROS -> core -------------------------------------------------------------------------
+
+    def _on_twist(self, msg: Any, smoothed: bool) -> None:
+        linear, angular = self.io.twist_args(msg)
+        with self.lock:
+            self.core.set_twist(linear, angular, smoothed)
+
+    def _on_led(self, msg: Any, strip: int) -> None:
+        with self.lock:
+            self.core.set_led(strip, **self.io.led_args(msg))
+
+    # -- core -> ROS -------------------------------------------------------------------------
+
+    def on_frame(self, frame_id: int, data: bytes) -> None:
+        with self.lock:
+            self.core.on_frame(frame_id, data)
+
+    def _publish(self, key: str, msg: Any) -> None:
+        pub = self._pubs.get(key)
+        if pub is not None:
+            pub.publish(msg)
+
+    def _on_event(self, what: str, core: DriverCore) -> None:
+        """DriverCore listener (called under the lock, in the reader thread)."""
+        now = core.clock.now()
+        if what == "odometry":
+            if self._throttles["odom"].ready(now):
+                self._publish_odometry()
+        elif what == "imu":
+            if core.imu is not None and self._throttles["imu"].ready(now):
+                gyro, accel = core.imu
+                s = self.settings
+                self._publish("imu", self.io.imu_msg(
+                    self.rospy.Time.now(), s.imu_frame, gyro, accel,
+                    s.imu_angular_velocity_variance, s.imu_linear_acceleration_variance))
+        elif what == "twist":
+            if self._throttles["odom_twist"].ready(now):
+                self._publish("odom_twist", self.io.twist_msg(*core.measured_twist))
+        elif what == "odometer":
+            if self._throttles["odometer"].ready(now):
+                self._publish("odometer", self.io.Float64(data=core.odometer))
+        elif what == "status_code":
+            if self._throttles["status_code"].ready(now):
+                self._publish("status_code", self.io.status_code_msg(core.status_code))
+        elif what == "battery":
+            self._battery_dirty = True
+        elif what in ("parameters", "information", "ready"):
+            self._info_dirty = True
+
+    def _publish_odometry(self) -> None:
+        core, io, s = self.core, self.io, self.settings
+        stamp = self.rospy.Time.now()
+        odo = core.odometry
+        if odo is not None and "odom_raw" in self._pubs:
+            self._publish("odom_raw", io.odometry_msg(
+                stamp, s.odom_frame, s.base_frame, (odo.x, odo.y, odo.yaw),
+                (odo.linear, odo.angular), odo.pose_covariance, odo.twist_covariance,
+                core.config.odometry_noise.unobserved_variance))
+        if "odom" in self._pubs or self._tf is not None:
+            ekf = core.ekf
+            msg = io.odometry_msg(
+                stamp, s.odom_frame, s.base_frame, ekf.pose, ekf.twist,
+                [float(v) for v in ekf.pose_covariance().ravel()],
+                [float(v) for v in ekf.twist_covariance().ravel()],
+                core.config.odometry_noise.unobserved_variance)
+            self._publish("odom", msg)
+            if self._tf is not None:
+                self._tf.sendTransform(io.transform_from_odometry(msg))
+
+    def _publish_periodic(self) -> None:
+        """What the main loop publishes: battery/BMS, parameters/information, link state."""
+        core, io = self.core, self.io
+        now = core.clock.now()
+        if self._battery_dirty and self._throttles["battery"].ready(now):
+            self._battery_dirty = False
+            battery, bms = core.bms.battery_fields(), core.bms.bms_fields()
+            stamp = self.rospy.Time.now()
+            if battery is not None and bms is not None:
+                self._publish("battery", io.battery_msg(stamp, battery))
+                self._publish("bms", io.bms_msg(stamp, bms))
+        if self._info_dirty and io.parameter_complete(core.parameters):
+            self._info_dirty = False
+            stamp = self.rospy.Time.now()
+            self._publish("parameter", io.parameter_msg(stamp, core.parameters))
+            if len(core.versions) == 4:
+                self._publish("information", io.information_msg(stamp, core.information()))
+            else:
+                self._info_dirty = True  # versions still coming: publish once complete
+        if core.state != self._published_state:
+            self._published_state = core.state
+            self._publish("link_state", io.String(data=core.state.value))
+            print(f"lowerbase driver: link {core.state.value}", flush=True)
+
+    # -- running -----------------------------------------------------------------------------
+
+    def start_reader(self) -> None:
+        self._reader = threading.Thread(target=self._read, name="driver_base-reader",
+                                        daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        try:
+            self.link.run_reader(self.on_frame, self.stop)
+        except Exception:  # never let the reader die silently
+            log.exception("the frame reader failed")
+            self.rospy.signal_shutdown("frame reader failed")
+
+    def step(self) -> None:
+        """One period of the main loop: tick the core, publish the periodic topics."""
+        with self.lock:
+            self.core.tick()
+            self._publish_periodic()
+
+    def spin(self) -> None:
+        """Run until rospy shuts down (Ctrl-C, SIGTERM, rosnode kill) or ``stop`` is set."""
+        rospy = self.rospy
+        rospy.on_shutdown(self.stop.set)
+        period = 1.0 / self.core.config.command_rate
+        deadline = time.monotonic()
+        while not self.stop.is_set() and not rospy.is_shutdown():
+            self.step()
+            deadline += period
+            delay = deadline - time.monotonic()
+            if delay < -1.0:  # suspended or overloaded: do not burst to catch up
+                deadline = time.monotonic()
+            self.stop.wait(max(delay, 0.0))
+
+    def shutdown(self) -> None:
+        """Stop the reader, send one stop if a twist is being commanded, close the link."""
+        self.stop.set()
+        if self._reader is not None:
+            self._reader.join(timeout=3.0)
+        with self.lock:
+            if self.core.commanding:
+                self.core.set_twist(0.0, 0.0)
+        for sub in self._subs:
+            sub.unregister()
+        self.link.close()
+
+
+def run(
+    link_factory: Callable[[Callable[[], None]], Any], ros_args: Sequence[str],
+    *, name: str = NODE_NAME, params: dict[str, Any] | None = None,
+) -> int:
+    """Start rospy, build the node on the link ``link_factory(on_finished)`` and spin.
+
+    ``ros_args`` are remappings and special keys (``__name:=``, ``__ns:=``, ``_param:=``),
+    as ``rospy.myargv`` leaves them out. ``params`` override the private parameters (tests).
+    """
+    rospy, _ = import_ros()
+    from lowerbase.driver.settings import load_settings
+
+    with contextlib.suppress(AttributeError, ValueError):
+        sys.stdout.reconfigure(line_buffering=True)  # type: ignore[union-attr]
+    import rosgraph
+
+    if not rosgraph.is_master_online():
+        raise TransportError(f"no ROS master at {rosgraph.get_master_uri()} (start roscore, or "
+                             "set ROS_MASTER_URI)")
+    rospy.init_node(name, argv=[name, *ros_args], anonymous=False)
+    pkg_logger = logging.getLogger("lowerbase")
+    pkg_logger.addHandler(_ToRosout())
+    pkg_logger.propagate = False
+    try:
+        private = rospy.get_param("~", {})
+        settings, config = load_settings({**private, **(params or {})})
+        node: DriverNode | None = None
+
+        def finished() -> None:
+            print("lowerbase driver: replay finished", file=sys.stderr, flush=True)
+            rospy.signal_shutdown("replay finished")
+
+        link = link_factory(finished)
+        try:
+            node = DriverNode(settings, config, link)
+            node.advertise()
+            node.start_reader()
+            print(f"lowerbase driver: {rospy.get_name()} on {link.description}; ROS master "
+                  f"{rosgraph.get_master_uri()}", flush=True)
+            node.spin()
+        finally:
+            if node is not None:
+                node.shutdown()
+                stats = ", ".join(f"{k} {v}" for k, v in sorted(node.core.stats.items()))
+                print(f"lowerbase driver: stopped; {stats}", file=sys.stderr, flush=True)
+            else:
+                link.close()
+    finally:
+        pkg_logger.removeHandler(pkg_logger.handlers[-1])
+        pkg_logger.propagate = True
+        if not rospy.is_shutdown():
+            rospy.signal_shutdown("driver_base stopped")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m lowerbase.driver.node ARGS`` == ``lowerbase driver ARGS``."""
+    from lowerbase.cli import main as cli_main
+
+    return cli_main(["driver", *(sys.argv[1:] if argv is None else argv)])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

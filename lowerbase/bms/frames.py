@@ -7,6 +7,7 @@ woosh_msgs/Battery and woosh_msgs/BMS fields from decoded frames (the ROS driver
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from typing import Any
 
@@ -37,7 +38,9 @@ def snapshot_to_frames(
         ("BmsPack", {
             "Voltage": _clamp(s.voltage, 0.0, 655.35),
             "Current": _clamp(s.current, -327.68, 327.67),
-            "Soc": round(_clamp(s.soc, 0.0, 100.0)),
+            # whole percent, truncated as BMS firmware does: 19.9 % is "19 %", below a 20 %
+            # low-battery threshold like the lower computer's own comparison
+            "Soc": math.floor(_clamp(s.soc, 0.0, 100.0)),
             "ChargeMode": int(s.charge_mode) & 1,
             "ChargeStatus": int(s.charge_status) & 1,
             "SwitchStatus": int(s.switch_status) & 3,

@@ -27,6 +27,7 @@ SUBCOMMANDS = (
     "dbc",
     "decode",
     "demo",
+    "record",
 )
 
 

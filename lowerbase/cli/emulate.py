@@ -58,6 +58,8 @@ def add_subparser(subparsers: Any) -> None:
                      "--bms-tcp or --bms-rtu instead of simulating a pack")
     p.add_argument("--print", dest="print_frames", action="store_true",
                    help="print every frame sent, decoded")
+    p.add_argument("--truth", metavar="FILE",
+                   help="write the ground truth (t,x,y,yaw,v,w) as CSV every 20 ms")
     p.set_defaults(func=run, simulated=False)
 
 
@@ -117,8 +119,15 @@ def run(args: argparse.Namespace) -> int:
             stop.set()
 
         signal.signal(signal.SIGTERM, _stop)
+        truth = None
+        if args.truth:
+            from lowerbase.bench.recording import TruthLog
+
+            truth = TruthLog(args.truth)
         with contextlib.suppress(KeyboardInterrupt):
-            run_mcu(mcu, bus, clock, duration=args.duration, stop=stop)
+            run_mcu(mcu, bus, clock, duration=args.duration, stop=stop, on_step=truth)
+        if truth is not None:
+            truth.close()
         mcu.shutdown()
         stats = ", ".join(f"{k} {v}" for k, v in sorted(mcu.stats.items()))
         print(f"lowerbase emulate: stopped after {clock.now() - mcu.boot_time:.1f} s; {stats}",

@@ -59,7 +59,7 @@ def test_emulator_serves_its_bms_over_modbus_tcp(lowerbase_proc: Any,
         assert frame is not None and capacity is not None
         # the same pack behind the registers and the frames (read at different instants, so
         # compare what does not move within a second)
-        assert frame.values["Soc"] == round(snapshot.soc)
+        assert frame.values["Soc"] == int(snapshot.soc)
         assert capacity.values["CapacityDesign"] == pytest.approx(snapshot.capacity_design)
         assert capacity.values["CapacityFull"] == pytest.approx(snapshot.capacity_full)
         assert frame.values["Voltage"] == pytest.approx(snapshot.voltage, abs=0.5)

@@ -1,0 +1,219 @@
+"""``lowerbase scenario``: run, check, list and replay scenarios (docs/scenarios.md)."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+MODES = ("simulated", "realtime", "processes")
+
+
+def add_subparser(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "scenario",
+        help="run a scenario (faults, expectations) and write its report",
+        description="Scenarios describe a run of the chassis in TOML: the profile, the "
+        "initial state, a timeline of actions and faults, and expectations. See "
+        "docs/scenarios.md; `lowerbase scenario list` shows the library.",
+    )
+    sub = p.add_subparsers(title="actions", dest="scenario_command", metavar="ACTION")
+    p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
+
+    run = sub.add_parser(
+        "run", help="run a scenario and write its report (exit 1 when an expectation fails)",
+        description="Run a scenario file (or a library scenario by name) and write the "
+        "report: plots, summary.json, junit.xml, trace.csv and index.html.")
+    run.add_argument("scenario", metavar="FILE|NAME")
+    run.add_argument("--out", metavar="DIR",
+                     help="report directory (default: reports/NAME-TIMESTAMP)")
+    timing = run.add_mutually_exclusive_group()
+    timing.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
+                        help="pace the simulation to the wall clock (same model, same result)")
+    timing.add_argument("--processes", dest="mode", action="store_const", const="processes",
+                        help="run the lower computer as `lowerbase emulate` in a child "
+                        "process on the default transport, the driver here (real time)")
+    run.add_argument("--record", metavar="FILE",
+                     help="record every frame: .log (candump), .asc, .blf, .csv or .trc")
+    run.add_argument("--progress", action="store_true",
+                     help="show the progress bar even when stderr is not a terminal")
+    run.add_argument("--status", action="store_true",
+                     help="show a live status line (pose, speed, SOC, StatusCode) instead")
+    run.set_defaults(func=run_command, mode="simulated")
+
+    check = sub.add_parser("check", help="validate scenario files without running them")
+    check.add_argument("scenarios", nargs="+", metavar="FILE|NAME")
+    check.set_defaults(func=check_command)
+
+    lst = sub.add_parser("list", help="list the library scenarios")
+    lst.set_defaults(func=list_command)
+
+    replay = sub.add_parser(
+        "replay", help="replay a recording through the driver core: /odom_raw and /odom",
+        description="Feed the lower computer's frames of a recording (.log, .asc, .blf, ...) "
+        "into the ROS-free driver core and plot the odometry it computes.")
+    replay.add_argument("recording", metavar="FILE")
+    replay.add_argument("--out", metavar="DIR",
+                        help="report directory (default: reports/replay-NAME-TIMESTAMP)")
+    replay.add_argument("--pose", nargs=3, type=float, metavar=("X", "Y", "YAW"),
+                        default=(0.0, 0.0, 0.0), help="initial pose of the run [m m rad]")
+    replay.set_defaults(func=replay_command)
+
+
+def default_out(name: str) -> Path:
+    return Path("reports") / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+@contextlib.contextmanager
+def log_to_file(path: Path, *, echo: bool = False) -> Iterator[None]:
+    """lowerbase's log records go to ``path`` (and to stderr only with ``echo``)."""
+    logger = logging.getLogger("lowerbase")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handler = logging.FileHandler(path, mode="w", encoding="utf-8")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    saved = logger.level, logger.propagate
+    logger.addHandler(handler)
+    logger.setLevel(logging.DEBUG if echo else logging.INFO)
+    logger.propagate = echo
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(saved[0])
+        logger.propagate = saved[1]
+        handler.close()
+
+
+def execute(scenario: Any, out: Path, *, mode: str = "simulated", record: str | None = None,
+            progress: Any = None, debug: bool = False,
+            bus_config: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+    """Run ``scenario`` in ``mode``, optionally recording, and write the report into ``out``.
+
+    Log records of the run go to ``out/run.log`` (also to stderr with ``debug``).
+    """
+    from lowerbase.bench.recording import BusRecorder, check_recording_path
+    from lowerbase.bench.report import write_report
+    from lowerbase.bench.runner import run_simulated
+
+    if mode == "processes":
+        from lowerbase.bench.demo import check_over_bus
+
+        check_over_bus(scenario)  # before anything is started or written
+    recorder = BusRecorder(check_recording_path(record)) if record else None
+    try:
+        with log_to_file(out / "run.log", echo=debug):
+            if mode == "processes":
+                from lowerbase.bench.demo import run_over_bus
+
+                result = run_over_bus(scenario, out, tap=recorder, progress=progress,
+                                      bus_config=bus_config)
+            else:
+                result = run_simulated(scenario, tap=recorder, realtime=mode == "realtime",
+                                       progress=progress)
+    finally:
+        if recorder is not None:
+            recorder.close()
+        if progress is not None:
+            progress.done()
+    summary = write_report(result, out, recording=recorder.path if recorder else None)
+    return result, summary
+
+
+def print_outcomes(result: Any, out: Path | None, *, stream: Any = None) -> None:
+    """One line per expectation, the verdict, and (with ``out``) where the report is."""
+    stream = stream or sys.stdout
+    for exp, outcome in result.outcomes:
+        print(f"  {outcome.status.upper():<7} {exp.title()}: {outcome.detail}", file=stream)
+    counts = {k: sum(1 for _, o in result.outcomes if o.status == k)
+              for k in ("passed", "failed", "skipped")}
+    verdict = "INTERRUPTED" if result.interrupted else "PASSED" if result.passed else "FAILED"
+    extra = f", {counts['skipped']} skipped" if counts["skipped"] else ""
+    print(f"scenario {result.scenario.name}: {verdict} ({counts['passed']} passed, "
+          f"{counts['failed']} failed{extra}); {result.trace.end:.1f} s {result.mode} in "
+          f"{result.wall_time:.1f} s", file=stream)
+    if out is not None:
+        print(f"report: {out / 'index.html'} (plots, summary.json, junit.xml)", file=stream)
+
+
+def run_command(args: argparse.Namespace) -> int:
+    from lowerbase.bench.demo import ProgressBar, StatusLine
+    from lowerbase.bench.scenario import find_scenario, load_scenario
+
+    scenario = load_scenario(find_scenario(args.scenario))
+    out = Path(args.out) if args.out else default_out(scenario.name)
+    progress: Any
+    if args.status or args.mode != "simulated":
+        progress = StatusLine(force=args.status or args.progress)
+    else:
+        progress = ProgressBar(scenario.duration, force=args.progress)
+    print(f"scenario {scenario.name}: {scenario.description or scenario.source} "
+          f"({scenario.duration:g} s, {args.mode})", file=sys.stderr)
+    result, _ = execute(scenario, out, mode=args.mode, record=args.record, progress=progress,
+                        debug=args.debug)
+    print_outcomes(result, out)
+    if args.record:
+        print(f"recording: {args.record}")
+    if result.interrupted:
+        return 130
+    return 0 if result.passed else 1
+
+
+def check_command(args: argparse.Namespace) -> int:
+    from lowerbase.bench.scenario import find_scenario, load_scenario
+
+    for name in args.scenarios:
+        s = load_scenario(find_scenario(name))
+        print(f"{s.source}: ok ({len(s.timeline)} timeline item(s), "
+              f"{len(s.expectations)} expectation(s), {s.duration:g} s)")
+    return 0
+
+
+def list_command(args: argparse.Namespace) -> int:
+    from lowerbase.bench.scenario import library, load_scenario
+
+    for name, path in library().items():
+        s = load_scenario(path)
+        print(f"{name:<20} {s.duration:5.0f} s  {s.description}")
+    return 0
+
+
+def replay_command(args: argparse.Namespace) -> int:
+    import json
+
+    from lowerbase.bench.recording import check_recording_path, replay
+    from lowerbase.bench.report import _pyplot, plot_status, plot_trajectory, plot_velocities
+
+    path = check_recording_path(args.recording, must_exist=True)
+    out = Path(args.out) if args.out else default_out(f"replay-{path.stem}")
+    result = replay(path, pose=tuple(args.pose))
+    out.mkdir(parents=True, exist_ok=True)
+    plt = _pyplot()
+    title = f"replay of {path.name}"
+    for name, fn in (("trajectory.png", plot_trajectory), ("velocities.png", plot_velocities),
+                     ("status.png", plot_status)):
+        fig = fn(result.trace, [], title)
+        fig.savefig(out / name, dpi=100)
+        plt.close(fig)
+    odo = result.driver.odometry
+    final: dict[str, dict[str, float] | None] = {
+        "odom_raw": None if odo is None else {"x": odo.x, "y": odo.y, "yaw": odo.yaw},
+        "odom": dict(zip(("x", "y", "yaw"), result.driver.ekf.pose, strict=True)),
+    }
+    summary = {"recording": str(path), "frames": result.frames,
+               "duration_s": result.trace.end, "reboots": result.driver.reboots,
+               "final": final, "files": ["trajectory.png", "velocities.png", "status.png"]}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    print(f"replayed {result.frames} frames ({result.trace.end:.1f} s) of {path}")
+    r, e = final["odom_raw"], final["odom"]
+    if r is not None and e is not None:
+        print(f"final /odom_raw x {r['x']:+.3f} y {r['y']:+.3f} yaw {r['yaw']:+.3f}; "
+              f"/odom x {e['x']:+.3f} y {e['y']:+.3f} yaw {e['yaw']:+.3f}")
+    else:
+        print("the driver never got the parameters it needs: no odometry in this recording")
+    print(f"report: {out}/ (trajectory.png, velocities.png, status.png, summary.json)")
+    return 0

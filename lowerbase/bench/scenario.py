@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import difflib
 import math
-import sys
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,13 +25,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from lowerbase.errors import ConfigError
+from lowerbase.files import read_toml
 from lowerbase.firmware_model.faults import Fault, parse_fault
 from lowerbase.protocol.status_codes import StatusBit, describe
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10 (tomli is what tomllib was before 3.11)
-    import tomli as tomllib  # type: ignore[import-not-found,unused-ignore]
 
 #: RobotState value table of SystemStatus (chassis.dbc)
 ROBOT_STATES = ("Boot", "Standby", "Active", "EmergencyStop", "Fault")
@@ -664,13 +659,7 @@ class _Table:
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario TOML file (see docs/scenarios.md)."""
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ConfigError(f"{p}: cannot read scenario: {e.strerror or e}") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise ConfigError(f"{p}: invalid TOML: {e}") from None
-    return scenario_from_dict(data, source=str(p), base=p.parent)
+    return scenario_from_dict(read_toml(p, "scenario"), source=str(p), base=p.parent)
 
 
 def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",

@@ -18,6 +18,7 @@ from typing import Any
 
 from lowerbase.bms.ocv import Chemistry
 from lowerbase.errors import ConfigError
+from lowerbase.files import read_toml
 
 
 def _finite(name: str, value: float) -> None:
@@ -300,21 +301,8 @@ def battery_config_from_mapping(table: Mapping[str, Any]) -> BatteryConfig:
 
 def load_battery_config(path: str | Path) -> BatteryConfig:
     """Read the ``[battery]`` table of a TOML profile file."""
-    try:
-        import tomllib  # type: ignore[import-not-found,unused-ignore]
-    except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-        try:
-            import tomli as tomllib  # type: ignore[import-not-found,no-redef,unused-ignore]
-        except ModuleNotFoundError:
-            raise ConfigError("reading TOML on Python 3.10 needs the tomli package") from None
     p = Path(path)
-    try:
-        with p.open("rb") as fh:
-            doc = tomllib.load(fh)
-    except OSError as exc:
-        raise ConfigError(f"cannot read profile {p}: {exc.strerror or exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: invalid TOML: {exc}") from None
+    doc = read_toml(p, "profile")
     table = doc.get("battery")
     if not isinstance(table, Mapping):
         raise ConfigError(f"{p}: no [battery] table")

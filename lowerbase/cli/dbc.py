@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 from lowerbase.errors import ConfigError
+from lowerbase.files import write_atomic
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -25,21 +24,6 @@ def add_subparser(subparsers: Any) -> None:
         "--check-docs", metavar="FILE", help="exit 1 if FILE differs from the generated document"
     )
     p.set_defaults(func=run)
-
-
-def write_atomic(path: Path, text: str) -> None:
-    """Write a file so that a crash mid-write leaves the previous version intact."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def run(args: argparse.Namespace) -> int:

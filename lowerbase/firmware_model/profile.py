@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import difflib
 import math
-import sys
 from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, field, fields, replace
 from importlib import resources
@@ -24,11 +23,7 @@ from types import MappingProxyType
 from typing import Any, ClassVar
 
 from lowerbase.errors import ConfigError
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib  # type: ignore[import-not-found,unused-ignore]
+from lowerbase.files import read_toml
 
 STANDARD_GRAVITY = 9.80665  # [m/s^2], 1 g
 
@@ -307,13 +302,7 @@ def default_profile_path() -> Path:
 def load_profile(path: str | Path | None = None) -> Profile:
     """Load and validate a profile TOML file (None = the packaged default)."""
     p = Path(path) if path is not None else default_profile_path()
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ConfigError(f"{p}: cannot read profile: {e.strerror or e}") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise ConfigError(f"{p}: invalid TOML: {e}") from None
-    return profile_from_dict(data, source=str(p))
+    return profile_from_dict(read_toml(p, "profile"), source=str(p))
 
 
 def profile_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> Profile:

@@ -115,7 +115,7 @@ if __name__ == "__main__":  # pragma: no cover - make docs
     if target is None:
         print(render(), end="")
     else:
-        from lowerbase.cli.dbc import write_atomic
+        from lowerbase.files import write_atomic
 
         write_atomic(target, render())
         print(f"wrote {target}")

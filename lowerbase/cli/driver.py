@@ -1,0 +1,99 @@
+"""``lowerbase driver``: run the ROS1 node driver_base against a lower computer."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from typing import Any
+
+
+def is_ros_arg(arg: str) -> bool:
+    """A ROS remapping or special key (``name:=value``, ``__name:=x``, ``_param:=v``)."""
+    return ":=" in arg and not arg.startswith("-")
+
+
+class RosArgvParser(argparse.ArgumentParser):
+    """Takes the ROS arguments out before parsing, wherever they stand.
+
+    roslaunch appends ``__name:=... __log:=...`` after the node's own arguments, which may end
+    in an option with a variable number of values (``--bus-kwargs port=1 __name:=x``); without
+    this, that option would swallow them.
+    """
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None,
+    ) -> tuple[argparse.Namespace, list[str]]:
+        import sys
+
+        argv = list(sys.argv[1:] if args is None else args)
+        ros = [a for a in argv if is_ros_arg(a)]
+        ns, extra = super().parse_known_args([a for a in argv if not is_ros_arg(a)], namespace)
+        ns.ros_args = [*getattr(ns, "ros_args", []), *ros]
+        return ns, extra
+
+
+def add_subparser(subparsers: Any) -> None:
+    from lowerbase.transport import add_bus_arguments
+
+    p = subparsers.add_parser(
+        "driver",
+        help="run the ROS1 node driver_base (the upper computer's chassis interface)",
+        description="Run the ROS1 node driver_base: it talks to the lower computer (the "
+        "emulated one or real firmware) over CAN or serial and provides the chassis topics "
+        "(/odom_raw, /odom, /imu/data_raw, /battery, ...; docs/driver.md). With no bus option "
+        "it uses udp_multicast 239.74.163.2:43113, where `lowerbase emulate` listens by "
+        "default. Needs a running ROS master (roscore) and the generated woosh_msgs.",
+        epilog="ROS arguments pass through: remappings (odom:=odom2, /odom:=/wheel/odom), "
+        "__name:=NAME, __ns:=NS and private parameters (_publish_tf:=false). Parameters and "
+        "their defaults: lowerbase/driver/config/driver_base.yaml.",
+    )
+    p.__class__ = RosArgvParser  # add_parser builds the class chosen by the main parser
+    add_bus_arguments(p)
+    p.add_argument("--replay", metavar="FILE",
+                   help="feed a python-can log (.log, .asc, .blf, ...) through the driver "
+                   "instead of a live bus, with its original timing; the node stops at its "
+                   "end (commands go nowhere)")
+    p.add_argument("ros_args", nargs="*", metavar="NAME:=VALUE",
+                   help="ROS remappings and special keys (see below)")
+    p.set_defaults(func=run)
+
+
+def split_ros_args(args: list[str]) -> list[str]:
+    """The ROS arguments of ``args``; anything else is a ConfigError (one clear line)."""
+    from lowerbase.errors import ConfigError
+
+    try:
+        import rospy
+
+        stray = rospy.myargv(["driver", *args])[1:]
+    except ImportError:
+        stray = [a for a in args if not is_ros_arg(a)]
+    if stray:
+        raise ConfigError(f"unexpected argument {stray[0]!r} (ROS arguments look like "
+                          "NAME:=VALUE)")
+    return list(args)
+
+
+def run(args: argparse.Namespace) -> int:
+    from lowerbase.driver import node
+    from lowerbase.errors import ConfigError
+
+    ros_args = split_ros_args(args.ros_args)
+    node.import_ros()  # one clear line when ROS or woosh_msgs is missing, before anything else
+    if args.replay:
+        if args.serial or getattr(args, "interface", None) or getattr(args, "channel", None):
+            raise ConfigError("--replay replaces the bus: drop the bus options")
+        path = args.replay
+        node.ReplayLink(path)  # validate the file before starting rospy
+
+        def link_factory(finished: Any) -> Any:
+            return node.ReplayLink(path, finished=finished)
+    else:
+        from lowerbase.transport import config_from_args
+
+        config = config_from_args(args)
+
+        def link_factory(finished: Any) -> Any:
+            return node.BusLink(config)
+
+    return node.run(link_factory, ros_args)

@@ -18,6 +18,7 @@ import can
 
 from lowerbase.errors import ProtocolError
 from lowerbase.protocol.codec import Codec, default_codec
+from lowerbase.transport import is_catalog_frame
 
 
 @dataclass(frozen=True)
@@ -43,7 +44,8 @@ class LowerClient(can.Listener):
     def on_message_received(self, msg: can.Message) -> None:
         now = time.monotonic()
         frame_id = msg.arbitration_id
-        if msg.is_error_frame or msg.is_remote_frame:
+        if not is_catalog_frame(msg):
+            self.stats["not_classic"] += 1
             return
         if frame_id not in self.codec:
             self.stats["unknown_id"] += 1

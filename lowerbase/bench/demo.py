@@ -31,6 +31,7 @@ from typing import Any, TextIO
 from lowerbase.bench.runner import FrameTap, Harness, RunResult, run_scenario
 from lowerbase.bench.scenario import ROBOT_STATES, Action, FaultAt, Scenario, Unplug
 from lowerbase.errors import ConfigError, TransportError
+from lowerbase.transport import is_catalog_frame
 
 READY_TEXT = "lower computer on"
 START_TIMEOUT = 20.0  #: [s] for the emulator to start listening and send a Heartbeat
@@ -160,7 +161,7 @@ class BusHarness:
 
     def _handle(self, msg: Any) -> tuple[int, bytes] | None:
         frame_id, data = int(msg.arbitration_id), bytes(msg.data)
-        if frame_id in self._upper_ids:
+        if frame_id in self._upper_ids or not is_catalog_frame(msg):
             return None  # our own frames, heard back
         if self.tap is not None:
             self.tap(self.now(), "lower", frame_id, data)

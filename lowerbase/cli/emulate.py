@@ -14,6 +14,7 @@ log = logging.getLogger("lowerbase.emulate")
 
 
 def add_subparser(subparsers: Any) -> None:
+    from lowerbase.firmware_model.faults import DEFECTS
     from lowerbase.transport import add_bus_arguments
 
     p = subparsers.add_parser(
@@ -25,7 +26,9 @@ def add_subparser(subparsers: Any) -> None:
         "framing, or --slcan to appear as a USB-CAN adapter on a pseudo-terminal.",
         epilog="Faults: stall:left|right, overcurrent:left|right, encoder:left|right, "
         "imu-freeze, imu-bias:RAD_S, silence, drop:P, delay:S, corrupt:P, estop, bms-silence; "
-        "add @T to start T s after boot and +D to last D s (e.g. --fault stall:left@5+2).",
+        "add @T to start T s after boot and +D to last D s (e.g. --fault stall:left@5+2). "
+        "Deliberate firmware bugs, to test a conformance suite: "
+        + ", ".join(f"defect:{name}" for name in DEFECTS) + ".",
     )
     add_bus_arguments(p)
     p.add_argument("--slcan", metavar="PORT",

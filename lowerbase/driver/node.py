@@ -37,6 +37,7 @@ from lowerbase.clock import Clock, RealClock
 from lowerbase.driver.core import DriverConfig, DriverCore, LinkState
 from lowerbase.driver.settings import NodeSettings
 from lowerbase.errors import ConfigError, RosUnavailableError, TransportError
+from lowerbase.transport import is_catalog_frame
 
 log = logging.getLogger(__name__)
 
@@ -145,7 +146,7 @@ class BusLink:
                     bus.shutdown()
                 stop.wait(self.reopen_period)
                 continue
-            if msg is None or msg.is_error_frame or msg.is_remote_frame:
+            if msg is None or not is_catalog_frame(msg):
                 continue
             on_frame(msg.arbitration_id, bytes(msg.data))
 
@@ -186,7 +187,7 @@ class ReplayLink:
                 for msg in can.MessageSync(reader, timestamps=True, skip=5.0):
                     if stop.is_set():
                         return
-                    if msg.is_error_frame or msg.is_remote_frame:
+                    if not is_catalog_frame(msg):
                         continue
                     self.frames += 1
                     on_frame(msg.arbitration_id, bytes(msg.data))

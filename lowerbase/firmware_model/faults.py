@@ -13,6 +13,7 @@ A fault is named by a short spec, the same on the command line and in scenarios:
     corrupt:0.01           each outgoing frame is cut one byte short with probability 0.01
     estop                  the emergency-stop button is pressed (released when the fault ends)
     bms-silence            the BMS stops answering the lower computer's polls
+    defect:NAME            a firmware bug, for testing the conformance suite (see DEFECTS)
 
 ``@T`` starts it T seconds after boot and ``+D`` ends it D seconds later
 (``stall:left@5+2``); without them a fault starts at once and lasts until cleared.
@@ -25,6 +26,15 @@ import re
 from dataclasses import dataclass
 
 from lowerbase.errors import ConfigError
+
+#: deliberate firmware bugs (``defect:NAME``): each breaks what ``lowerbase conformance`` checks
+DEFECTS: dict[str, str] = {
+    "no-watchdog": "the command watchdog never fires (the last MotionCommand stays in force)",
+    "counter-stuck": "rolling counters never advance",
+    "slow-heartbeat": "Heartbeat at twice its cycle time",
+    "ignore-estop": "ControlCommand EStopSet is ignored",
+    "param-no-nack": "out-of-range parameter writes are acked (and ignored) instead of nacked",
+}
 
 #: fault kind -> (argument description or None, whether an argument is required)
 KINDS: dict[str, tuple[str | None, bool]] = {
@@ -39,6 +49,7 @@ KINDS: dict[str, tuple[str | None, bool]] = {
     "corrupt": ("probability 0..1", True),
     "estop": (None, False),
     "bms-silence": (None, False),
+    "defect": ("|".join(DEFECTS), True),
 }
 
 _SPEC = re.compile(
@@ -92,7 +103,10 @@ def parse_fault(spec: str) -> Fault:
         raise ConfigError(f"fault {kind!r} takes no argument")
     if what == "left|right" and arg not in ("left", "right"):
         raise ConfigError(f"fault {spec!r}: the wheel must be left or right")
-    if arg is not None and what not in (None, "left|right"):
+    if kind == "defect":
+        if arg not in DEFECTS:
+            raise ConfigError(f"fault {spec!r}: unknown defect; known: {', '.join(DEFECTS)}")
+    elif arg is not None and what not in (None, "left|right"):
         try:
             x = float(arg)
         except ValueError:

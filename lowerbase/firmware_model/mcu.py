@@ -289,7 +289,8 @@ class Mcu:
             if self.state == RobotState.ACTIVE:
                 self.state = RobotState.STANDBY
         elif cmd == Command.ESTOP_SET:
-            self.estop_command = True
+            if not self._active("defect", "ignore-estop"):  # defect hook (conformance)
+                self.estop_command = True
         elif cmd == Command.ESTOP_RELEASE:
             if self._active("estop"):
                 return  # the button is still pressed
@@ -347,6 +348,8 @@ class Mcu:
         if value is None:
             return Result.ACK, current
         result = check(spec, value)
+        if result == Result.OUT_OF_RANGE and self._active("defect", "param-no-nack"):
+            return Result.ACK, value  # defect hook (conformance): acked, not applied
         if result != Result.ACK:
             return result, current
         moving = any(abs(m.omega) > 1e-6 for m in self._motors.values())
@@ -437,9 +440,16 @@ class Mcu:
             self.smoother.reset(*self._measured_twist())
             self._watchdog = False
             return 0.0, 0.0, True
-        if self._last_cmd is None or now - self._last_cmd_time > self.chassis.command_timeout:
+        timed_out = now - self._last_cmd_time > self.chassis.command_timeout
+        if timed_out and self._active("defect", "no-watchdog"):  # defect hook (conformance)
+            timed_out = False
+        if self._last_cmd is None or timed_out:
             moving = any(abs(m.omega) > 1e-9 for m in self._motors.values())
-            self._watchdog = self._watchdog or moving or self._last_cmd is not None
+            # braking because commands stopped while the robot moved or was told to move; a
+            # robot at rest after a zero command that simply hears nothing more is not stopped
+            # by the watchdog
+            asked = self._last_cmd is not None and (self._last_cmd[0] or self._last_cmd[1])
+            self._watchdog = self._watchdog or moving or bool(asked)
             self._last_cmd = None
             self.smoother.reset(*self._measured_twist())
             return 0.0, 0.0, True
@@ -585,12 +595,14 @@ class Mcu:
                 continue
             # keep the period; after a stall, skip the missed slots instead of bursting
             period = msg.cycle_time or 0.0
+            if msg.name == "Heartbeat" and self._active("defect", "slow-heartbeat"):
+                period *= 2  # defect hook (conformance)
             missed = max(0, math.floor((now - due) / period)) if period else 0
             self._next_due[msg.name] = due + (missed + 1) * period
             rows = self._build(msg)
             if msg.name in SHARED_COUNTER and rows and msg.has_counter:
                 counter = self._counters[msg.name]  # one counter for all rows of a cycle
-                self._counters[msg.name] = (counter + 1) & 0xF
+                self._advance_counter(msg.name)
                 for values in rows:
                     values["Counter"] = counter
             for values in rows:
@@ -638,7 +650,9 @@ class Mcu:
         if name.startswith("Bms"):
             if self.bms is None or self.bms_snapshot is None or self._bms_link_lost():
                 return []
-            return [self.bms.frame(name, self.bms_snapshot)]
+            values = dict(self.bms.frame(name, self.bms_snapshot))
+            del values["Counter"]  # the MCU's rolling counter, set in _emit (was stuck at 0)
+            return [values]
         raise KeyError(name)  # pragma: no cover - every periodic message is built above
 
     def _bms_link_lost(self) -> bool:
@@ -648,7 +662,7 @@ class Mcu:
         msg = self.codec.message(name)
         if msg.has_counter and "Counter" not in values:
             values["Counter"] = self._counters[name]
-            self._counters[name] = (self._counters[name] + 1) & 0xF
+            self._advance_counter(name)
         data = msg.encode(values)
         if self._active("silence"):
             self.stats["tx_silenced"] += 1
@@ -669,6 +683,11 @@ class Mcu:
             return
         self.stats["tx_frames"] += 1
         self._send(msg.frame_id, data)
+
+    def _advance_counter(self, name: str) -> None:
+        if self._active("defect", "counter-stuck"):  # defect hook (conformance)
+            return
+        self._counters[name] = (self._counters[name] + 1) & 0xF
 
     def _release_delayed(self, now: float) -> None:
         while self._delayed and self._delayed[0][0] <= now + 1e-9:

@@ -15,6 +15,7 @@ import can
 
 from lowerbase.clock import Clock, SimClock
 from lowerbase.firmware_model.mcu import Mcu
+from lowerbase.transport import is_catalog_frame
 
 log = logging.getLogger(__name__)
 
@@ -33,6 +34,14 @@ def bus_sender(
             log.debug("transmit failed: %s", exc)
 
     return send
+
+
+def _receive(mcu: Mcu, msg: can.Message) -> None:
+    if is_catalog_frame(msg):
+        mcu.receive(msg.arbitration_id, bytes(msg.data))
+    else:  # counted like any frame the catalog does not know, and ignored
+        mcu.stats["rx_frames"] += 1
+        mcu.stats["rx_not_classic"] += 1
 
 
 def run(
@@ -54,7 +63,7 @@ def run(
         deadline += mcu.dt
         if isinstance(clock, SimClock):
             while (msg := bus.recv(0.0)) is not None:
-                mcu.receive(msg.arbitration_id, bytes(msg.data))
+                _receive(mcu, msg)
             mcu.step()
             clock.advance(mcu.dt)
         else:
@@ -63,7 +72,7 @@ def run(
                 msg = bus.recv(max(remaining, 0.0)) if remaining > 0 else bus.recv(0.0)
                 if msg is None:
                     break
-                mcu.receive(msg.arbitration_id, bytes(msg.data))
+                _receive(mcu, msg)
             mcu.step()
             if clock.now() - deadline > 1.0:  # overloaded (or suspended): do not burst-catch-up
                 deadline = clock.now()

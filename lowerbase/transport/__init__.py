@@ -30,6 +30,15 @@ DEFAULT_PORT = 43113
 DEFAULT_HOP_LIMIT = 0
 
 
+def is_catalog_frame(msg: can.Message) -> bool:
+    """Whether ``msg`` can be a catalog frame at all: a classic data frame with an 11-bit ID.
+
+    Extended, remote, error and CAN FD frames never are; treating an extended ID 0x10 as the
+    standard 0x10 would, for example, turn any device's frame into a ControlCommand.
+    """
+    return not (msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame or msg.is_fd)
+
+
 def add_bus_arguments(parser: argparse.ArgumentParser, *, serial: bool = True) -> None:
     """python-can's bus flags (-i/-c/-b/--bus-kwargs...) plus ``--serial PORT``."""
     from can.cli import add_bus_arguments as can_add_bus_arguments

@@ -79,3 +79,27 @@ def test_bad_interface_is_one_clear_line(lowerbase_proc: Any) -> None:
     lines = [line for line in err.splitlines() if line.strip()]
     assert lines[-1].startswith("lowerbase emulate: error: cannot open socketcan")
     assert "Traceback" not in err
+
+
+def test_extended_and_remote_frames_are_not_catalog_frames(
+        lowerbase_proc: Any, udp_bus_config: dict[str, Any]) -> None:
+    """An extended frame with ID 0x10 is some other device's, not a ControlCommand Reboot."""
+    import can
+
+    proc = lowerbase_proc("emulate", *bus_cli_args(udp_bus_config))
+    proc.wait_for("lower computer on")
+    bus = open_bus(udp_bus_config)
+    client = LowerClient(bus)
+    try:
+        first = client.expect("Heartbeat", timeout=10.0)
+        assert first is not None
+        boot = first.values["BootCounter"]
+        bus.send(can.Message(arbitration_id=0x10, data=b"\x07", is_extended_id=True))
+        bus.send(can.Message(arbitration_id=0x10, is_remote_frame=True, is_extended_id=False))
+        later = client.expect("Heartbeat", lambda v: v["Uptime"] > 1.5, timeout=5.0)
+        assert later is not None and later.values["BootCounter"] == boot
+    finally:
+        client.close()
+        bus.shutdown()
+    code, err = proc.stop()
+    assert code == 0 and "rx_not_classic 2" in err

@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from lowerbase.bms.adapter import McuBmsAdapter
 from lowerbase.errors import ConfigError
 from lowerbase.firmware_model.faults import parse_fault
 from lowerbase.firmware_model.mcu import RobotState
@@ -197,12 +198,13 @@ def test_unknown_ids_and_garbage_are_counted_not_fatal() -> None:
 
 
 def test_every_periodic_frame_at_its_rate() -> None:
-    rig = SimRig(bms=None)
+    p = load_profile()
+    rig = SimRig(p, bms=McuBmsAdapter.from_battery_table(p.battery))
     rig.run(10.0)
     codec = default_codec()
     per_cycle = {"WheelFeedback": 2, "LedState": 16}
     for msg in codec:
-        if not msg.is_periodic or "Lower" not in msg.senders or msg.name.startswith("Bms"):
+        if not msg.is_periodic or "Lower" not in msg.senders:
             continue
         frames = rig.frames(msg.name)
         n = per_cycle.get(msg.name, 1)

@@ -271,11 +271,77 @@ class MessageCodec:
             expr = f"{expr} & {s.mask:#x}"
         return expr
 
+    def _table_bytes(self, direct: set[int]) -> dict[int, list[SignalSpec]]:
+        """Bytes (not part of a direct field) whose signals all lie within that byte: they are
+        decoded through a 256-entry table instead of shifts and masks."""
+        by_byte: dict[int, list[SignalSpec]] = {}
+        spanning: set[int] = set()
+        for sig in self.signals:
+            first, last = sig.start // 8, (sig.start + sig.length - 1) // 8
+            if first == last:
+                by_byte.setdefault(first, []).append(sig)
+            else:
+                spanning.update(range(first, last + 1))
+        return {b: sigs for b, sigs in by_byte.items()
+                if b not in spanning and b not in direct and not any(s.is_float for s in sigs)}
+
+    def _physical(self, sig: SignalSpec, raw: int) -> int | float:
+        """cantools' raw -> physical arithmetic, as the generated code does it."""
+        if sig.kind == "identity":
+            return raw
+        if sig.offset == 0 and sig.scale > 0:
+            return raw * sig.scale
+        return raw * sig.scale + sig.offset
+
     def _compile_decode(self) -> Callable[[bytes, bool], Signals]:
-        """Generate ``decode(data, strict)``: one struct unpack, then shifts and masks."""
+        """Generate ``decode(data, strict)``: one struct unpack; bytes of small bit fields
+        through lookup tables; wider fields by shifts and masks."""
         fmt, fields = self._layout()
+        direct_bytes = {b for name, first, width in fields if name.startswith("d_")
+                        for b in range(first // 8, (first + width) // 8)}
+        tables = self._table_bytes(direct_bytes)
+        # re-cut the struct: table bytes become single 'B' fields of their own
+        new_fmt = "<"
+        new_fields: list[tuple[str, int, int]] = []
+        codes = fmt[1:]
+        for (name, first, width), code in zip(fields, codes, strict=True):
+            if name.startswith("d_"):
+                new_fmt += code
+                new_fields.append((name, first, width))
+                continue
+            byte = first // 8
+            pending: list[int] = []
+
+            def flush(pending: list[int]) -> None:
+                nonlocal new_fmt
+                pos = 0
+                while pos < len(pending):  # consecutive non-table bytes: widest pieces first
+                    n = next(k for k in (8, 4, 2, 1) if pos + k <= len(pending))
+                    new_fmt += {1: "B", 2: "H", 4: "I", 8: "Q"}[n]
+                    new_fields.append((f"p{pending[pos]}", pending[pos] * 8, n * 8))
+                    pos += n
+                pending.clear()
+
+            for b in range(byte, byte + width // 8):
+                if b in tables:
+                    flush(pending)
+                    new_fmt += "B"
+                    new_fields.append((f"t{b}", b * 8, 8))
+                else:
+                    pending.append(b)
+            flush(pending)
+        fields = new_fields
         direct = {f[0] for f in fields if f[0].startswith("d_")}
         pieces = [f for f in fields if f[0].startswith("p")]
+        namespace: dict[str, Any] = {
+            "FrameLengthError": FrameLengthError,
+            "_StructError": struct.error,
+            "_F32": _F32,
+            "_F64": _F64,
+            "_unpack": struct.Struct(new_fmt).unpack,
+            "_out_of_range": _out_of_range,
+            "codec": self,
+        }
         lines = [
             "def decode(data, strict):",
             "    try:",
@@ -284,9 +350,43 @@ class MessageCodec:
             f"        raise FrameLengthError('{self.name}: payload of %d bytes, the catalog "
             f"says {self.length}' % len(data)) from None",
         ]
+        table_var: dict[str, str] = {}
+        for b, sigs in sorted(tables.items()):
+            loose: list[tuple[int | float, ...]] = []
+            valid: list[bool] = []
+            for byte_value in range(256):
+                row = []
+                ok = True
+                for sig in sigs:
+                    raw = (byte_value >> (sig.start - 8 * b)) & sig.mask
+                    if sig.is_signed and raw & (1 << (sig.length - 1)):
+                        raw -= 1 << sig.length
+                    ok = ok and sig.raw_min <= raw <= sig.raw_max
+                    row.append(self._physical(sig, raw))
+                loose.append(tuple(row))
+                valid.append(ok)
+            names = [f"s{self.signals.index(sig)}" for sig in sigs]
+            for sig, var in zip(sigs, names, strict=True):
+                table_var[sig.name] = var
+            target = ", ".join(names)
+            if len(sigs) == 1:  # a table of values, not of 1-tuples
+                loose = [row[0] for row in loose]  # type: ignore[misc]
+            namespace[f"_TL{b}"] = tuple(loose)
+            if all(valid):
+                lines.append(f"    {target} = _TL{b}[t{b}]")
+            else:
+                namespace[f"_TS{b}"] = tuple(r if ok else None for r, ok in
+                                              zip(loose, valid, strict=True))
+                lines.append(f"    e{b} = (_TS{b} if strict else _TL{b})[t{b}]")
+                lines.append(f"    if e{b} is None:")
+                lines.append("        _out_of_range(codec, decode_loose(data))")
+                lines.append(f"    {target} = e{b}")
         checks: list[str] = []
         out = []
         for i, s in enumerate(self.signals):
+            if s.name in table_var:
+                out.append(f"'{s.name}': {table_var[s.name]}")
+                continue
             full_lo = -(1 << (s.length - 1)) if s.is_signed else 0
             full_hi = (1 << (s.length - 1)) - 1 if s.is_signed else (1 << s.length) - 1
             needs_var = s.is_float or s.is_signed or (s.raw_min, s.raw_max) != (full_lo, full_hi)
@@ -328,15 +428,6 @@ class MessageCodec:
         named = [ln.replace("def decode(", "def decode_named(") for ln in lines]
         named[-1] = named[-1].replace("    return {", f"    return '{self.name}', {{", 1)
         lines += named
-        namespace: dict[str, Any] = {
-            "FrameLengthError": FrameLengthError,
-            "_StructError": struct.error,
-            "_F32": _F32,
-            "_F64": _F64,
-            "_unpack": struct.Struct(fmt).unpack,
-            "_out_of_range": _out_of_range,
-            "codec": self,
-        }
         self._decode_source = "\n".join(lines)
         exec(compile(self._decode_source, f"<lowerbase codec {self.name}.decode>", "exec"),
              namespace)

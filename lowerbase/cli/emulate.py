@@ -99,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     clock = SimClock() if args.simulated else RealClock(stop)
     try:
-        send = bus_sender(bus)
+        # transmit errors (a bus-off adapter, a full socket buffer) are counted in mcu.stats
+        send = bus_sender(bus, lambda key: mcu.stats.update([key]))
         codec = default_codec()
         if args.print_frames:
             inner = send
@@ -110,7 +111,6 @@ def run(args: argparse.Namespace) -> int:
                 print(f"{clock.now():10.3f} {name:<18} {values}", flush=True)
 
         mcu = Mcu(profile, clock, send, params_path=args.params, bms=bms, faults=faults)
-        mcu.stats  # noqa: B018 - created
         where = getattr(bus, "stream", None)
         target = where.name if where is not None else describe(config)
         print(f"lowerbase emulate: lower computer on {target} "

@@ -117,6 +117,12 @@ def run(args: argparse.Namespace) -> int:
               f"({'simulated' if args.simulated else 'real'} time, boot #{mcu.boot_counter}"
               f"{', faults: ' + ', '.join(map(str, faults)) if faults else ''}); Ctrl-C stops",
               flush=True)
+        periodic = [m for m in codec if m.is_periodic and "Lower" in m.senders
+                    and (bms is not None or not m.name.startswith("Bms"))]
+        print("sending " + ", ".join(f"{m.name} {(m.cycle_time or 0) * 1000:g} ms"
+                                     for m in periodic)
+              + "; answering ParameterRequest, VersionRequest"
+              + ("" if args.print_frames else " (--print shows every frame)"), flush=True)
 
         def _stop(*_: Any) -> None:
             stop.set()

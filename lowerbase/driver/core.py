@@ -22,7 +22,7 @@ from lowerbase.bms.frames import BmsFrameAccumulator
 from lowerbase.clock import Clock
 from lowerbase.driver.ekf import EkfNoise, PlanarEkf
 from lowerbase.driver.odometry import OdometryNoise, OdometryParameters, WheelOdometry
-from lowerbase.errors import LowerbaseError, ProtocolError
+from lowerbase.errors import LowerbaseError, ProtocolError, UnknownMessageError
 from lowerbase.protocol.codec import Codec, default_codec
 from lowerbase.protocol.status_codes import StatusBit
 
@@ -80,6 +80,7 @@ class DriverCore:
         self.clock = clock
         self.config = config or DriverConfig()
         self.codec = codec or default_codec()
+        self._decoders = self.codec.decoders()
         self.stats: Counter[str] = Counter()
         self.listeners: list[Listener] = []
         self._counters: Counter[str] = Counter()
@@ -159,8 +160,12 @@ class DriverCore:
         """Handle one frame. Unknown and malformed frames are counted and logged, not raised."""
         now = self.clock.now() if stamp is None else stamp
         self.stats["frames"] += 1
+        decode = self._decoders.get(frame_id)
+        if decode is None:
+            self._malformed(frame_id, UnknownMessageError(f"unknown ID {frame_id:#05x}"), now)
+            return
         try:
-            name, values = self.codec.decode(frame_id, data)
+            name, values = decode(data, True)
         except ProtocolError as exc:
             self._malformed(frame_id, exc, now)
             return

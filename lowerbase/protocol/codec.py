@@ -604,6 +604,11 @@ class Codec:
             return self.message(name).encode(values, strict=strict)
         return msg._encode(values)
 
+    def decoders(self) -> dict[int, Callable[[bytes, bool], tuple[str, Signals]]]:
+        """Frame ID -> compiled ``decode(data, strict) -> (name, signals)``, for receive loops
+        that dispatch on the ID themselves (one call less than :attr:`decode`)."""
+        return dict(self._decoders)
+
     def _decode_slow(
         self, frame_id: int, data: bytes | bytearray | memoryview, decode_choices: bool,
         strict: bool,

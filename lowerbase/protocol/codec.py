@@ -620,7 +620,7 @@ class Codec:
 
     def _make_decode(self) -> DecodeFunction:
         # a plain function held by the instance: no method binding, one dict lookup, one call
-        get = self._decoders.get
+        table = self._decoders
         slow = self._decode_slow
 
         def decode(
@@ -628,9 +628,12 @@ class Codec:
             decode_choices: bool = False, strict: bool = True,
         ) -> tuple[str, Signals]:
             """Decode a frame; returns (message name, signals)."""
-            fast = get(frame_id)
-            if fast is None or decode_choices:
+            if decode_choices:
                 return slow(frame_id, data, decode_choices, strict)
+            try:
+                fast = table[frame_id]  # subscript: cheaper than a call to dict.get
+            except KeyError:
+                return slow(frame_id, data, decode_choices, strict)  # raises UnknownMessage
             return fast(data, strict)
 
         return decode

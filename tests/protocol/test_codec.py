@@ -105,7 +105,8 @@ def test_random_payloads_decode_like_cantools_or_raise_typed(
     payload = data.draw(st.binary(min_size=msg.length, max_size=msg.length))
     expected = ref.decode(payload, decode_choices=False)
     loose = msg.decode(payload, strict=False)
-    assert CODEC.decoders()[msg.frame_id](payload, False) == (name, loose)
+    # repr: NaN float signals compare unequal to themselves
+    assert repr(CODEC.decoders()[msg.frame_id](payload, False)) == repr((name, loose))
     assert loose.keys() == expected.keys()
     for key, value in expected.items():
         if isinstance(value, float) and math.isnan(value):

@@ -40,7 +40,7 @@ class SimLoop:
         if bms == "own":
             from lowerbase.bms.adapter import McuBmsAdapter
 
-            bms = McuBmsAdapter.from_battery_table(self.profile.battery, soc=soc)
+            bms = McuBmsAdapter.from_profile(self.profile, soc=soc)
         self.mcu = Mcu(self.profile, self.clock, self._from_mcu, params_path=params_path,
                        bms=bms, faults=faults)
         self.driver = DriverCore(self._from_driver, self.clock, driver_config)

@@ -90,19 +90,38 @@ class McuBmsAdapter:
     @classmethod
     def from_battery_table(
         cls, table: Mapping[str, Any], *, soc: float = 80.0, charger: bool = False,
-        unit: int = 1,
+        unit: int = 1, low_soc: float = 20.0, critical_soc: float = 5.0,
+        temp_warning_c: float = 50.0,
     ) -> McuBmsAdapter:
-        """Its own pack from a profile's [battery] table."""
+        """Its own pack from a profile's [battery] table (thresholds: see the class)."""
         pack = BatteryPack(battery_config_from_mapping(table), soc=soc)
         device = BmsDevice(pack, unit=unit)
         if charger:
             device.connect_charger(ChargeMode.AUTO)
-        return cls(device)
+        return cls(device, low_soc=low_soc, critical_soc=critical_soc,
+                   temp_warning_c=temp_warning_c)
 
     @classmethod
-    def external(cls, link: BmsLink) -> McuBmsAdapter:
-        """Poll a BMS that runs elsewhere, in the background."""
-        return cls(None, BackgroundPoller(link))
+    def from_profile(
+        cls, profile: Any, *, soc: float = 80.0, charger: bool = False, unit: int = 1,
+    ) -> McuBmsAdapter:
+        """Its own pack from the profile's [battery], thresholds from its [power]."""
+        power = profile.power
+        return cls.from_battery_table(
+            profile.battery, soc=soc, charger=charger, unit=unit,
+            low_soc=power.low_battery_soc, critical_soc=power.critical_battery_soc,
+            temp_warning_c=power.battery_temp_warning)
+
+    @classmethod
+    def external(cls, link: BmsLink, profile: Any = None) -> McuBmsAdapter:
+        """Poll a BMS that runs elsewhere, in the background (thresholds from the profile's
+        [power] when given)."""
+        if profile is None:
+            return cls(None, BackgroundPoller(link))
+        power = profile.power
+        return cls(None, BackgroundPoller(link), low_soc=power.low_battery_soc,
+                   critical_soc=power.critical_battery_soc,
+                   temp_warning_c=power.battery_temp_warning)
 
     def serve(self, *, tcp: tuple[str, int] | None, rtu: str | None,
               baudrate: int = 19200) -> BmsServer:

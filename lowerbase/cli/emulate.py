@@ -159,12 +159,14 @@ def _make_bms(profile: Any, args: argparse.Namespace) -> Any:
     if args.bms_external:
         if args.bms_tcp:
             host, port = parse_host_port(args.bms_tcp)
-            return McuBmsAdapter.external(ModbusTcpBmsLink(host, port, unit=args.bms_unit))
+            return McuBmsAdapter.external(ModbusTcpBmsLink(host, port, unit=args.bms_unit),
+                                          profile)
         if args.bms_rtu:
-            return McuBmsAdapter.external(ModbusRtuBmsLink(args.bms_rtu, unit=args.bms_unit))
+            return McuBmsAdapter.external(ModbusRtuBmsLink(args.bms_rtu, unit=args.bms_unit),
+                                          profile)
         raise ConfigError("--bms-external needs --bms-tcp HOST:PORT or --bms-rtu PORT")
-    adapter = McuBmsAdapter.from_battery_table(profile.battery, soc=args.soc,
-                                               charger=args.charger, unit=args.bms_unit)
+    adapter = McuBmsAdapter.from_profile(profile, soc=args.soc, charger=args.charger,
+                                         unit=args.bms_unit)
     if args.bms_tcp or args.bms_rtu:
         tcp = parse_host_port(args.bms_tcp) if args.bms_tcp else None
         server = adapter.serve(tcp=tcp, rtu=args.bms_rtu)

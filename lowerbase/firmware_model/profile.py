@@ -264,6 +264,23 @@ class TruthParams(_Validated):
     seed: int = _num(7, 0, 2**63 - 1, integer=True)  # slip generator seed
 
 
+@dataclass(frozen=True)
+class PowerParams(_Validated):
+    """The lower computer's own reading of the BMS (the BMS's protections are in [battery])."""
+
+    SECTION: ClassVar[str] = "power"
+    low_battery_soc: float = _num(20.0, 0.0, 100.0, "%")  # LOW_BATTERY below this SOC
+    critical_battery_soc: float = _num(5.0, 0.0, 100.0, "%")  # CRITICAL_BATTERY below this
+    battery_temp_warning: float = _num(50.0, -40.0, 120.0, "degC")  # BATTERY_OVER_TEMPERATURE
+
+    def _check_relations(self) -> None:
+        if self.critical_battery_soc > self.low_battery_soc:
+            raise ConfigError(
+                f"power.critical_battery_soc = {_fmt(self.critical_battery_soc)} must not be "
+                f"above power.low_battery_soc = {_fmt(self.low_battery_soc)} %"
+            )
+
+
 SECTIONS: Mapping[str, type[_Validated]] = MappingProxyType(
     {
         "identity": IdentityParams,
@@ -272,6 +289,7 @@ SECTIONS: Mapping[str, type[_Validated]] = MappingProxyType(
         "imu": ImuParams,
         "rates": RatesParams,
         "truth": TruthParams,
+        "power": PowerParams,
     }
 )
 
@@ -286,6 +304,7 @@ class Profile:
     imu: ImuParams = field(default_factory=ImuParams)
     rates: RatesParams = field(default_factory=RatesParams)
     truth: TruthParams = field(default_factory=TruthParams)
+    power: PowerParams = field(default_factory=PowerParams)
     battery: Mapping[str, Any] = field(default_factory=dict, hash=False)  # opaque [battery]
     source: str = field(default="<defaults>", compare=False)  # file it was loaded from
 

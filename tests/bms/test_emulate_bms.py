@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import pytest
@@ -92,3 +93,23 @@ def test_emulator_polls_an_external_bms_and_notices_when_it_dies(
         client.close()
         bus.shutdown()
     assert emu.stop()[0] == 0
+
+
+def test_low_battery_threshold_comes_from_the_profile() -> None:
+    p = load_profile()
+    p = p.replace(power=dataclasses.replace(p.power, low_battery_soc=50.0))
+    rig = SimRig(p, bms=McuBmsAdapter.from_profile(p, soc=45.0))
+    rig.run(1.5)
+    assert rig.status() & StatusBit.LOW_BATTERY
+    default = load_profile()
+    rig = SimRig(default, bms=McuBmsAdapter.from_profile(default, soc=45.0))
+    rig.run(1.5)
+    assert not rig.status() & StatusBit.LOW_BATTERY
+
+
+def test_power_thresholds_are_validated() -> None:
+    from lowerbase.errors import ConfigError
+    from lowerbase.firmware_model.profile import profile_from_dict
+
+    with pytest.raises(ConfigError, match="critical_battery_soc"):
+        profile_from_dict({"power": {"low_battery_soc": 10, "critical_battery_soc": 15}})

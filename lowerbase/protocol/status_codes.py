@@ -63,7 +63,7 @@ DESCRIPTIONS: dict[StatusBit, tuple[bool, str]] = {
     StatusBit.LOW_BATTERY: (False, "State of charge below the low-battery threshold (profile [power] low_battery_soc)."),
     StatusBit.CRITICAL_BATTERY: (False, "State of charge below the critical threshold (profile [power] critical_battery_soc): send the robot to charge; the BMS opens its discharge switch soon (BMS_PROTECTION)."),
     StatusBit.BMS_PROTECTION: (False, "The BMS opened its discharge switch (a protection tripped): motors stopped."),
-    StatusBit.DRIVER_OVER_TEMPERATURE: (False, "Motor driver temperature above its limit."),
+    StatusBit.DRIVER_OVER_TEMPERATURE: (False, "Motor driver temperature above its limit. Reserved: the emulator has no driver temperature model and never sets it."),
     StatusBit.BATTERY_OVER_TEMPERATURE: (False, "Battery temperature at or above the warning threshold (profile [power] battery_temp_warning), or a BMS over-temperature status bit."),
     StatusBit.PARAMETER_ERROR: (True, "The parameter file was missing values, corrupt or out of range at boot; defaults used for those."),
     StatusBit.PARAMETER_STORE_FAILED: (True, "Writing the parameter file failed; the previous file is intact."),

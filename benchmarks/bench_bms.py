@@ -10,12 +10,7 @@ import socket
 import time
 
 from benchmarks.common import Row
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+from lowerbase.transport import free_loopback_port
 
 
 def bench_full_discharge(load_a: float = 20.0, dt_s: float = 1.0) -> dict:
@@ -53,7 +48,7 @@ def bench_modbus(seconds: float = 2.0) -> list[dict]:
 
     rows = []
     device = BmsDevice()
-    with BmsServer(device, tcp=("127.0.0.1", _free_port())) as server:
+    with BmsServer(device, tcp=("127.0.0.1", free_loopback_port(socket.SOCK_STREAM))) as server:
         assert server.tcp_address is not None
         with ModbusTcpBmsLink(*server.tcp_address, timeout=1.0) as tcp:
             rows.append({"name": f"Modbus TCP loopback, FC04 x{INPUT_COUNT} registers",

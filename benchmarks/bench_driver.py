@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.common import Row, percentile
+from lowerbase.transport import free_loopback_port
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -181,12 +182,6 @@ rospy.signal_shutdown("done")
 '''
 
 
-def _free_port(kind: int = socket.SOCK_STREAM) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def bench_latency_ros(n: int) -> tuple[list[float], str] | None:
     """Twist on /base_cmd_vel -> MotionCommand on the bus via rosmaster and the real node."""
     try:
@@ -196,9 +191,9 @@ def bench_latency_ros(n: int) -> tuple[list[float], str] | None:
         return None
     if shutil.which("rosmaster") is None:
         return None
-    port = _free_port()
+    port = free_loopback_port(socket.SOCK_STREAM)
     bus = {"interface": "udp_multicast", "channel": "239.74.163.98",
-           "port": _free_port(socket.SOCK_DGRAM), "hop_limit": 0}
+           "port": free_loopback_port(socket.SOCK_DGRAM), "hop_limit": 0}
     home = Path(tempfile.mkdtemp(prefix="bench_driver_"))
     env = {**os.environ, "ROS_MASTER_URI": f"http://127.0.0.1:{port}", "ROS_IP": "127.0.0.1",
            "ROS_HOME": str(home), "ROS_LOG_DIR": str(home / "log"), "PYTHONUNBUFFERED": "1"}

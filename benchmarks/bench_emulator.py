@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import itertools
-import socket
 import subprocess
 import sys
 import time
@@ -18,15 +17,9 @@ from lowerbase.firmware_model.mcu import Command, Mcu
 from lowerbase.firmware_model.profile import load_profile
 from lowerbase.firmware_model.sim import SimRig
 from lowerbase.protocol.codec import default_codec
-from lowerbase.transport import open_bus
+from lowerbase.transport import free_loopback_port, open_bus
 
 GROUP = "239.74.163.98"
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def sim_speed(seconds: float) -> float:
@@ -43,7 +36,7 @@ def chassis_per_core(seconds: float) -> tuple[float, float]:
     """(chassis one core can run in real time, frames/s each) with every frame sent to a real
     udp_multicast bus (hop limit 0), measured on the simulated clock."""
     p = load_profile()
-    bus = open_bus(interface="udp_multicast", channel=GROUP, port=_free_port(), hop_limit=0)
+    bus = open_bus(interface="udp_multicast", channel=GROUP, port=free_loopback_port(), hop_limit=0)
     sent = 0
 
     def send(frame_id: int, data: bytes) -> None:
@@ -69,7 +62,7 @@ def chassis_per_core(seconds: float) -> tuple[float, float]:
 
 def jitter(seconds: float) -> list[Row]:
     """Period jitter of each periodic frame of `lowerbase emulate` in real time."""
-    port = _free_port()
+    port = free_loopback_port()
     proc = subprocess.Popen(
         [sys.executable, "-m", "lowerbase", "emulate", "-i", "udp_multicast", "-c", GROUP,
          "--bus-kwargs", f"port={port}", "hop_limit=0", "--duration", str(seconds + 3)],

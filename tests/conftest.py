@@ -16,6 +16,8 @@ from typing import Any
 import pytest
 from hypothesis import settings
 
+from lowerbase.transport import free_loopback_port
+
 # Property and fuzz tests draw the same examples on every run (deterministic tests); set
 # HYPOTHESIS_PROFILE=explore locally to search with fresh random examples.
 settings.register_profile("deterministic", derandomize=True, database=None)
@@ -28,15 +30,11 @@ TEST_GROUP = "239.74.163.99"
 
 
 def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    return free_loopback_port(socket.SOCK_DGRAM)
 
 
 def free_tcp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    return free_loopback_port(socket.SOCK_STREAM)
 
 
 @pytest.fixture

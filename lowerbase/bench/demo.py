@@ -21,7 +21,6 @@ import math
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -31,18 +30,11 @@ from typing import Any, TextIO
 from lowerbase.bench.runner import FrameTap, Harness, RunResult, run_scenario
 from lowerbase.bench.scenario import ROBOT_STATES, Action, FaultAt, Scenario, Unplug
 from lowerbase.errors import ConfigError, TransportError
-from lowerbase.transport import is_catalog_frame
+from lowerbase.transport import free_loopback_port, is_catalog_frame
 
 READY_TEXT = "lower computer on"
 START_TIMEOUT = 20.0  #: [s] for the emulator to start listening and send a Heartbeat
 STOP_GRACE = 5.0  #: [s] after SIGINT before the emulator is killed
-
-
-def free_udp_port() -> int:
-    """A UDP port nobody on this host is bound to right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("", 0))
-        return int(s.getsockname()[1])
 
 
 def default_bus_config(port: int | None = None) -> dict[str, Any]:
@@ -50,7 +42,7 @@ def default_bus_config(port: int | None = None) -> dict[str, Any]:
     from lowerbase.transport import DEFAULT_CHANNEL, DEFAULT_HOP_LIMIT
 
     return {"interface": "udp_multicast", "channel": DEFAULT_CHANNEL,
-            "port": port or free_udp_port(), "hop_limit": DEFAULT_HOP_LIMIT}
+            "port": port or free_loopback_port(), "hop_limit": DEFAULT_HOP_LIMIT}
 
 
 def describe_bus(config: dict[str, Any]) -> str:

@@ -81,6 +81,11 @@ class DriverCore:
         self.config = config or DriverConfig()
         self.codec = codec or default_codec()
         self._decoders = self.codec.decoders()
+        mc = self.codec.message("MotionCommand")
+        #: the wire range of MotionCommand's Linear [m/s] and Angular [rad/s]
+        self._twist_range = tuple(
+            (float(mc.signal(n).minimum or 0.0), float(mc.signal(n).maximum or 0.0))
+            for n in ("Linear", "Angular"))
         self.stats: Counter[str] = Counter()
         self.listeners: list[Listener] = []
         self._counters: Counter[str] = Counter()
@@ -119,10 +124,7 @@ class DriverCore:
             self.stats["twist_rejected"] += 1
             log.warning("ignored a twist with NaN or infinity (%r, %r)", linear, angular)
             return False
-        mc = self.codec.message("MotionCommand")
-        lo_v, hi_v = mc.signal("Linear").minimum, mc.signal("Linear").maximum
-        lo_w, hi_w = mc.signal("Angular").minimum, mc.signal("Angular").maximum
-        assert lo_v is not None and hi_v is not None and lo_w is not None and hi_w is not None
+        (lo_v, hi_v), (lo_w, hi_w) = self._twist_range
         clipped = (min(max(linear, lo_v), hi_v), min(max(angular, lo_w), hi_w))
         if clipped != (linear, angular):
             self.stats["twist_clipped"] += 1

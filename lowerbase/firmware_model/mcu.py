@@ -560,7 +560,7 @@ class Mcu:
             s |= SB.IMU_FAULT
         if self._active("silence") or self._active("drop") or self._active("corrupt"):
             s |= SB.BUS_ERROR
-        s |= self._bms_status_bits(now)
+        s |= self._bms_status_bits()
         # the button e-stop is latched only while pressed; releasing needs EStopRelease too
         if s & SB.ESTOP_BUTTON:
             self.estop_command = True
@@ -573,13 +573,10 @@ class Mcu:
             elif self.state != RobotState.ACTIVE:
                 self.state = RobotState.STANDBY  # released: wait to be enabled again
 
-    def _bms_status_bits(self, now: float) -> int:
+    def _bms_status_bits(self) -> int:
         if self.bms is None:
             return 0
-        bits = 0
-        if now - self._bms_last_answer > BMS_LINK_TIMEOUT:
-            bits |= SB.BMS_LINK_LOST
-        return bits | self._bms_bits
+        return (SB.BMS_LINK_LOST if self._bms_link_lost() else 0) | self._bms_bits
 
     # -- sending -----------------------------------------------------------------------------
 

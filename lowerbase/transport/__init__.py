@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import socket
 from typing import Any
 
 import can
@@ -28,6 +29,15 @@ DEFAULT_INTERFACE = "udp_multicast"
 DEFAULT_CHANNEL = "239.74.163.2"
 DEFAULT_PORT = 43113
 DEFAULT_HOP_LIMIT = 0
+
+
+def free_loopback_port(kind: int = socket.SOCK_DGRAM) -> int:
+    """A port on 127.0.0.1 that nothing is bound to right now (UDP by default, or
+    ``socket.SOCK_STREAM`` for TCP): for a bus, a Modbus server or a ROS master of a test,
+    benchmark or demo that must not collide with another run."""
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
 
 
 def is_catalog_frame(msg: can.Message) -> bool:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import socket
 
+from lowerbase.transport import free_loopback_port
+
 
 def free_port() -> int:
     """A TCP port on 127.0.0.1 that nothing listens on right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    return free_loopback_port(socket.SOCK_STREAM)

@@ -119,9 +119,9 @@ class RosMaster:
         import socket
         import subprocess
 
-        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-            s.bind(("127.0.0.1", 0))
-            self.port = int(s.getsockname()[1])
+        from lowerbase.transport import free_loopback_port
+
+        self.port = free_loopback_port(socket.SOCK_STREAM)
         self.uri = f"http://127.0.0.1:{self.port}"
         home.mkdir(parents=True, exist_ok=True)
         package_path = [str(p) for p in share_dirs]

@@ -9,13 +9,20 @@ PY := $(VENV)/bin/python
 SYSTEM_PYTHON ?= $(shell test -x /usr/bin/python3 && echo /usr/bin/python3 || command -v python3)
 STAMP := $(VENV)/.lowerbase-installed
 ROS_OUT := build/ros
+# The oldest supported Python (requires-python >= 3.10), from pyenv; a venv of its own without
+# the system's site-packages (so the ROS tests skip there).
+OLDEST_VENV ?= .venv-py310
+OLDEST_PYTHON ?= $(shell { ls -d "$$(pyenv root 2>/dev/null)"/versions/3.10*/bin/python3.10 \
+  "$$HOME"/.pyenv/versions/3.10*/bin/python3.10 2>/dev/null; command -v python3.10; } | sort -uV | tail -n 1)
+OLDEST_STAMP := $(OLDEST_VENV)/.lowerbase-installed
 
-.PHONY: help env system-deps test lint typecheck unit demo bench docs clean
+.PHONY: help env system-deps test test-oldest lint typecheck unit demo bench docs clean
 
 help:
 	@echo "make demo   - set up and run the demo (emulator + driver + a scenario, with a report)"
 	@echo "make test   - set up and run ruff, mypy and the whole test suite"
-	@echo "make bench  - run the benchmarks (results: docs/benchmarks.md)"
+	@echo "make test-oldest - the test suite on the oldest supported Python (3.10, from pyenv)"
+	@echo "make bench  - run the benchmarks and print the results (WRITE=1: into docs/benchmarks.md)"
 	@echo "make docs   - regenerate docs/protocol.md and docs/status-codes.md"
 
 system-deps:
@@ -43,15 +50,26 @@ unit: env
 
 test: env lint typecheck unit
 
+$(OLDEST_STAMP): pyproject.toml
+	@test -n "$(OLDEST_PYTHON)" || { echo "make test-oldest: no Python 3.10 found (pyenv install 3.10, or pass OLDEST_PYTHON=/path/to/python3.10)" >&2; exit 1; }
+	$(OLDEST_PYTHON) -m venv --clear $(OLDEST_VENV)
+	$(OLDEST_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(OLDEST_VENV)/bin/python -m pip install --quiet -e '.[dev]'
+	touch $@
+
+test-oldest: $(OLDEST_STAMP)
+	$(OLDEST_VENV)/bin/python -m pytest -q $(TESTS)
+
 demo: env
 	$(PY) -m lowerbase demo
 
+# prints the results; `make bench WRITE=1` also writes them into docs/benchmarks.md
 bench: env
-	$(PY) -m benchmarks --write docs/benchmarks.md
+	$(PY) -m benchmarks $(if $(WRITE),--write docs/benchmarks.md)
 
 docs: env
 	$(PY) -m lowerbase dbc --export-docs docs/protocol.md
 	$(PY) -m lowerbase.protocol.status_codes docs/status-codes.md
 
 clean:
-	rm -rf $(VENV) build .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) $(OLDEST_VENV) build .pytest_cache .mypy_cache .ruff_cache

@@ -34,6 +34,7 @@ from types import ModuleType
 from typing import Any
 
 from lowerbase.clock import Clock, RealClock
+from lowerbase.driver import services
 from lowerbase.driver.core import DriverConfig, DriverCore, LinkState
 from lowerbase.driver.settings import NodeSettings
 from lowerbase.errors import ConfigError, RosUnavailableError, TransportError
@@ -231,6 +232,7 @@ class DriverNode:
         self._published_state: LinkState | None = None
         self._pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
+        self._services: list[Any] = []
         self._tf: Any = None
         self._reader: threading.Thread | None = None
 
@@ -265,6 +267,7 @@ class DriverNode:
         for key, cls, callback in subs:
             if topics[key]:
                 self._subs.append(rospy.Subscriber(topics[key], cls, callback, queue_size=10))
+        self._services = services.advertise(rospy, self.core, self.lock)
 
     # -- ROS -> core -------------------------------------------------------------------------
 
@@ -403,6 +406,8 @@ class DriverNode:
                 self.core.set_twist(0.0, 0.0)
         for sub in self._subs:
             sub.unregister()
+        for service in self._services:
+            service.shutdown()
         self.link.close()
 
 

@@ -252,6 +252,11 @@ for line in sys.stdin:
         print(json.dumps({"ok": True, "t": time.monotonic()}), flush=True)
     elif op == "now":
         print(json.dumps({"t": time.monotonic()}), flush=True)
+    elif op == "call":
+        from roslib.message import get_service_class
+        rospy.wait_for_service(req["name"], timeout=10)
+        proxy = rospy.ServiceProxy(req["name"], get_service_class(req["type"]))
+        print(json.dumps(to_plain(proxy(**req.get("args", {})))), flush=True)
     elif op == "quit":
         break
 rospy.signal_shutdown("done")
@@ -548,3 +553,67 @@ def test_replay_feeds_a_recorded_run_through_the_driver(rig: dict[str, Any]) -> 
     code, err = replay.wait(timeout=20.0)
     assert code == 0, err
     assert "lowerbase driver: replay finished" in err
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_services_operate_the_chassis(rig: dict[str, Any]) -> None:
+    """std_srvs services called from another node: e-stop, release + enable, odometer reset,
+    fault clear (of a rejected frame sent on the bus) and reboot, checked on the topics."""
+    import xmlrpc.client
+
+    from lowerbase.protocol.status_codes import StatusBit
+    from lowerbase.transport import open_bus
+
+    probe: Probe = rig["probe"]
+    master = xmlrpc.client.ServerProxy(rig["env"]["ROS_MASTER_URI"])
+    _, _, (_, _, services) = master.getSystemState("/pytest")
+    offered = {name for name, nodes in services if "/driver_base" in nodes}
+    assert {"/driver_base/enable", "/driver_base/standby", "/driver_base/estop",
+            "/driver_base/fault_clear", "/driver_base/odometer_reset",
+            "/driver_base/reboot"} <= offered
+
+    def call(name: str, **args: Any) -> dict[str, Any]:
+        type_ = "std_srvs/SetBool" if name == "estop" else "std_srvs/Trigger"
+        reply: dict[str, Any] = probe.ask(op="call", name=f"/driver_base/{name}", type=type_,
+                                          args=args)
+        assert reply["success"], reply
+        return reply
+
+    def status(bit: StatusBit, on: bool, what: str) -> None:
+        probe.wait_for(lambda s: bool(_msg(s, "/status_code")["data"] & bit) == on, 5.0, what)
+
+    def drive() -> None:
+        probe.ask(op="publish", topic="/base_cmd_vel", type="geometry_msgs/Twist",
+                  fields={"linear": {"x": 0.3}, "angular": {"z": 0.0}}, rate=20, duration=1.0)
+
+    assert call("estop", data=True)["message"] == "EStopSet sent"
+    status(StatusBit.ESTOP_COMMAND, True, "the e-stop bit set")
+    call("estop", data=False)
+    status(StatusBit.ESTOP_COMMAND, False, "the e-stop bit released")
+    call("enable")  # released into standby: enable again, no driver restart
+    drive()
+    probe.wait_for(lambda s: _msg(s, "/odometer")["data"] > 0.1, 6.0, "odometer counting")
+    call("odometer_reset")
+    probe.wait_for(lambda s: _msg(s, "/odometer")["data"] < 0.05, 6.0, "odometer reset")
+
+    bus = open_bus(rig["bus"])  # a MotionCommand too short to decode: latched COMMAND_REJECTED
+    try:
+        import can
+
+        from lowerbase.protocol.codec import default_codec
+
+        frame_id = default_codec().message("MotionCommand").frame_id
+        bus.send(can.Message(arbitration_id=frame_id, data=b"\x01", is_extended_id=False))
+    finally:
+        bus.shutdown()
+    status(StatusBit.COMMAND_REJECTED, True, "a rejected command latched")
+    call("fault_clear")
+    status(StatusBit.COMMAND_REJECTED, False, "the latched fault cleared")
+
+    call("reboot")
+    rig["node"].wait_for("link configuring", timeout=10.0)
+    rig["node"].wait_for("link ready", timeout=15.0)
+    drive()  # re-enabled by the driver after the reboot
+    probe.wait_for(lambda s: _msg(s, "/odom_twist")["linear"]["x"] > 0.2, 6.0,
+                   "driving after the reboot")

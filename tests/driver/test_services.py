@@ -1,0 +1,46 @@
+"""driver_base's services without ROS: the table and send_control against the emulated MCU
+(SimLoop, simulated clock). The ROS side (std_srvs over a real master) is in test_node_ros.py."""
+
+from __future__ import annotations
+
+from lowerbase.bench.simloop import SimLoop
+from lowerbase.driver.core import LinkState
+from lowerbase.driver.services import ESTOP, TRIGGERS, send_control
+from lowerbase.protocol.status_codes import StatusBit
+
+
+def ready(loop: SimLoop) -> bool:
+    return loop.driver.state == LinkState.READY and loop.mcu.state.name == "ACTIVE"
+
+
+def test_every_service_names_a_control_command_of_the_catalog() -> None:
+    loop = SimLoop()
+    choices = set(loop.driver.codec.message("ControlCommand").signal("Command").choices.values())
+    assert {*TRIGGERS.values(), *ESTOP[1:]} <= choices
+    assert len({*TRIGGERS, ESTOP[0]}) == 6
+
+
+def test_estop_release_and_enable_let_the_robot_drive_again() -> None:
+    loop = SimLoop()
+    assert loop.run_until(ready, timeout=3.0)
+    assert send_control(loop.driver, "EStopSet") == (True, "EStopSet sent")
+    loop.run(0.3)
+    assert loop.mcu.status & StatusBit.ESTOP_COMMAND
+    assert send_control(loop.driver, "EStopRelease")[0]
+    loop.run(0.3)
+    assert not loop.mcu.status & StatusBit.ESTOP_COMMAND
+    loop.drive(0.3, 0.0, 0.5)
+    assert loop.mcu.truth.v == 0.0  # released into standby: not driving until enabled
+    assert send_control(loop.driver, "EnableCanControl")[0]
+    loop.drive(0.3, 0.0, 1.0)
+    assert loop.mcu.truth.v > 0.2
+
+
+def test_refused_while_the_link_is_not_up() -> None:
+    loop = SimLoop()
+    assert loop.driver.state == LinkState.WAITING
+    sent = loop.driver.stats["tx_ControlCommand"]
+    ok, message = send_control(loop.driver, "Reboot")
+    assert not ok and "link is waiting" in message and "\n" not in message
+    assert loop.driver.stats["tx_ControlCommand"] == sent
+    assert loop.driver.stats["service_refused"] == 1

@@ -1,0 +1,60 @@
+"""Facts the suite derives from the catalog (and the one place that knows how
+WheelFeedback rows are told apart)."""
+
+from __future__ import annotations
+
+from lowerbase.protocol.codec import Codec, MessageCodec
+from lowerbase.protocol.status_codes import StatusBit
+
+# -- catalog-derived facts ----------------------------------------------------------------------
+
+#: signals that tell apart the frames of one cycle (the catalog's comments: one WheelFeedback
+#: per wheel, one LedState per submodule of both strips)
+ROW_KEYS: dict[str, tuple[str, ...]] = {
+    "WheelFeedback": ("Wheel",),
+    "LedState": ("Strip", "Submodule"),
+}
+#: messages sent only while a condition holds, with the StatusCode bit that announces its absence
+CONDITIONAL: dict[str, StatusBit] = {
+    "BmsPack": StatusBit.BMS_LINK_LOST,
+    "BmsCell": StatusBit.BMS_LINK_LOST,
+    "BmsCapacity": StatusBit.BMS_LINK_LOST,
+    "BmsStatus": StatusBit.BMS_LINK_LOST,
+    "BmsLife": StatusBit.BMS_LINK_LOST,
+}
+
+
+def periodic_lower_messages(codec: Codec) -> list[MessageCodec]:
+    """Every periodic message the lower computer sends, in catalog order."""
+    return [m for m in codec if m.is_periodic and "Lower" in m.senders]
+
+
+def shared_counter(msg: MessageCodec) -> bool:
+    """Whether the frames of one cycle share the counter (the Counter comment says so)."""
+    return msg.has_counter and "shared" in msg.signal("Counter").comment.lower()
+
+
+def protocol_version(codec: Codec) -> int:
+    """The catalog's protocol version: the last word of its VERSION string."""
+    words = (codec.database.version or "").split()
+    return int(words[-1]) if words and words[-1].isdigit() else 1
+
+
+def parameter_index(codec: Codec, name: str) -> int:
+    table = codec.message("ParameterRequest").signal("Index").choices
+    for index, text in table.items():
+        if text == name:
+            return index
+    raise KeyError(name)
+
+
+def parameter_limits() -> dict[int, tuple[str, float, float]]:
+    """index -> (name, minimum, maximum): the documented parameter ranges."""
+    from lowerbase.firmware_model.parameters import SPECS
+
+    return {i: (s.name, s.minimum, s.maximum) for i, s in SPECS.items()}
+
+
+def _close(a: float, b: float) -> bool:
+    """Equal within float32 precision (parameter values travel as float32)."""
+    return abs(a - b) <= 1e-6 * max(1.0, abs(a), abs(b))

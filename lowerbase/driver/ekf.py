@@ -25,6 +25,7 @@ velocity [m/s], yaw rate [rad/s] and the z-gyro's bias [rad/s].
 * Standstill: when the wheels have reported exactly no motion for ``standstill_time``, a
   zero-velocity pseudo-measurement pins ``v`` and ``w`` to zero, so the gyro then measures pure
   bias and the bias converges (physical-data.md 5.2: a standstill bias estimate is mandatory).
+  The pose covariance does not grow then (no process noise on a base that does not move).
 
 A gate that keeps rejecting one sensor would lock the filter onto a wrong state; after
 ``max_consecutive_rejections`` rejections in a row the next measurement is accepted.
@@ -311,6 +312,10 @@ class PlanarEkf:
         steps = max(1, math.ceil(dt / self.noise.max_step))
         h = dt / steps
         kf = self.kf
+        # a base known to stand still does not drift: its pose rows of P stay as they are
+        # (as robot_localization and diff_drive_controller add no process noise then), while
+        # v, w and the bias keep theirs, so the filter can follow when the base moves off
+        frozen = kf.P[X : YAW + 1, :].copy() if self.is_standstill else None
         for _ in range(steps):
             # filterpy's predict() is linear (F x); the nonlinear step is done here, as its
             # documentation suggests, keeping F, Q, x_prior and P_prior in its attributes
@@ -318,6 +323,9 @@ class PlanarEkf:
             kf.Q = process_noise(kf.x, h, self.noise)
             kf.x = motion_model(kf.x, h)
             kf.P = kf.F @ kf.P @ kf.F.T + kf.Q
+        if frozen is not None:
+            kf.P[X : YAW + 1, :] = frozen
+            kf.P[:, X : YAW + 1] = frozen.T
         kf.P = 0.5 * (kf.P + kf.P.T)
         kf.x_prior = kf.x.copy()
         kf.P_prior = kf.P.copy()

@@ -389,3 +389,28 @@ def test_ekf_converges_to_truth_without_faults() -> None:
     assert run.ekf is not None
     assert run.ekf.gyro_bias == pytest.approx(0.01, abs=5e-4)
     assert run.ekf.twist == pytest.approx((0.0, 0.0), abs=1e-3)
+
+
+def _stand_then_drive(still: float, drive: float) -> tuple[float, float, float]:
+    """x variance [m^2] once standstill is detected, after ``still`` s of it and after
+    ``drive`` s more at 0.5 m/s (wheels 50 Hz, gyro 100 Hz with bias and noise, seeded)."""
+    rng = np.random.default_rng(7)
+    ekf = PlanarEkf(stamp=0.0)
+    var: list[float] = []
+    for k in range(1, round(100 * (still + drive)) + 1):
+        t = k / 100
+        v = 0.5 if t > still else 0.0
+        ekf.update_gyro(0.01 + rng.normal(0.0, 2e-3), stamp=t)
+        if k % 2 == 0:
+            ekf.update_wheels(v, 0.0, stamp=t)
+        if k in (100, round(100 * still)):
+            assert ekf.is_standstill
+            var.append(float(ekf.P[0, 0]))
+    var.append(float(ekf.P[0, 0]))
+    return var[0], var[1], var[2]
+
+
+def test_pose_covariance_does_not_grow_at_standstill_but_does_while_driving() -> None:
+    start, after_60_s, driven = _stand_then_drive(61.0, 5.0)
+    assert after_60_s == pytest.approx(start, rel=1e-6, abs=1e-12)
+    assert driven > 2 * start  # moving: the pose uncertainty grows again

@@ -233,6 +233,8 @@ class DriverNode:
         self._pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
         self._services: list[Any] = []
+        self._bad_twists = 0  # refused since the last warning
+        self._bad_twist_log = -math.inf
         self._tf: Any = None
         self._reader: threading.Thread | None = None
 
@@ -263,6 +265,7 @@ class DriverNode:
             ("smooth_cmd_vel", io.Twist, lambda m: self._on_twist(m, True)),
             ("rgbled", io.LED, lambda m: self._on_led(m, 0)),
             ("rgbled_shelf", io.LED, lambda m: self._on_led(m, 1)),
+            ("rgbled_shelf_vendor", io.LED, lambda m: self._on_led(m, 1)),
         ]
         for key, cls, callback in subs:
             if topics[key]:
@@ -274,7 +277,19 @@ class DriverNode:
     def _on_twist(self, msg: Any, smoothed: bool) -> None:
         linear, angular = self.io.twist_args(msg)
         with self.lock:
-            self.core.set_twist(linear, angular, smoothed)
+            if math.isfinite(linear) and math.isfinite(angular):
+                self.core.set_twist(linear, angular, smoothed)
+                return
+            # refused here, not in the core, so that a NaN stream (20/s) is one line every
+            # malformed_log_period seconds, with the count, instead of a line per twist
+            self.core.stats["twist_rejected"] += 1
+            self._bad_twists += 1
+            now = self.core.clock.now()
+            if now - self._bad_twist_log >= self.core.config.malformed_log_period:
+                log.warning("ignored %d twist(s) with NaN or infinity, latest (%r, %r)",
+                            self._bad_twists, linear, angular)
+                self._bad_twist_log = now
+                self._bad_twists = 0
 
     def _on_led(self, msg: Any, strip: int) -> None:
         with self.lock:

@@ -40,6 +40,8 @@ DEFAULT_TOPICS: dict[str, str] = {
     "smooth_cmd_vel": "/smooth_cmd_vel",  # geometry_msgs/Twist, smoothed by the lower computer
     "rgbled": "rgbled",  # woosh_msgs/LED, body strip (0)
     "rgbled_shelf": "rgbled_shelf",  # woosh_msgs/LED, shelf strip (1)
+    # the same strip under the name the vendor's robot publishes it on
+    "rgbled_shelf_vendor": "/kShelfLedColorPubName",  # woosh_msgs/LED, shelf strip (1)
 }
 
 #: rate keys -> default [Hz]. 0: every new sample from the lower computer (odometry 50 Hz,

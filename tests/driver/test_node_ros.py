@@ -51,6 +51,7 @@ SUBSCRIBED = {
     "/smooth_cmd_vel": "geometry_msgs/Twist",
     "/rgbled": "woosh_msgs/LED",
     "/rgbled_shelf": "woosh_msgs/LED",
+    "/kShelfLedColorPubName": "woosh_msgs/LED",
 }
 #: what the probe also listens to: the launched and the replaying node, in namespaces
 EXTRA = {
@@ -225,9 +226,9 @@ def publish(topic, type_, fields, rate, duration):
         while pubs[topic].get_num_connections() == 0 and time.monotonic() < deadline:
             time.sleep(0.02)
     msg = cls()
-    for part, values in fields.items():
+    for part, values in fields.items():  # part "": fields of the message itself
         for k, v in values.items():
-            setattr(getattr(msg, part), k, v)
+            setattr(getattr(msg, part) if part else msg, k, v)
     end = time.monotonic() + duration
     while time.monotonic() < end:
         pubs[topic].publish(msg)
@@ -617,3 +618,28 @@ def test_services_operate_the_chassis(rig: dict[str, Any]) -> None:
     drive()  # re-enabled by the driver after the reboot
     probe.wait_for(lambda s: _msg(s, "/odom_twist")["linear"]["x"] > 0.2, 6.0,
                    "driving after the reboot")
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_the_vendors_shelf_led_topic_reaches_the_bus(rig: dict[str, Any]) -> None:
+    """The vendor's robot publishes the shelf strip on /kShelfLedColorPubName: heard by default,
+    sent as a LedCommand for strip 1 (read off the bus by this test)."""
+    from lowerbase.protocol.codec import default_codec
+    from lowerbase.transport import open_bus
+
+    led = default_codec().message("LedCommand")
+    bus = open_bus(rig["bus"])
+    try:
+        rig["probe"].ask(op="publish", topic="/kShelfLedColorPubName", type="woosh_msgs/LED",
+                         fields={"": {"submodule": 2, "color": 0x123456}}, rate=10, duration=1.0)
+        deadline = time.monotonic() + 5.0
+        seen: dict[str, Any] = {}
+        while time.monotonic() < deadline and not seen:
+            msg = bus.recv(0.1)
+            if msg is not None and msg.arbitration_id == led.frame_id:
+                seen = dict(led.decode(bytes(msg.data)))
+    finally:
+        bus.shutdown()
+    assert seen, "no LedCommand on the bus"
+    assert (int(seen["Strip"]), int(seen["Submodule"]), int(seen["Color"])) == (1, 2, 0x123456)

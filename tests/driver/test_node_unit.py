@@ -1,0 +1,88 @@
+"""DriverNode without a master: its ROS callbacks on a simulated clock (rospy and the generated
+woosh_msgs are imported, nothing is advertised)."""
+
+from __future__ import annotations
+
+import logging
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from lowerbase.clock import SimClock
+from lowerbase.driver.settings import load_settings
+
+
+class RecordingLink:
+    description = "a list"
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[int, bytes]] = []
+
+    def send(self, frame_id: int, data: bytes) -> None:
+        self.sent.append((frame_id, data))
+
+    def close(self) -> None:
+        pass
+
+
+def test_nan_twists_are_refused_counted_and_logged_once_per_period(
+        woosh_msgs: Any, caplog: pytest.LogCaptureFixture) -> None:
+    from geometry_msgs.msg import Twist
+
+    from lowerbase.driver.node import DriverNode
+
+    clock, link = SimClock(), RecordingLink()
+    settings, config = load_settings({})  # malformed_log_period 5 s
+    node = DriverNode(settings, config, link, clock=clock)
+    bad = Twist()
+    bad.linear.x = float("nan")
+    with caplog.at_level(logging.WARNING):
+        for _ in range(160):  # 10 s at 16 Hz
+            node._on_twist(bad, False)
+            clock.advance(0.0625)
+    lines = [r.getMessage() for r in caplog.records if "NaN" in r.getMessage()]
+    assert len(lines) == 2, lines  # t = 0 and t = 5 s, not 160
+    assert lines[0].startswith("ignored 1 twist(s)") and lines[1].startswith("ignored 80 ")
+    assert node.core.stats["twist_rejected"] == 160
+    assert link.sent == [] and not node.core.commanding
+    good = Twist()
+    good.linear.x = 0.2
+    node._on_twist(good, False)
+    assert node.core.commanding and len(link.sent) == 1
+
+
+SCRIPT = Path(__file__).resolve().parents[2] / "lowerbase" / "driver" / "scripts" / "driver_base"
+
+
+def _one_line_hint(result: subprocess.CompletedProcess[str], missing: str) -> None:
+    assert result.returncode == 1
+    assert "Traceback" not in result.stderr
+    assert result.stderr.count("\n") == 1, result.stderr
+    assert result.stderr.startswith("driver_base: ") and f"cannot import {missing}" in \
+        result.stderr and "python:=" in result.stderr
+
+
+def test_launch_script_says_which_interpreter_to_pass_when_a_dependency_is_missing() -> None:
+    code = ("import runpy, sys; sys.modules['filterpy'] = None; sys.argv = [sys.argv[1]]; "
+            "runpy.run_path(sys.argv[0], run_name='__main__')")
+    result = subprocess.run([sys.executable, "-c", code, str(SCRIPT)], capture_output=True,
+                            text=True, timeout=60)
+    _one_line_hint(result, "filterpy")
+
+
+@pytest.mark.skipif(not Path("/usr/bin/python3").exists(), reason="no /usr/bin/python3")
+def test_launch_script_under_the_system_python_without_the_dependencies() -> None:
+    """What roslaunch does without python:= on Debian: /usr/bin/python3 runs the script."""
+    probe = subprocess.run(["/usr/bin/python3", "-c", "import numpy, filterpy"],
+                           capture_output=True, timeout=60)
+    if probe.returncode == 0:
+        pytest.skip("/usr/bin/python3 has lowerbase's dependencies here")
+    result = subprocess.run(["/usr/bin/python3", str(SCRIPT), "__name:=driver_base"],
+                            capture_output=True, text=True, timeout=60,
+                            env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
+    assert result.returncode == 1
+    assert "Traceback" not in result.stderr and "python:=" in result.stderr

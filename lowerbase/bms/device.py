@@ -1,12 +1,9 @@
-"""The BMS as a Modbus device: the pack model behind a lock, served by pymodbus 3.16.1.
+"""The BMS as a Modbus device: the pack model behind a lock, and the server that serves it.
 
 :class:`BmsDevice` is the device without networking: it steps the pack, builds the register
 images of :mod:`lowerbase.bms.registers` and validates threshold writes. :class:`BmsServer`
-serves it over Modbus TCP and/or Modbus RTU (a serial port or a pseudo-terminal) with
-pymodbus' own server classes: a :class:`pymodbus.simulator.SimDevice` whose documented
-``action`` hook fills the registers from the model on every read and vets every write, and the
-``trace_pdu`` hook that keeps the device silent to other unit ids, as a slave on an RS-485 line
-must be.
+serves it over Modbus TCP and/or Modbus RTU (a serial port or a pseudo-terminal) through the
+framing and request handling of :mod:`lowerbase.bms.modbus`.
 """
 
 from __future__ import annotations
@@ -14,18 +11,16 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
+import select
 import socket
 import threading
 from collections.abc import Sequence
 from typing import Any
 
+from lowerbase.bms.modbus import RtuFramer, SlaveCore, serve_tcp_connection, silence_s
 from lowerbase.bms.pack import BatteryPack
 from lowerbase.bms.registers import (
-    HOLDING_BASE,
-    HOLDING_COUNT,
-    ILLEGAL_FUNCTION,
-    INPUT_BASE,
-    INPUT_COUNT,
     RegisterValueError,
     apply_holding_write,
     encode_protection,
@@ -41,6 +36,8 @@ log = logging.getLogger(__name__)
 DEFAULT_TCP = ("127.0.0.1", 5020)
 DEFAULT_UNIT = 1
 DEFAULT_BAUDRATE = 19200
+#: a Modbus TCP connection silent this long [s] is closed
+DEFAULT_IDLE_TIMEOUT = 60.0
 
 
 class BmsDevice:
@@ -128,48 +125,63 @@ def parse_host_port(text: str, default_port: int = DEFAULT_TCP[1]) -> tuple[str,
     return host, port
 
 
-def _check_tcp(host: str, port: int) -> None:
-    """Fail early with the OS's reason; pymodbus only logs it."""
+def _listen_tcp(host: str, port: int) -> socket.socket:
+    """A listening socket, or :class:`ModbusDeviceError` with the OS's reason."""
     try:
         infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
     except socket.gaierror as exc:
         raise ModbusDeviceError(f"cannot listen on {host}:{port}: {exc.strerror}") from None
     family, kind, proto, _, addr = infos[0]
-    with socket.socket(family, kind, proto) as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            probe.bind(addr)
-        except OSError as exc:
-            raise ModbusDeviceError(
-                f"cannot listen on Modbus TCP {host}:{port}: {exc.strerror or exc}"
-            ) from None
+    sock = socket.socket(family, kind, proto)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(addr)
+        sock.listen(16)
+    except OSError as exc:
+        sock.close()
+        raise ModbusDeviceError(
+            f"cannot listen on Modbus TCP {host}:{port}: {exc.strerror or exc}"
+        ) from None
+    sock.setblocking(False)
+    return sock
 
 
-def _check_serial(port: str) -> None:
+def _open_serial(port: str, baudrate: int) -> Any:
     import serial
 
     try:
-        serial.serial_for_url(port, exclusive=True).close()
+        ser = serial.serial_for_url(port, baudrate=baudrate, timeout=0, exclusive=True)
     except (serial.SerialException, OSError, ValueError) as exc:
         raise ModbusDeviceError(f"cannot open serial port {port}: {exc}") from None
+    try:
+        ser.fileno()
+    except Exception:
+        ser.close()
+        raise ModbusDeviceError(f"cannot serve Modbus RTU on {port}: not a serial device") from None
+    return ser
 
 
 class BmsServer:
-    """Serve a :class:`BmsDevice` over Modbus TCP and/or RTU from a background thread.
+    """Serve a :class:`BmsDevice` over Modbus TCP and/or RTU from background threads.
 
     ``tcp`` is (host, port) or None; port 0 picks a free port (see :attr:`tcp_address`).
-    ``rtu`` is a serial device path (or a pyserial URL) or None. With a ``clock``, an update
-    thread steps the device every ``update_period`` [s] of that clock (times ``speed``);
-    without one the caller steps the device (tests on simulated time).
+    A TCP connection that sends nothing for ``idle_timeout`` [s] is closed (None: never).
+    ``rtu`` is a serial device path or None. With a ``clock``, an update thread steps the
+    device every ``update_period`` [s] of that clock (times ``speed``); without one the
+    caller steps the device (tests on simulated time). :attr:`dropped` counts the requests
+    that got no answer, by reason (see :class:`~lowerbase.bms.modbus.SlaveCore`).
     """
 
     def __init__(
         self, device: BmsDevice, *, tcp: tuple[str, int] | None = DEFAULT_TCP,
         rtu: str | None = None, baudrate: int = DEFAULT_BAUDRATE, clock: Clock | None = None,
         update_period: float = 0.1, speed: float = 1.0,
+        idle_timeout: float | None = DEFAULT_IDLE_TIMEOUT,
     ) -> None:
         if tcp is None and rtu is None:
             raise ConfigError("the BMS needs at least one of Modbus TCP and Modbus RTU")
+        if idle_timeout is not None and idle_timeout <= 0:
+            raise ConfigError("the idle timeout must be > 0 s (or None: never)")
         self.device = device
         self.tcp = tcp
         self.rtu = rtu
@@ -177,169 +189,128 @@ class BmsServer:
         self.clock = clock
         self.update_period = update_period
         self.speed = speed
+        self.idle_timeout = idle_timeout
         self.tcp_address: tuple[str, int] | None = None
-        self._thread: threading.Thread | None = None
-        self._updater: threading.Thread | None = None
-        self._update_stop = threading.Event()
-        self._ready = threading.Event()
+        self._core = SlaveCore(device)
+        self.dropped = self._core.dropped
+        self._threads: list[threading.Thread] = []
+        self._stop = threading.Event()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stopping: asyncio.Event | None = None
-        self._start_error: BaseException | None = None
 
-    # -- pymodbus hooks -------------------------------------------------------------------
+    # -- Modbus TCP -----------------------------------------------------------------------
 
-    async def _action(
-        self, function_code: int, start_address: int, address: int, count: int,
-        registers: list[int], set_values: list[int] | list[bool] | None,
-    ) -> Any:
-        """SimDevice action: refresh the block from the model, vet writes (see pymodbus'
-        ``SimDevice.action``). Returns a pymodbus ``ExcCodes`` member to refuse."""
-        from pymodbus.constants import ExcCodes
+    def _tcp_main(self, sock: socket.socket, loop: asyncio.AbstractEventLoop,
+                  stopping: asyncio.Event) -> None:
+        asyncio.set_event_loop(loop)
+        try:
+            loop.run_until_complete(self._serve_tcp(sock, stopping))
+        finally:
+            sock.close()
+            loop.close()
 
-        if function_code in (1, 2, 5, 15):  # no coils or discrete inputs on this device
-            return ExcCodes(ILLEGAL_FUNCTION)
-        if set_values is not None and function_code in (6, 16, 23):
+    async def _serve_tcp(self, sock: socket.socket, stopping: asyncio.Event) -> None:
+        connections: set[asyncio.Task[Any]] = set()
+
+        async def on_connect(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            task = asyncio.current_task()
+            assert task is not None
+            connections.add(task)
             try:
-                self.device.write_holding(address, [int(v) for v in set_values])
-            except RegisterValueError as exc:
-                log.info("refused write at %#06x: %s", address, exc)
-                return ExcCodes(exc.exception_code)
-            return None
-        if function_code == 4:
-            image, base = self.device.input_registers(), INPUT_BASE
-        else:
-            image, base = self.device.holding_registers(), HOLDING_BASE
-        offset = base - start_address
-        registers[offset : offset + len(image)] = image
+                await serve_tcp_connection(self._core, reader, writer, self.idle_timeout)
+            finally:
+                connections.discard(task)
+
+        server = await asyncio.start_server(on_connect, sock=sock)
+        await stopping.wait()
+        server.close()
+        for task in list(connections):
+            task.cancel()
+        await asyncio.gather(server.wait_closed(), *connections, return_exceptions=True)
+
+    # -- Modbus RTU -----------------------------------------------------------------------
+
+    def _rtu_main(self, ser: Any) -> None:
+        framer = RtuFramer(self._core, ser.write)
+        gap = silence_s(self.baudrate)
+        try:
+            while not self._stop.is_set():
+                try:
+                    wait = gap if framer.buffer else 0.1
+                    ready, _, _ = select.select([ser.fileno()], [], [], wait)
+                    data = os.read(ser.fileno(), 512) if ready else b""
+                except OSError as exc:
+                    log.warning("Modbus RTU on %s: %s; reopening", self.rtu, exc)
+                    ser.close()
+                    ser = self._reopen_serial()
+                    if ser is None:
+                        return
+                    framer = RtuFramer(self._core, ser.write)
+                    continue
+                if data:
+                    framer.feed(data)
+                elif framer.buffer:
+                    framer.silence()
+        finally:
+            if ser is not None:
+                ser.close()
+
+    def _reopen_serial(self) -> Any:
+        assert self.rtu is not None
+        while not self._stop.wait(0.5):
+            try:
+                return _open_serial(self.rtu, self.baudrate)
+            except ModbusDeviceError:
+                continue
         return None
-
-    def _trace_pdu(self, sending: bool, pdu: Any) -> Any:
-        """Drop requests for other unit ids (a slave stays silent); broadcasts (0) pass."""
-        if not sending and pdu.dev_id not in (self.device.unit, 0):
-            return None
-        return pdu
-
-    def _sim_device(self) -> Any:
-        from pymodbus.pdu.device import ModbusDeviceIdentification
-        from pymodbus.simulator import DataType, SimData, SimDevice
-
-        identity = ModbusDeviceIdentification(
-            info_name={"VendorName": "lowerbase", "ProductCode": "BMS",
-                       "ProductName": "emulated battery management system"}
-        )
-        placeholder = [SimData(0, values=False, datatype=DataType.BITS)]
-        return SimDevice(
-            self.device.unit,
-            simdata=(
-                placeholder,  # coils: refused by the action
-                [SimData(0, values=False, datatype=DataType.BITS)],  # discrete inputs: refused
-                [SimData(HOLDING_BASE, count=HOLDING_COUNT, values=0,
-                         datatype=DataType.REGISTERS)],
-                [SimData(INPUT_BASE, count=INPUT_COUNT, values=0,
-                         datatype=DataType.REGISTERS, readonly=True)],
-            ),
-            identity=identity,
-            action=self._action,
-        )
 
     # -- lifecycle ------------------------------------------------------------------------
 
-    async def _serve(self) -> None:
-        from pymodbus import FramerType
-        from pymodbus.server import ModbusSerialServer, ModbusTcpServer
-
-        self._stopping = asyncio.Event()
-        servers: list[Any] = []
-        try:
-            if self.tcp is not None:
-                tcp_server = ModbusTcpServer(
-                    self._sim_device(), address=self.tcp, trace_pdu=self._trace_pdu
-                )
-                servers.append(tcp_server)
-                await tcp_server.serve_forever(background=True)
-                sock = tcp_server.transport.sockets[0]  # type: ignore[attr-defined]
-                self.tcp_address = (self.tcp[0], int(sock.getsockname()[1]))
-            if self.rtu is not None:
-                rtu_server = ModbusSerialServer(
-                    self._sim_device(), framer=FramerType.RTU, port=self.rtu,
-                    baudrate=self.baudrate, broadcast_enable=True, trace_pdu=self._trace_pdu,
-                    reconnect_delay=0.5,
-                )
-                servers.append(rtu_server)
-                await rtu_server.serve_forever(background=True)
-        except Exception as exc:  # reported by start() in the caller's thread
-            self._start_error = exc
-        self._ready.set()
-        if self._start_error is None:
-            await self._stopping.wait()
-        for server in servers:
-            with contextlib.suppress(Exception):
-                await server.shutdown()
-
-    def _thread_main(self) -> None:
-        loop = asyncio.new_event_loop()
-        self._loop = loop
-        asyncio.set_event_loop(loop)
-        try:
-            loop.run_until_complete(self._serve())
-        finally:
-            pending = asyncio.all_tasks(loop)
-            for task in pending:
-                task.cancel()
-            if pending:
-                loop.run_until_complete(asyncio.gather(*pending, return_exceptions=True))
-            loop.close()
-            self._ready.set()
-
-    def start(self, timeout: float = 5.0) -> None:
+    def start(self) -> None:
         """Open the ports and serve; :class:`ModbusDeviceError` with the reason if one fails."""
-        if self._thread is not None:
+        if self._threads:
             raise ModbusDeviceError("the BMS server is already running")
-        if self.tcp is not None:
-            _check_tcp(*self.tcp)
-        if self.rtu is not None:
-            _check_serial(self.rtu)
-        self._ready.clear()
-        self._start_error = None
-        self._thread = threading.Thread(target=self._thread_main, name="bms-modbus", daemon=True)
-        self._thread.start()
-        if not self._ready.wait(timeout):
-            self.stop()
-            raise ModbusDeviceError("the Modbus server did not start in time")
-        if self._start_error is not None:
-            error = self._start_error
-            self.stop()
-            where = " and ".join(
-                ([f"TCP {self.tcp[0]}:{self.tcp[1]}"] if self.tcp else [])
-                + ([f"RTU {self.rtu}"] if self.rtu else [])
-            )
-            raise ModbusDeviceError(f"cannot serve Modbus {where}: {error}") from None
+        sock = _listen_tcp(*self.tcp) if self.tcp is not None else None
+        try:
+            ser = _open_serial(self.rtu, self.baudrate) if self.rtu is not None else None
+        except ModbusDeviceError:
+            if sock is not None:
+                sock.close()
+            raise
+        self._stop.clear()
+        if sock is not None:
+            assert self.tcp is not None
+            self.tcp_address = (self.tcp[0], int(sock.getsockname()[1]))
+            self._loop, self._stopping = asyncio.new_event_loop(), asyncio.Event()
+            self._threads.append(threading.Thread(
+                target=self._tcp_main, args=(sock, self._loop, self._stopping),
+                name="bms-modbus", daemon=True,
+            ))
+        if ser is not None:
+            self._threads.append(threading.Thread(
+                target=self._rtu_main, args=(ser,), name="bms-modbus-rtu", daemon=True
+            ))
         if self.clock is not None:
-            self._update_stop.clear()
-            self._updater = threading.Thread(
+            self._threads.append(threading.Thread(
                 target=self.device.run, name="bms-update", daemon=True,
-                args=(self.clock, self._update_stop),
+                args=(self.clock, self._stop),
                 kwargs={"period": self.update_period, "speed": self.speed},
-            )
-            self._updater.start()
+            ))
+        for thread in self._threads:
+            thread.start()
 
     def stop(self, timeout: float = 5.0) -> None:
         """Stop serving and updating; idempotent. Ports are closed when this returns."""
-        self._update_stop.set()
-        if self._updater is not None:
-            self._updater.join(timeout)
-            self._updater = None
-        if self._thread is not None:
-            loop, stopping = self._loop, self._stopping
-            if loop is not None and stopping is not None and not loop.is_closed():
-                with contextlib.suppress(RuntimeError):
-                    loop.call_soon_threadsafe(stopping.set)
-            self._thread.join(timeout)
-            if self._thread.is_alive():
-                raise ModbusDeviceError("the Modbus server thread did not stop in time")
-            self._thread = None
-            self._loop = None
-            self._stopping = None
+        self._stop.set()
+        loop, stopping, self._loop, self._stopping = self._loop, self._stopping, None, None
+        if loop is not None and stopping is not None:
+            with contextlib.suppress(RuntimeError):  # already closed
+                loop.call_soon_threadsafe(stopping.set)
+        threads, self._threads = self._threads, []
+        for thread in threads:
+            thread.join(timeout)
+        if any(thread.is_alive() for thread in threads):
+            raise ModbusDeviceError("the Modbus server threads did not stop in time")
 
     def __enter__(self) -> BmsServer:
         self.start()

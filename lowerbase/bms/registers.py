@@ -29,6 +29,7 @@ Table = Literal["input", "holding"]
 ILLEGAL_FUNCTION = 0x01
 ILLEGAL_DATA_ADDRESS = 0x02
 ILLEGAL_DATA_VALUE = 0x03
+DEVICE_FAILURE = 0x04
 
 
 class RegisterValueError(ModbusDeviceError):

@@ -34,7 +34,7 @@ def no_leaked_threads() -> Iterator[None]:
     import threading
 
     yield
-    names = {"bms-modbus", "bms-update", "pty-bridge"}
+    names = {"bms-modbus", "bms-modbus-rtu", "bms-update", "pty-bridge"}
     leaked = [t.name for t in threading.enumerate() if t.name in names]
     assert not leaked, f"threads left running: {leaked}"
 

@@ -32,7 +32,7 @@ from lowerbase.protocol.status_codes import StatusBit, describe
 #: RobotState value table of SystemStatus (chassis.dbc)
 ROBOT_STATES = ("Boot", "Standby", "Active", "EmergencyStop", "Fault")
 #: DriverCore LinkState values
-LINK_STATES = ("waiting", "configuring", "ready", "lost")
+LINK_STATES = ("waiting", "configuring", "ready", "lost", "standby")
 #: ControlCommand actions: scenario action name -> ControlCommand value name
 CONTROL_ACTIONS = {
     "enable": "EnableCanControl",

@@ -2,10 +2,26 @@
 
 ``DriverCore`` is everything the ROS node does except talking to ROS: it decodes the lower
 computer's frames, reads the parameters from the lower computer at start (and again after a
-reboot, seen as a changed Heartbeat BootCounter), enables CAN control, integrates wheel
-odometry (/odom_raw) and runs the EKF (/odom), keeps the IMU, battery, BMS, parameter,
-version and status state, and turns twists and LED requests into frames. The ROS node, the
-benches and the demo all drive this one class; time comes from the injected clock.
+reboot), enables CAN control, integrates wheel odometry (/odom_raw) and runs the EKF (/odom),
+keeps the IMU, battery, BMS, parameter, version and status state, and turns twists and LED
+requests into frames. The ROS node, the benches and the demo all drive this one class; time
+comes from the injected clock.
+
+Reboots are decided from consistent evidence: the Heartbeat's Uptime runs with the receiver's
+clock; a Heartbeat whose Uptime is well *behind* that timeline (it went backwards, or is
+smaller than a silence that just ended) makes a reboot suspected, and the next Heartbeat
+confirms it if it continues the *new* timeline. Only then are the parameters read again and
+CAN control re-enabled (``auto_enable``). A changed BootCounter with the Uptime still counting
+(a garbled or forged frame) is counted and ignored. Control is enabled at first contact and
+after a confirmed reboot only, retried until SystemStatus shows ControlMode Can; a chassis
+put in standby (or e-stopped) on purpose is never re-enabled. ``state`` is ``ready`` only
+while the chassis takes commands (ControlMode Can); configured but in standby is ``standby``.
+
+MotionCommand runs on a fixed grid of 1/command_rate (the DBC's 20 ms cycle): a tick sends
+when its slot is due (from half a period early), the slot then advances by exactly one
+period; a new twist goes out at once when it starts a command or its slot is within half a
+period, else in the next slot, so the rate stays at command_rate however ticks and twists
+jitter.
 """
 
 from __future__ import annotations
@@ -40,7 +56,8 @@ VERSION_FIELDS = {1: "hardwareVersion", 2: "softwareVersion", 3: "IAPSoftwareVer
 class LinkState(enum.Enum):
     WAITING = "waiting"  #: nothing heard from the lower computer yet
     CONFIGURING = "configuring"  #: reading parameters
-    READY = "ready"  #: parameters read, odometry running, control enabled
+    STANDBY = "standby"  #: configured, but the chassis ignores commands (not in CAN control)
+    READY = "ready"  #: parameters read, odometry running, the chassis in CAN control
     LOST = "lost"  #: no Heartbeat within link_timeout
 
 
@@ -64,6 +81,10 @@ class DriverConfig:
             if not (math.isfinite(value) and value > 0):
                 raise LowerbaseError(f"driver {name} must be > 0, got {value!r}")
 
+
+#: [s] how far a Heartbeat's Uptime may stray from the receiver's clock (plus 2 % of the gap)
+UPTIME_SLACK = 0.5
+_ESTOP_OR_FAULT = (3, 4, "EmergencyStop", "Fault")  # SystemStatus RobotState
 
 Send = Callable[[int, bytes], None]
 Listener = Callable[[str, "DriverCore"], None]
@@ -93,6 +114,12 @@ class DriverCore:
         self.state = LinkState.WAITING
         self.boot_counter: int | None = None
         self.reboots = 0
+        self._uptime: tuple[float, float] | None = None  # (Uptime, receive time) of the last
+        self._reboot_suspect: tuple[float, float, int] | None = None  # (Uptime, time, boot)
+        self._configured_ok = False
+        self._control_can: bool | None = None  # ControlMode Can in the latest SystemStatus
+        self._enable_wanted = False  # first contact or a confirmed reboot, not enabled yet
+        self._last_enable = -math.inf
         self.parameters: dict[str, float] = {}
         self.versions: dict[str, str] = {}
         self._version_parts: dict[int, dict[int, bytes]] = {}
@@ -129,10 +156,14 @@ class DriverCore:
         if clipped != (linear, angular):
             self.stats["twist_clipped"] += 1
         now = self.clock.now()
+        idle = self._twist is None
         self._twist = (clipped[0], clipped[1], smoothed)
         self._twist_stamp = now
         self._stale_sent = False
-        self._send_motion()  # a new twist goes out at once: latency matters
+        if idle:  # a new command goes out at once (latency matters) and starts the grid
+            self._next_command = now
+        if now >= self._next_command - 0.5 / self.config.command_rate:
+            self._send_motion(now)  # else it goes out in the next slot, in < half a period
         return True
 
     def set_led(self, strip: int, submodule: int, urgency: int, abnormal: int, normal: int,
@@ -178,8 +209,30 @@ class DriverCore:
         if handler is not None:
             handler(values, now)
         if self.state == LinkState.LOST:
-            self.state = LinkState.CONFIGURING if self.odometry is None else LinkState.READY
             log.info("lower computer link is back")
+            self._settle()
+
+    def bus_down(self, why: str) -> None:
+        """The link's bus failed (a device unplugged): the link is lost until frames return."""
+        self.stats["bus_down"] += 1
+        self._control_can = None  # learn the chassis' state afresh when frames return
+        if self.state != LinkState.LOST:
+            self.state = LinkState.LOST
+            self.stats["link_lost"] += 1
+            log.warning("lower computer link lost: %s", why)
+            self._notify("link")
+
+    def _settle(self) -> None:
+        """The state the link is in when it is up: configuring, standby or ready."""
+        if not self._configured_ok or self.odometry is None:
+            state = LinkState.CONFIGURING
+        elif self._control_can is None:
+            state = LinkState.CONFIGURING if self.state == LinkState.CONFIGURING \
+                else LinkState.STANDBY
+        else:
+            state = LinkState.READY if self._control_can else LinkState.STANDBY
+        if state != self.state:
+            self.state = state
             self._notify("link")
 
     def _malformed(self, frame_id: int, exc: Exception, now: float) -> None:
@@ -193,18 +246,44 @@ class DriverCore:
 
     def _on_Heartbeat(self, v: dict[str, Any], now: float) -> None:
         self._last_heartbeat = now
-        boot = int(v["BootCounter"])
-        if self.boot_counter is None:
-            self.boot_counter = boot
+        boot, uptime = int(v["BootCounter"]), float(v["Uptime"])
+        if self.boot_counter is None or self._uptime is None:
+            self.boot_counter, self._uptime = boot, (uptime, now)
+            self._enable_wanted = self.config.auto_enable
             self._configure("first contact")
-        elif boot != self.boot_counter:
-            self.boot_counter = boot
-            self.reboots += 1
-            log.warning("the lower computer rebooted (boot #%d): reading parameters again", boot)
-            self._configure("reboot")
+            return
+        if _continues(self._uptime, uptime, now):
+            self._uptime = (uptime, now)
+            if self._reboot_suspect is not None:
+                self._reboot_suspect = None
+                self.stats["heartbeat_inconsistent"] += 1
+            if boot != self.boot_counter:
+                self.stats["heartbeat_inconsistent"] += 1
+                log.warning("a Heartbeat with BootCounter %d (not %d) but the Uptime still "
+                            "counting: not a reboot, ignored (garbled or forged?)", boot,
+                            self.boot_counter)
+            return
+        suspect = self._reboot_suspect
+        if suspect is not None and _continues(suspect[:2], uptime, now) and boot == suspect[2]:
+            behind = uptime < self._uptime[0] + (now - self._uptime[1])
+            self._reboot_suspect = None
+            self.boot_counter, self._uptime = boot, (uptime, now)
+            if behind:
+                self.reboots += 1
+                log.warning("the lower computer rebooted (boot #%d, up %.1f s): reading "
+                            "parameters again", boot, uptime)
+                self._enable_wanted = self.config.auto_enable
+                self._configure("reboot")
+            else:  # ahead of the old timeline: not a reboot; follow the new one
+                self.stats["heartbeat_timeline_jump"] += 1
+                log.warning("the lower computer's Uptime jumped ahead to %.1f s", uptime)
+            return
+        self._reboot_suspect = (uptime, now, boot)
+        self.stats["heartbeat_off_timeline"] += 1
 
     def _configure(self, why: str) -> None:
         self.state = LinkState.CONFIGURING
+        self._configured_ok = False
         self.parameters = {}
         self.versions = {}
         self._version_parts = {}
@@ -233,12 +312,17 @@ class DriverCore:
 
     def _configured(self) -> None:
         self._apply_parameters()
-        self.state = LinkState.READY
+        self._configured_ok = True
         log.info("lower computer configured: %s", ", ".join(
             f"{k}={self.parameters[k]:g}" for k in ODOMETRY_PARAMETERS))
-        if self.config.auto_enable:
-            self.control("EnableCanControl")
-        self._notify("ready")
+        if self._enable_wanted:
+            self._enable()
+        self._notify("ready")  # configured (the link state says whether commands are taken)
+        self._settle()
+
+    def _enable(self) -> None:
+        self._last_enable = self.clock.now()
+        self.control("EnableCanControl")
 
     def _apply_parameters(self) -> None:
         params = OdometryParameters.from_lower_computer(self.parameters)
@@ -311,10 +395,14 @@ class DriverCore:
     def _on_SystemStatus(self, v: dict[str, Any], now: float) -> None:
         previous = self.system_status.get("RobotState")
         self.system_status = v
-        # back in standby on its own (e.g. after an e-stop release) is not re-enabled here:
-        # that is the operator's decision; only a reboot is
+        self._control_can = v["ControlMode"] in (1, "Can")
+        # enabled: done; e-stopped or faulted: standby after that is the operator's decision
+        if self._control_can or v["RobotState"] in _ESTOP_OR_FAULT:
+            self._enable_wanted = False
         if previous is not None and previous != v["RobotState"]:
             self._notify("system_status")
+        if self.state != LinkState.LOST:
+            self._settle()
 
     def _on_LedState(self, v: dict[str, Any], now: float) -> None:
         self.leds[(int(v["Strip"]), int(v["Submodule"]))] = {
@@ -347,6 +435,7 @@ class DriverCore:
         silent = now - self._last_heartbeat > self.config.link_timeout
         if silent and self.state not in (LinkState.WAITING, LinkState.LOST):
             self.state = LinkState.LOST
+            self._control_can = None  # learn the chassis' state afresh when frames return
             self.stats["link_lost"] += 1
             log.warning("lower computer link lost: no Heartbeat for %.1f s",
                         now - self._last_heartbeat)
@@ -359,24 +448,31 @@ class DriverCore:
                     self._emit("ParameterRequest", {"Index": index, "Op": 0, "Value": 0.0})
             if len(self.versions) < len(VERSION_FIELDS):
                 self._emit("VersionRequest", {"Field": 0})
+        if (self._enable_wanted and self.state == LinkState.STANDBY
+                and now - self._last_enable >= self.config.request_retry):
+            self._enable()  # the first EnableCanControl was lost, or came during boot
         if self._twist is None:
             return
+        period = 1.0 / self.config.command_rate
         fresh = now - self._twist_stamp < self.config.command_timeout
-        if fresh and now >= self._next_command - 1e-9:
-            self._send_motion()
+        if fresh and now >= self._next_command - 0.5 * period:
+            self._send_motion(now)
         elif not fresh and not self._stale_sent:
             self._stale_sent = True
             self._twist = (0.0, 0.0, self._twist[2])
-            self._send_motion()  # one explicit stop; the lower computer's watchdog backs it up
+            self._send_motion(now)  # one explicit stop; the lower computer's watchdog backs it
             self._twist = None
             self.stats["twist_stale"] += 1
 
-    def _send_motion(self) -> None:
+    def _send_motion(self, now: float) -> None:
         assert self._twist is not None
         v, w, smoothed = self._twist
         self._emit("MotionCommand", {"Linear": v, "Angular": w,
                                      "Mode": "Smoothed" if smoothed else "Raw"})
-        self._next_command = self.clock.now() + 1.0 / self.config.command_rate
+        period = 1.0 / self.config.command_rate
+        self._next_command += period  # the next slot of a fixed grid
+        if self._next_command < now:  # far behind (a stall): resync, do not burst
+            self._next_command = now + period
 
     def _emit(self, name: str, values: dict[str, Any]) -> None:
         msg = self.codec.message(name)
@@ -400,9 +496,15 @@ class DriverCore:
 
     @property
     def link_up(self) -> bool:
-        return self.state in (LinkState.CONFIGURING, LinkState.READY)
+        return self.state in (LinkState.CONFIGURING, LinkState.STANDBY, LinkState.READY)
 
     def information(self) -> dict[str, Any]:
         """woosh_msgs/Information fields (without header)."""
         return {**{name: self.versions.get(name, "") for name in VERSION_FIELDS.values()},
                 "parameter": dict(self.parameters)}
+
+
+def _continues(last: tuple[float, float], uptime: float, now: float) -> bool:
+    """Whether a Heartbeat's ``uptime`` received at ``now`` continues the timeline ``last``."""
+    expected = last[0] + (now - last[1])
+    return abs(uptime - expected) <= UPTIME_SLACK + 0.02 * (now - last[1])

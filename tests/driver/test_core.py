@@ -153,3 +153,50 @@ def test_a_frozen_imu_is_no_longer_fused() -> None:
     loop.drive(0.3, 0.2, 1.0)
     assert loop.driver.ekf.statistics.get("gyro.accepted", 0) == fused
     assert loop.driver.odometry is not None
+
+
+def _count_motion_commands(twist_every: float | None, seconds: float = 10.0,
+                           seed: int = 7) -> int:
+    """MotionCommands a core sends while ticked at 50 Hz by a jittery loop (ticks up to
+    0.5 ms early or late), with a twist every ``twist_every`` s (None: one twist at start)."""
+    import random
+
+    rng = random.Random(seed)
+    clock = SimClock()
+    mc = default_codec().message("MotionCommand").frame_id
+    sent: list[float] = []
+    core = DriverCore(lambda fid, data: sent.append(clock.now()) if fid == mc else None,
+                      clock, DriverConfig(command_timeout=seconds + 1.0))
+    events = [(k * 0.02 + rng.uniform(-5e-4, 5e-4), "tick") for k in range(1, 501)]
+    if twist_every is None:
+        events.append((0.0, "twist"))
+    else:
+        events += [(k * twist_every + rng.uniform(0.0, 2e-3), "twist")
+                   for k in range(round(seconds / twist_every))]
+    for t, what in sorted(events):
+        clock.sleep_until(t)
+        if what == "tick":
+            core.tick()
+        else:
+            core.set_twist(0.2, 0.0)
+    return len([t for t in sent if t < seconds])
+
+
+@pytest.mark.parametrize("twist_every", [None, 0.05, 0.1, 0.033])
+def test_motion_commands_keep_the_dbc_cycle_whatever_the_tick_jitter(
+        twist_every: float | None) -> None:
+    # 20 ms cycle (chassis.dbc): 500 frames in 10 s, one twist or twists at 10..30 Hz
+    assert abs(_count_motion_commands(twist_every) - 500) <= 1
+
+
+def test_motion_commands_resync_after_a_stall_without_a_burst() -> None:
+    clock = SimClock()
+    sent: list[float] = []
+    core = DriverCore(lambda fid, data: sent.append(clock.now()), clock,
+                      DriverConfig(command_timeout=5.0))
+    core.set_twist(0.2, 0.0)
+    clock.advance(1.0)  # the loop stalled for 1 s
+    for _ in range(10):
+        core.tick()
+        clock.advance(0.02)
+    assert len(sent) == 1 + 10  # one per tick after the stall, not 50 at once

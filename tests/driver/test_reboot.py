@@ -39,12 +39,13 @@ def test_restarted_emulator_with_the_same_boot_counter_is_re_enabled_ten_times_o
         assert loop.mcu.boot_counter == 1  # no parameter file: it says 1 again
         ready_but_ignoring = 0.0
 
-        def watch(lp: SimLoop) -> None:
+        def watch(lp: SimLoop) -> bool:
             nonlocal ready_but_ignoring
             if lp.driver.state == LinkState.READY and lp.mcu.state.name != "ACTIVE":
                 ready_but_ignoring += lp.mcu.dt
+            return ready(lp)
 
-        assert loop.run_until(lambda lp: (watch(lp), ready(lp))[1], timeout=3.0), n
+        assert loop.run_until(watch, timeout=3.0), n
         assert loop.driver.reboots == n
         assert ready_but_ignoring <= 0.11  # at most until the next SystemStatus (100 ms)
         loop.drive(0.3, 0.0, 0.5)
@@ -95,7 +96,7 @@ def test_a_real_reboot_of_a_chassis_in_standby_is_re_enabled() -> None:
 
 def test_a_lost_enable_is_retried_until_the_chassis_is_in_can_control() -> None:
     loop = SimLoop(bms=None)
-    dropped = []
+    dropped: list[bytes] = []
     send = loop.driver._send
 
     def lossy(frame_id: int, data: bytes) -> None:

@@ -3,7 +3,7 @@
 Examples::
 
     lowerbase bms                                  # Modbus TCP on 127.0.0.1:5020, unit 1
-    lowerbase bms --tcp 0.0.0.0:502 --unit 3
+    lowerbase bms --tcp 0.0.0.0:502 --unit 3 --idle-timeout 300
     lowerbase bms --rtu /dev/ttyUSB0 --baudrate 9600 --no-tcp
     lowerbase bms --rtu pty:/tmp/lowerbase-bms     # new pseudo-terminal, firmware opens the link
     lowerbase bms --profile robot.toml --soc 30 --charger --speed 60
@@ -42,6 +42,11 @@ def add_subparser(subparsers: Any) -> None:
         "--baudrate", type=int, default=19200, help="RTU baud rate (default 19200; 8N1)"
     )
     parser.add_argument("--unit", type=int, default=1, help="Modbus unit id (default 1)")
+    parser.add_argument(
+        "--idle-timeout", type=float, default=60.0, metavar="SECONDS",
+        help="close a Modbus TCP connection that sends nothing for this long "
+        "(default 60; 0 = never)",
+    )
     parser.add_argument(
         "--profile", metavar="FILE",
         help="TOML file with a [battery] table (default: packaged 16S LFP 40 Ah pack)",
@@ -101,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--soc must be within 0-100")
     if args.load < 0:
         raise ConfigError("--load must be >= 0 A")
+    if args.idle_timeout < 0:
+        raise ConfigError("--idle-timeout must be >= 0 s (0 = never)")
     if args.no_tcp and not args.rtu:
         raise ConfigError("--no-tcp needs --rtu")
     if args.profile:
@@ -126,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     server = BmsServer(
         device, tcp=tcp, rtu=rtu, baudrate=args.baudrate, clock=RealClock(stop),
-        speed=args.speed,
+        speed=args.speed, idle_timeout=args.idle_timeout or None,
     )
     # SIGTERM (systemd, docker, kill) stops as cleanly as Ctrl-C does
     previous = None

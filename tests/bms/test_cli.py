@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -19,12 +20,14 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_options() -> None:
     args = build_parser().parse_args(
         ["bms", "--tcp", "127.0.0.1:1502", "--rtu", "pty:/tmp/x", "--unit", "3", "--soc", "40",
-         "--charger", "--speed", "60"]
+         "--charger", "--speed", "60", "--idle-timeout", "2.5"]
     )
     assert args.command == "bms" and args.unit == 3 and args.charger == "auto"
+    assert args.idle_timeout == 2.5
     assert args.rtu == "pty:/tmp/x" and args.speed == 60.0 and callable(args.func)
     args = build_parser().parse_args(["bms"])
     assert args.tcp == "127.0.0.1:5020" and args.unit == 1 and args.speed == 1.0
+    assert args.idle_timeout == 60.0
 
 
 @pytest.mark.parametrize(
@@ -34,6 +37,7 @@ def test_options() -> None:
         (["bms", "--tcp", "nonexistent.invalid:5020"], "cannot listen"),
         (["bms", "--rtu", "/nonexistent/tty", "--no-tcp"], "cannot open serial port"),
         (["bms", "--soc", "120"], "--soc"),
+        (["bms", "--idle-timeout", "-1"], "--idle-timeout"),
         (["bms", "--profile", "/nonexistent.toml"], "cannot read profile"),
     ],
 )
@@ -52,7 +56,7 @@ def test_ctrl_c_exits_zero(tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(
         [sys.executable, "-m", "lowerbase", "bms", "--tcp", f"127.0.0.1:{port}",
-         "--rtu", f"pty:{link}", "--charger", "--soc", "30"],
+         "--rtu", f"pty:{link}", "--charger", "--soc", "30", "--idle-timeout", "0.5"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
     )
     try:
@@ -72,6 +76,8 @@ def test_ctrl_c_exits_zero(tmp_path: Path) -> None:
         assert snap is not None and snap.charge_mode == 1 and 29 < snap.soc < 31
         with ModbusRtuBmsLink(str(link), timeout=2.0) as rtu:
             assert rtu.poll() is not None
+        with socket.create_connection(("127.0.0.1", port), timeout=10.0) as idle:
+            assert idle.recv(1) == b""  # closed by the BMS after 0.5 s of silence
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=10) == 0
         assert not link.exists() and not link.is_symlink()

@@ -25,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import os
 import sys
 import threading
 import time
@@ -36,19 +37,15 @@ from typing import Any
 from lowerbase.clock import Clock, RealClock
 from lowerbase.driver import services
 from lowerbase.driver.core import DriverConfig, DriverCore, LinkState
+from lowerbase.driver.links import REPLAY_SUFFIXES, BusLink, ReplayLink  # noqa: F401 (re-export)
 from lowerbase.driver.settings import NodeSettings
-from lowerbase.errors import ConfigError, RosUnavailableError, TransportError
-from lowerbase.transport import is_catalog_frame
+from lowerbase.errors import RosUnavailableError, TransportError
 
 log = logging.getLogger(__name__)
 
 NODE_NAME = "driver_base"
-ROS_HINT = "run make env (Debian) or source /opt/ros/noetic/setup.bash"
-#: python-can log formats that --replay reads (can.LogReader picks the reader by suffix)
-REPLAY_SUFFIXES = (".log", ".asc", ".blf", ".csv", ".trc", ".mf4")
-
-FrameSink = Callable[[int, bytes], None]
-
+ROS_HINT = ("run lowerbase from a venv made from the ROS Python (Debian: /usr/bin/python3 -m venv "
+            "--system-site-packages VENV) or source /opt/ros/noetic/setup.bash; docs/driver.md")
 
 def import_ros() -> tuple[ModuleType, ModuleType]:
     """(rospy, lowerbase.driver.ros_io); RosUnavailableError with one clear line if missing."""
@@ -60,8 +57,8 @@ def import_ros() -> tuple[ModuleType, ModuleType]:
         name = getattr(exc, "name", "") or ""
         if name.startswith("woosh_msgs"):
             raise RosUnavailableError(
-                "woosh_msgs is not generated: run make env, or python -m lowerbase.driver.msggen "
-                "build/ros --pth <site-packages>") from None
+                f"woosh_msgs is not generated for {sys.executable}: run "
+                f"{Path(sys.executable).name} -m lowerbase.driver.msggen") from None
         raise RosUnavailableError(f"ROS is not installed ({exc}): {ROS_HINT}") from None
     return rospy, ros_io
 
@@ -84,122 +81,6 @@ class Throttle:
             return False
         self._due = max(self._due + self.period, now + 0.5 * self.period)
         return True
-
-
-# -- links to the lower computer ---------------------------------------------------------------
-
-
-class BusLink:
-    """A python-can bus that is reopened after it fails (a serial adapter unplugged...)."""
-
-    def __init__(self, config: dict[str, Any], reopen_period: float = 1.0) -> None:
-        from lowerbase.transport import describe, open_bus
-
-        self.config = config
-        self.reopen_period = reopen_period
-        self.description = describe(config)
-        self._open_bus = open_bus
-        self._bus: Any = open_bus(config)  # the first failure is the user's: raise it
-        self._last_error_log = -math.inf
-        self.tx_errors = 0
-        self.rx_errors = 0
-
-    def send(self, frame_id: int, data: bytes) -> None:
-        import can
-
-        bus = self._bus
-        if bus is None:
-            self.tx_errors += 1
-            return
-        try:
-            bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False))
-        except (can.CanError, OSError, ValueError) as exc:
-            self.tx_errors += 1
-            self._log_error(f"transmit failed: {exc}")
-
-    def _log_error(self, text: str) -> None:
-        now = time.monotonic()
-        if now - self._last_error_log >= 5.0:
-            self._last_error_log = now
-            log.warning("%s (%s)", text, self.description)
-
-    def run_reader(self, on_frame: FrameSink, stop: threading.Event) -> None:
-        """Feed ``on_frame`` until ``stop`` is set; reopen the bus after an error."""
-        import can
-
-        while not stop.is_set():
-            bus = self._bus
-            if bus is None:
-                try:
-                    self._bus = self._open_bus(self.config)
-                    log.info("bus reopened: %s", self.description)
-                except TransportError as exc:
-                    self._log_error(str(exc))
-                    stop.wait(self.reopen_period)
-                continue
-            try:
-                msg = bus.recv(0.1)
-            except (can.CanError, OSError, ValueError) as exc:
-                self.rx_errors += 1
-                self._log_error(f"receive failed, reopening the bus: {exc}")
-                self._bus = None
-                with contextlib.suppress(Exception):
-                    bus.shutdown()
-                stop.wait(self.reopen_period)
-                continue
-            if msg is None or not is_catalog_frame(msg):
-                continue
-            on_frame(msg.arbitration_id, bytes(msg.data))
-
-    def close(self) -> None:
-        bus, self._bus = self._bus, None
-        if bus is not None:
-            with contextlib.suppress(Exception):
-                bus.shutdown()
-
-
-class ReplayLink:
-    """Frames from a python-can log file (.log, .asc, .blf, ...) with their original timing.
-
-    What the driver sends goes nowhere (it is counted): a replay reproduces what the driver
-    made of a recorded run, it does not drive anything.
-    """
-
-    def __init__(self, path: str | Path, *, finished: Callable[[], None] | None = None) -> None:
-        self.path = Path(path)
-        if not self.path.is_file():
-            raise ConfigError(f"--replay: no such file: {self.path}")
-        if self.path.suffix.lower() not in REPLAY_SUFFIXES:
-            raise ConfigError(f"--replay: {self.path.name}: not a python-can log "
-                              f"({', '.join(REPLAY_SUFFIXES)})")
-        self.description = f"replay of {self.path}"
-        self.finished = finished
-        self.sent = 0
-        self.frames = 0
-
-    def send(self, frame_id: int, data: bytes) -> None:
-        self.sent += 1
-
-    def run_reader(self, on_frame: FrameSink, stop: threading.Event) -> None:
-        import can
-
-        try:
-            with can.LogReader(str(self.path)) as reader:
-                for msg in can.MessageSync(reader, timestamps=True, skip=5.0):
-                    if stop.is_set():
-                        return
-                    if not is_catalog_frame(msg):
-                        continue
-                    self.frames += 1
-                    on_frame(msg.arbitration_id, bytes(msg.data))
-        except Exception as exc:  # a truncated or garbled log: say so, do not crash the node
-            log.error("replay of %s stopped: %s", self.path, exc)
-        log.info("replay finished: %d frames from %s", self.frames, self.path)
-        if self.finished is not None:
-            self.finished()
-
-    def close(self) -> None:
-        pass
 
 
 # -- the node ----------------------------------------------------------------------------------
@@ -301,6 +182,10 @@ class DriverNode:
         with self.lock:
             self.core.on_frame(frame_id, data)
 
+    def on_bus_down(self, why: str) -> None:
+        with self.lock:
+            self.core.bus_down(why)
+
     def _publish(self, key: str, msg: Any) -> None:
         pub = self._pubs.get(key)
         if pub is not None:
@@ -386,7 +271,7 @@ class DriverNode:
 
     def _read(self) -> None:
         try:
-            self.link.run_reader(self.on_frame, self.stop)
+            self.link.run_reader(self.on_frame, self.stop, self.on_bus_down)
         except Exception:  # never let the reader die silently
             log.exception("the frame reader failed")
             self.rospy.signal_shutdown("frame reader failed")
@@ -445,6 +330,13 @@ def run(
     if not rosgraph.is_master_online():
         raise TransportError(f"no ROS master at {rosgraph.get_master_uri()} (start roscore, or "
                              "set ROS_MASTER_URI)")
+    from lowerbase.driver.settings import loopback_address
+
+    address = loopback_address(os.environ, rosgraph.get_master_uri(), [*sys.argv, *ros_args])
+    if address is not None:  # a local master: listen on loopback, not on every interface
+        os.environ["ROS_IP"] = address
+        print(f"lowerbase driver: listening on loopback only (ROS_IP={address}); set ROS_IP or "
+              "ROS_HOSTNAME to this host's address to serve other hosts", flush=True)
     rospy.init_node(name, argv=[name, *ros_args], anonymous=False)
     pkg_logger = logging.getLogger("lowerbase")
     pkg_logger.addHandler(_ToRosout())

@@ -161,13 +161,18 @@ class Mcu:
         # the new BootCounter, so the upper side knows before any counter restarts at zero
         self._next_due["Heartbeat"] = now
         self._next_any_due = min(self._next_due.values())
+        # the hardware is the profile's (and never changes); the parameters are beliefs
+        hw, true = self.profile.chassis, self.truth.geometry
         self._motors = {
-            side: WheelMotor(self.profile.motor, WheelGeometry.from_chassis(self.chassis, side))
+            side: WheelMotor(self.profile.motor, WheelGeometry(
+                true.radius_left if side == "left" else true.radius_right,
+                hw.ratio_left if side == "left" else hw.ratio_right,
+                0.0, self.chassis.max_rpm))  # the deadband is the firmware's (step)
             for side in ("left", "right")
         }
         self._encoders = {
-            "left": EncoderCounter(self.chassis.ratio_left, self.chassis.pulse_per_circle),
-            "right": EncoderCounter(self.chassis.ratio_right, self.chassis.pulse_per_circle),
+            "left": EncoderCounter(hw.ratio_left, hw.pulse_per_circle),
+            "right": EncoderCounter(hw.ratio_right, hw.pulse_per_circle),
         }
         self._enc_stuck = {"left": 0.0, "right": 0.0}
         self.smoother = VelocitySmoother(SmootherLimits.from_chassis(self.chassis))
@@ -369,14 +374,34 @@ class Mcu:
         return Result.ACK, float(self.chassis.as_wire_dict()[spec.name])
 
     def _apply_chassis(self) -> None:
+        """New beliefs take effect; the hardware (motors' gears and wheels, encoders) stays."""
+        for motor in self._motors.values():
+            motor.geometry = replace(motor.geometry, max_rpm=self.chassis.max_rpm)
+        self.smoother.limits = SmootherLimits.from_chassis(self.chassis)
+
+    def _wheel_target(self, side: str, rim: float) -> float:
+        """What the firmware makes the real wheel do [rad/s] for a commanded rim speed [m/s]:
+        the motor speed its beliefs give (rim / believed radius x believed ratio; the minSpeed
+        deadband), turned by the REAL gearbox."""
         c = self.chassis
-        self._motors["left"].geometry = WheelGeometry.from_chassis(c, "left")
-        self._motors["right"].geometry = WheelGeometry.from_chassis(c, "right")
-        self._encoders["left"].ratio = c.ratio_left
-        self._encoders["right"].ratio = c.ratio_right
-        for enc in self._encoders.values():
-            enc.pulse_per_circle = c.pulse_per_circle
-        self.smoother.limits = SmootherLimits.from_chassis(c)
+        if abs(rim) < c.min_speed:
+            return 0.0
+        ratio = c.ratio_left if side == "left" else c.ratio_right
+        motor_rad_s = kinematics.rim_speed_to_wheel_rad_s(rim, c.wheel_perimeter) * ratio
+        return motor_rad_s / self._motors[side].geometry.ratio
+
+    def _belief_per_pulse(self, side: str) -> float:
+        """Rim distance [m] the firmware counts per encoder pulse (its parameters)."""
+        c = self.chassis
+        ratio = c.ratio_left if side == "left" else c.ratio_right
+        return c.wheel_perimeter / (ratio * c.pulse_per_circle)
+
+    def wheel_velocity(self, side: str) -> float:
+        """The reported rim speed [m/s] (WheelFeedback.Velocity): the real motor speed as the
+        encoder measures it, converted with the believed pulsePerCircle, ratio and perimeter."""
+        motor, enc = self._motors[side], self._encoders[side]
+        pulses_per_s = motor.omega * enc.pulses_per_wheel_rad()
+        return pulses_per_s * self._belief_per_pulse(side)
 
     def _on_VersionRequest(self, v: dict[str, Any]) -> None:
         ident = self.profile.identity
@@ -405,10 +430,8 @@ class Mcu:
         target_v, target_w, brake = self._target(now)
         c = self.chassis
         v_l, v_r = kinematics.wheel_speeds_from_twist(target_v, target_w, c.wheel_distant)
-        targets = {
-            "left": kinematics.rim_speed_to_wheel_rad_s(v_l, c.wheel_perimeter),
-            "right": kinematics.rim_speed_to_wheel_rad_s(v_r, c.wheel_perimeter),
-        }
+        targets = {"left": self._wheel_target("left", v_l),
+                   "right": self._wheel_target("right", v_r)}
         angles = {}
         for side, motor in self._motors.items():
             angles[side] = motor.step(targets[side], dt, brake=brake)
@@ -420,7 +443,7 @@ class Mcu:
             before = enc.total
             enc.add(angles[side])
             moved = enc.total - before
-            ds += 0.5 * moved / enc.pulses_per_wheel_rad() * c.wheel_radius
+            ds += 0.5 * moved * self._belief_per_pulse(side)
             self._check_encoder(side, moved, dt)
         self.odometer += abs(ds)
         if now >= self._imu_due:
@@ -463,8 +486,7 @@ class Mcu:
 
     def _measured_twist(self) -> tuple[float, float]:
         return kinematics.twist_from_wheel_speeds(
-            self._motors["left"].rim_speed, self._motors["right"].rim_speed,
-            self.chassis.wheel_distant)
+            self.wheel_velocity("left"), self.wheel_velocity("right"), self.chassis.wheel_distant)
 
     def _apply_faults(self) -> None:
         if not self.faults and not self._imu_bias_applied and not self.imu.frozen:
@@ -613,7 +635,8 @@ class Mcu:
             for wheel, side in ((0, "left"), (1, "right")):
                 motor, enc = self._motors[side], self._encoders[side]
                 rows.append({
-                    "Count": enc.count, "Velocity": _clip(motor.rim_speed, msg, "Velocity"),
+                    "Count": enc.count,
+                    "Velocity": _clip(self.wheel_velocity(side), msg, "Velocity"),
                     "Current": _clip(motor.current, msg, "Current"), "Wheel": wheel,
                     "DriverStatus": motor.status_bits | enc.status_bits})
             return rows

@@ -238,19 +238,20 @@ class BmsServer:
                 try:
                     wait = gap if framer.buffer else 0.1
                     ready, _, _ = select.select([ser.fileno()], [], [], wait)
-                    data = os.read(ser.fileno(), 512) if ready else b""
-                except OSError as exc:
+                    data = os.read(ser.fileno(), 512) if ready else None
+                    if data == b"":
+                        raise OSError("the port reports data but has none (disconnected?)")
+                    if data:
+                        framer.feed(data)  # may answer: writes to the port
+                    elif framer.buffer:
+                        framer.silence()
+                except OSError as exc:  # incl. serial.SerialException: unplugged, closed
                     log.warning("Modbus RTU on %s: %s; reopening", self.rtu, exc)
                     ser.close()
                     ser = self._reopen_serial()
                     if ser is None:
                         return
                     framer = RtuFramer(self._core, ser.write)
-                    continue
-                if data:
-                    framer.feed(data)
-                elif framer.buffer:
-                    framer.silence()
         finally:
             if ser is not None:
                 ser.close()

@@ -184,32 +184,29 @@ async def serve_tcp_connection(
     peer = writer.get_extra_info("peername")
     try:
         while True:
-            try:
-                header = await asyncio.wait_for(reader.readexactly(MBAP_SIZE), idle_timeout)
-                tid, protocol, length, unit = (
-                    header[0:2], _u16(header, 2), _u16(header, 4), header[6]
-                )
-                if not 1 <= length <= MAX_MBAP_LENGTH:
-                    core.drop("connection with a bad MBAP length", f"{length} from {peer}")
-                    return
-                pdu = await asyncio.wait_for(reader.readexactly(length - 1), idle_timeout)
-            except asyncio.IncompleteReadError:
+            header = await asyncio.wait_for(reader.readexactly(MBAP_SIZE), idle_timeout)
+            tid, protocol, length, unit = header[0:2], _u16(header, 2), _u16(header, 4), header[6]
+            if not 1 <= length <= MAX_MBAP_LENGTH:
+                core.drop("connection with a bad MBAP length", f"{length} from {peer}")
                 return
-            except asyncio.TimeoutError:
-                core.drop("idle connection", f"{peer}, {idle_timeout:g} s")
-                return
+            pdu = await asyncio.wait_for(reader.readexactly(length - 1), idle_timeout)
             if protocol != 0:
                 core.drop("frame with a protocol id other than 0", f"{protocol}")
                 continue
             response = core.answer(unit, pdu)
             if response is not None:
-                writer.write(
-                    tid + b"\0\0" + (len(response) + 1).to_bytes(2, "big") + bytes([unit])
-                    + response
-                )
-                await writer.drain()
+                size = (len(response) + 1).to_bytes(2, "big")
+                writer.write(tid + b"\0\0" + size + bytes([unit]) + response)
+                # a client that stops reading its answers is as good as idle
+                await asyncio.wait_for(writer.drain(), idle_timeout)
+    except asyncio.IncompleteReadError:
+        return
+    except asyncio.TimeoutError:
+        core.drop("idle connection", f"{peer}, {idle_timeout:g} s")
     except (ConnectionError, OSError):
         return
+    except Exception as exc:  # never a traceback from a connection handler
+        log.error("Modbus TCP connection %s closed: %s: %s", peer, type(exc).__name__, exc)
     finally:
         writer.close()
         with contextlib.suppress(Exception):

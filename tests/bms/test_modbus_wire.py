@@ -204,3 +204,15 @@ def test_pymodbus_client_sees_no_identification(sock: socket.socket, server: Bms
         assert client.diag_read_bus_message_count(device_id=1).isError()
     finally:
         client.close()
+
+
+def test_a_failing_model_is_a_device_failure(caplog: pytest.LogCaptureFixture) -> None:
+    from lowerbase.bms.modbus import handle_pdu
+
+    class Broken(BmsDevice):
+        def input_registers(self) -> list[int]:
+            raise ZeroDivisionError("model bug")
+
+    with caplog.at_level("ERROR", logger="lowerbase.bms.modbus"):
+        assert handle_pdu(Broken(), h("04 00 00 00 01")) == h("84 04")
+    assert "BMS device failure on request 04 00 00 00 01" in caplog.text

@@ -432,10 +432,12 @@ class Mcu:
         v_l, v_r = kinematics.wheel_speeds_from_twist(target_v, target_w, c.wheel_distant)
         targets = {"left": self._wheel_target("left", v_l),
                    "right": self._wheel_target("right", v_r)}
-        angles = {}
+        angles, accel = {}, {}
         for side, motor in self._motors.items():
+            before = motor.omega
             angles[side] = motor.step(targets[side], dt, brake=brake)
-        rim_accel = (0.0, 0.0)
+            accel[side] = (motor.omega - before) / dt * motor.geometry.radius  # real rim
+        rim_accel = (accel["left"], accel["right"])
         slip = self.slip.step(now - self.boot_time, self.truth.v * dt, rim_accel)
         self.truth.step(angles["left"] / dt, angles["right"] / dt, dt, slip)
         ds = 0.0

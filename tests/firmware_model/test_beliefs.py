@@ -96,3 +96,37 @@ def test_beliefs_from_the_parameter_file_leave_the_hardware_alone(tmp_path: Path
     left, right = rig.mcu.encoder_counts()
     assert right == pytest.approx(0.5 * left, rel=1e-3)  # 10/20 of the motor speed ...
     assert rig.mcu.truth.w == pytest.approx((0.1 - 0.2) / hw.wheel_distant, rel=1e-9)
+
+
+def test_hard_acceleration_slips_by_the_configured_fraction() -> None:
+    """accel_slip_*: while a wheel's rim accelerates harder than the threshold, its ground
+    speed is (1 - fraction) x its rim speed. With the ramp alone (no lag) the rim accelerates
+    at exactly max_wheel_accel to v and back, so each start or stop loses
+    fraction x v^2 / (2 a) of ground distance."""
+    p = ideal_profile()
+    a, s, v = 3.0, 0.4, 0.5
+    p = p.replace(motor=dataclasses.replace(p.motor, max_wheel_accel=a),
+                  truth=dataclasses.replace(p.truth, accel_slip_threshold=2.0,
+                                            accel_slip_fraction=s))
+    rig = SimRig(p)
+    rig.enable()
+    rig.drive(v, 0.0, 1.0)
+    ramp = v * v / (2 * a)
+    lost = rig.mcu.odometer - rig.mcu.truth.distance
+    assert lost == pytest.approx(s * ramp, rel=0.05)
+    rig.drive(v, 0.0, 1.0)  # cruising: no slip
+    assert rig.mcu.odometer - rig.mcu.truth.distance == pytest.approx(lost, abs=1e-5)  # pulses
+    rig.drive(0.0, 0.0, 1.0)  # braking as hard slips as much again
+    assert rig.mcu.odometer - rig.mcu.truth.distance == pytest.approx(2 * s * ramp, rel=0.05)
+    assert rig.mcu.truth.yaw == pytest.approx(0.0, abs=1e-12)  # both wheels alike
+
+
+def test_gentle_acceleration_below_the_threshold_does_not_slip() -> None:
+    p = ideal_profile()
+    p = p.replace(motor=dataclasses.replace(p.motor, max_wheel_accel=1.0),
+                  truth=dataclasses.replace(p.truth, accel_slip_threshold=2.0,
+                                            accel_slip_fraction=0.4))
+    rig = SimRig(p)
+    rig.enable()
+    rig.drive(0.5, 0.0, 1.5)
+    assert rig.mcu.odometer - rig.mcu.truth.distance == pytest.approx(0.0, abs=1e-5)

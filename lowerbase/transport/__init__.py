@@ -123,6 +123,11 @@ def open_bus(config: dict[str, Any] | None = None, **kwargs: Any) -> can.BusABC:
     """Open a python-can bus; failures become one clear :class:`TransportError`."""
     cfg = bus_config(**{**(config or {}), **kwargs})
     try:
+        if cfg.get("interface") == DEFAULT_INTERFACE:  # udp_multicast: the group's datagrams only
+            from lowerbase.transport.multicast import GroupOnlyMulticastBus
+
+            rest = {k: v for k, v in cfg.items() if k != "interface"}
+            return GroupOnlyMulticastBus(**rest)
         return can.Bus(**cfg)
     except (can.CanError, OSError, ValueError, ImportError, TypeError) as exc:
         where = f"{cfg.get('interface')} channel {cfg.get('channel')!r}"

@@ -41,6 +41,7 @@ from lowerbase.driver.odometry import OdometryNoise, OdometryParameters, WheelOd
 from lowerbase.errors import LowerbaseError, ProtocolError, UnknownMessageError
 from lowerbase.protocol.codec import Codec, default_codec
 from lowerbase.protocol.status_codes import StatusBit
+from lowerbase.transport.peers import PeerMonitor
 
 log = logging.getLogger(__name__)
 
@@ -120,6 +121,8 @@ class DriverCore:
         self._control_can: bool | None = None  # ControlMode Can in the latest SystemStatus
         self._enable_wanted = False  # first contact or a confirmed reboot, not enabled yet
         self._last_enable = -math.inf
+        #: notices a second lower computer on the bus (warned once, stats two_lower_computers)
+        self.peers = PeerMonitor(self.codec)
         self.parameters: dict[str, float] = {}
         self.versions: dict[str, str] = {}
         self._version_parts: dict[int, dict[int, bytes]] = {}
@@ -205,6 +208,10 @@ class DriverCore:
         msg = self.codec.message(frame_id)
         if "Lower" not in msg.senders:
             return  # our own commands, heard back on a shared bus
+        if frame_id == self.peers.heartbeat_id and self.peers.on_frame(frame_id, data, now):
+            self.stats["two_lower_computers"] += 1
+            log.warning("%s", self.peers.warning)
+            self._notify("two_lower_computers")
         handler = getattr(self, f"_on_{name}", None)
         if handler is not None:
             handler(values, now)
@@ -350,7 +357,8 @@ class DriverCore:
             self._notify("information")
 
     def _on_WheelFeedback(self, v: dict[str, Any], now: float) -> None:
-        self._wheels[int(v["Wheel"])] = (int(v["Counter"]), int(v["Count"]))
+        wheel = int(v["Wheel"])  # the multiplexer: LeftCount or RightCount
+        self._wheels[wheel] = (int(v["Counter"]), int(v["RightCount" if wheel else "LeftCount"]))
         left, right = self._wheels.get(0), self._wheels.get(1)
         if left is None or right is None or left[0] != right[0] or self.odometry is None:
             return  # wait for both wheels of the same cycle

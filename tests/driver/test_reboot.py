@@ -8,6 +8,10 @@ takes commands.
 
 from __future__ import annotations
 
+import logging
+
+import pytest
+
 from lowerbase.bench.simloop import SimLoop
 from lowerbase.driver.core import LinkState
 from lowerbase.firmware_model.mcu import Mcu
@@ -119,3 +123,15 @@ def test_bus_down_is_lost_at_once_and_frames_bring_the_link_back_without_re_enab
     assert loop.run_until(ready, timeout=1.0)
     assert loop.driver.stats["tx_ControlCommand"] == commands
     assert loop.driver.reboots == 0
+
+
+def test_a_second_lower_computer_on_the_bus_is_warned_once(
+        caplog: pytest.LogCaptureFixture) -> None:
+    loop = SimLoop(bms=None)
+    assert loop.run_until(ready, timeout=3.0)
+    other = Mcu(loop.profile, loop.clock, loop._from_mcu, bms=None)  # on the same bus
+    with caplog.at_level(logging.WARNING, logger="lowerbase.driver.core"):
+        loop.run(5.0, on_step=lambda lp: other.step())
+    assert loop.driver.stats["two_lower_computers"] == 1
+    warnings = [r.getMessage() for r in caplog.records if "two lower computers" in r.getMessage()]
+    assert len(warnings) == 1 and "stop one" in warnings[0]

@@ -28,6 +28,7 @@ SUBCOMMANDS = (
     "decode",
     "demo",
     "record",
+    "ros-env",
 )
 
 
@@ -43,9 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(title="commands", dest="command", metavar="COMMAND")
     for name in SUBCOMMANDS:
         try:
-            module = importlib.import_module(f"lowerbase.cli.{name}")
+            module = importlib.import_module(f"lowerbase.cli.{name.replace('-', '_')}")
         except ModuleNotFoundError as exc:
-            if exc.name == f"lowerbase.cli.{name}":
+            if exc.name == f"lowerbase.cli.{name.replace('-', '_')}":
                 continue  # subcommand not built yet
             raise
         module.add_subparser(subparsers)

@@ -25,7 +25,14 @@ is enough for ``rosmsg show woosh_msgs/Battery`` and ``rostopic echo /battery``.
 
 Usage::
 
-    python -m lowerbase.driver.msggen OUTDIR [--pth VENV_SITE_PACKAGES] [-I PKG:MSGDIR ...]
+    python -m lowerbase.driver.msggen [OUTDIR] [--pth SITE_PACKAGES | --no-pth] [-I PKG:MSGDIR]
+    python -m lowerbase.driver.msggen --print-env     # the same as `lowerbase ros-env`
+
+By default OUTDIR is ``<sys.prefix>/share/lowerbase/ros`` and the ``.pth`` goes into the active
+environment's site-packages, so ``pip install`` + this one command make ``import woosh_msgs``
+work in that environment. ``--print-env`` prints the ``export ROS_PACKAGE_PATH=...`` line that
+makes rosmsg/rostopic/rosbag/roslaunch find woosh_msgs and lowerbase_driver:
+``eval "$(lowerbase ros-env)"``.
 
 Needs python3-genpy and python3-genmsg, and the .msg definitions of std_msgs, geometry_msgs and
 actionlib_msgs (Debian: ros-std-msgs, ros-geometry-msgs, ros-actionlib-msgs; or /opt/ros/noetic).
@@ -37,8 +44,10 @@ import argparse
 import contextlib
 import importlib
 import os
+import shlex
 import shutil
 import sys
+import sysconfig
 import tempfile
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -282,6 +291,38 @@ def write_pth(site_packages: str | os.PathLike[str], python_dir: str | os.PathLi
     return pth
 
 
+def default_outdir() -> Path:
+    """Where woosh_msgs goes without an OUTDIR: inside the active environment."""
+    return Path(sys.prefix) / "share" / "lowerbase" / "ros"
+
+
+def site_packages() -> Path:
+    """The active environment's site-packages (where pip installed lowerbase)."""
+    return Path(sysconfig.get_paths()["purelib"])
+
+
+def ros_package_path() -> list[Path]:
+    """The ROS_PACKAGE_PATH entries for woosh_msgs (as generated and importable here) and for
+    the package lowerbase_driver (launch file, parameter file, script)."""
+    import importlib.util
+
+    spec = importlib.util.find_spec(PACKAGE)
+    if spec is None or not spec.origin:
+        raise RosUnavailableError(f"{PACKAGE} is not generated for {sys.executable}: run "
+                                  f"{Path(sys.executable).name} -m lowerbase.driver.msggen")
+    share = Path(spec.origin).resolve().parents[1] / "share"
+    if not (share / PACKAGE / "package.xml").is_file():
+        raise RosUnavailableError(f"{share / PACKAGE} is missing: run {Path(sys.executable).name}"
+                                  " -m lowerbase.driver.msggen again")
+    return [share, Path(__file__).resolve().parent]
+
+
+def env_lines() -> str:
+    """Shell lines that put woosh_msgs and lowerbase_driver on ROS_PACKAGE_PATH."""
+    paths = ":".join(shlex.quote(str(p)) for p in ros_package_path())
+    return f"export ROS_PACKAGE_PATH={paths}${{ROS_PACKAGE_PATH:+:$ROS_PACKAGE_PATH}}\n"
+
+
 def _parse_include(values: Sequence[str]) -> dict[str, list[str]]:
     include: dict[str, list[str]] = {}
     for v in values:
@@ -293,17 +334,24 @@ def _parse_include(values: Sequence[str]) -> dict[str, list[str]]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: ``python -m lowerbase.driver.msggen OUTDIR [--pth SITE] [-I PKG:DIR]``."""
+    """Command line: ``python -m lowerbase.driver.msggen [OUTDIR] [--pth SITE | --no-pth]``."""
     parser = argparse.ArgumentParser(
         prog="python -m lowerbase.driver.msggen",
-        description="Generate the woosh_msgs ROS1 Python package (genpy, no catkin).",
+        description="Generate the woosh_msgs ROS1 Python package (genpy, no catkin) and make "
+        "it importable in the active environment.",
     )
-    parser.add_argument("outdir", help="output directory (e.g. build/ros)")
-    parser.add_argument(
+    parser.add_argument("outdir", nargs="?", help=f"output directory (default: {default_outdir()})")
+    pth_group = parser.add_mutually_exclusive_group()
+    pth_group.add_argument(
         "--pth",
         metavar="SITE_PACKAGES",
-        help=f"also write {PTH_NAME} into this site-packages directory, pointing at OUTDIR",
+        help=f"write {PTH_NAME}, pointing at OUTDIR, into this site-packages directory "
+        f"(default: the active environment's, {site_packages()})",
     )
+    pth_group.add_argument("--no-pth", action="store_true", help=f"do not write {PTH_NAME}")
+    pth_group.add_argument("--print-env", action="store_true",
+                     help="generate nothing; print the export ROS_PACKAGE_PATH=... line for the "
+                     "woosh_msgs importable here (eval \"$(lowerbase ros-env)\")")
     parser.add_argument(
         "-I",
         dest="include",
@@ -314,15 +362,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     try:
-        result = generate(args.outdir, include=_parse_include(args.include))
+        if args.print_env:
+            sys.stdout.write(env_lines())
+            return 0
+        outdir = Path(args.outdir) if args.outdir else default_outdir()
+        result = generate(outdir, include=_parse_include(args.include))
         print(
             f"generated {len(result.message_types)} messages and {len(result.service_types)} "
             f"services of {PACKAGE} in {result.python_dir}"
         )
-        if args.pth:
-            pth = write_pth(args.pth, result.python_dir)
+        if not args.no_pth:
+            pth = write_pth(args.pth or site_packages(), result.python_dir)
             print(f"wrote {pth}")
-        print(f"for the ROS tools: export ROS_PACKAGE_PATH={result.share_dir}:$ROS_PACKAGE_PATH")
+        print(f"for the ROS tools: export ROS_PACKAGE_PATH={result.share_dir}:"
+              f"{Path(__file__).resolve().parent}:$ROS_PACKAGE_PATH (or: eval \"$(lowerbase "
+              "ros-env)\")")
+    except OSError as exc:  # an unwritable OUTDIR or site-packages (a system Python, no venv)
+        print(f"msggen: error: {exc}; pass a writable OUTDIR and --pth, or use a venv",
+              file=sys.stderr)
+        return 1
     except LowerbaseError as exc:
         print(f"msggen: error: {exc}", file=sys.stderr)
         return 1

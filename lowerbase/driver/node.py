@@ -25,10 +25,12 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import os
 import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from types import ModuleType
 from typing import Any
 
@@ -42,7 +44,8 @@ from lowerbase.errors import RosUnavailableError, TransportError
 log = logging.getLogger(__name__)
 
 NODE_NAME = "driver_base"
-ROS_HINT = "run make env (Debian) or source /opt/ros/noetic/setup.bash"
+ROS_HINT = ("run lowerbase from a venv made from the ROS Python (Debian: /usr/bin/python3 -m venv "
+            "--system-site-packages VENV) or source /opt/ros/noetic/setup.bash; docs/driver.md")
 
 def import_ros() -> tuple[ModuleType, ModuleType]:
     """(rospy, lowerbase.driver.ros_io); RosUnavailableError with one clear line if missing."""
@@ -54,8 +57,8 @@ def import_ros() -> tuple[ModuleType, ModuleType]:
         name = getattr(exc, "name", "") or ""
         if name.startswith("woosh_msgs"):
             raise RosUnavailableError(
-                "woosh_msgs is not generated: run make env, or python -m lowerbase.driver.msggen "
-                "build/ros --pth <site-packages>") from None
+                f"woosh_msgs is not generated for {sys.executable}: run "
+                f"{Path(sys.executable).name} -m lowerbase.driver.msggen") from None
         raise RosUnavailableError(f"ROS is not installed ({exc}): {ROS_HINT}") from None
     return rospy, ros_io
 
@@ -327,6 +330,13 @@ def run(
     if not rosgraph.is_master_online():
         raise TransportError(f"no ROS master at {rosgraph.get_master_uri()} (start roscore, or "
                              "set ROS_MASTER_URI)")
+    from lowerbase.driver.settings import loopback_address
+
+    address = loopback_address(os.environ, rosgraph.get_master_uri(), [*sys.argv, *ros_args])
+    if address is not None:  # a local master: listen on loopback, not on every interface
+        os.environ["ROS_IP"] = address
+        print(f"lowerbase driver: listening on loopback only (ROS_IP={address}); set ROS_IP or "
+              "ROS_HOSTNAME to this host's address to serve other hosts", flush=True)
     rospy.init_node(name, argv=[name, *ros_args], anonymous=False)
     pkg_logger = logging.getLogger("lowerbase")
     pkg_logger.addHandler(_ToRosout())

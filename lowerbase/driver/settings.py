@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+import urllib.parse
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -165,3 +166,24 @@ def load_settings(params: Mapping[str, Any]) -> tuple[NodeSettings, DriverConfig
     except LowerbaseError as exc:
         raise ConfigError(f"~{exc}".replace("~driver ", "~")) from None
     return settings, config
+
+
+def loopback_address(environ: Mapping[str, str], master_uri: str,
+                     args: Sequence[str] = ()) -> str | None:
+    """The ROS_IP that keeps the node on loopback, or None to leave the address alone.
+
+    Without ROS_IP, ROS_HOSTNAME, ``__ip:=`` or ``__hostname:=`` rospy listens on every
+    interface (0.0.0.0). When the master is on this host's loopback (the default
+    ``http://localhost:11311``), nothing off this host can use the node anyway, so it listens
+    on loopback only; set ROS_IP (or ROS_HOSTNAME) to the address to serve to open it up.
+    """
+    if environ.get("ROS_IP") or environ.get("ROS_HOSTNAME"):
+        return None
+    if any(a.startswith(("__ip:=", "__hostname:=")) for a in args):
+        return None
+    host = urllib.parse.urlparse(master_uri).hostname or ""
+    if host == "localhost" or host.startswith("127."):
+        return "127.0.0.1"
+    if host == "::1":
+        return "::1"
+    return None

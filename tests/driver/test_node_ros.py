@@ -8,6 +8,7 @@ deadlines. The pure parts (settings, conversions, throttle, CLI errors) are test
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -167,8 +168,8 @@ def test_cli_says_when_ros_is_missing(capsys: pytest.CaptureFixture[str],
     assert main(["driver"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("lowerbase driver: error: ROS is not installed")
-    assert err.rstrip().endswith(
-        "run make env (Debian) or source /opt/ros/noetic/setup.bash")
+    assert "venv --system-site-packages" in err and "/opt/ros/noetic/setup.bash" in err
+    assert "make" not in err.split() and err.count("\n") == 1  # pip users have no Makefile
     monkeypatch.undo()
     import lowerbase.driver
 
@@ -176,7 +177,9 @@ def test_cli_says_when_ros_is_missing(capsys: pytest.CaptureFixture[str],
     monkeypatch.delattr(lowerbase.driver, "ros_io", raising=False)
     monkeypatch.setitem(sys.modules, "woosh_msgs.msg", None)
     assert main(["driver"]) == 1
-    assert "woosh_msgs is not generated" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "woosh_msgs is not generated" in err and "-m lowerbase.driver.msggen" in err
+    assert "make" not in err.split()
 
 
 # -- the probe: a ROS node in a subprocess that records topics and publishes on request ---------
@@ -328,7 +331,9 @@ def rig(ros_master: Any, tmp_path_factory: pytest.TempPathFactory) -> Iterator[d
         emulator = Proc(["emulate", *bus_cli_args(bus)], ros_master.env)
         procs.append(emulator)
         emulator.wait_for("lower computer on")
-        node = Proc(["driver", *bus_cli_args(bus), "__name:=driver_base"], ros_master.env)
+        # the node as a user starts it: no ROS_IP (it must choose loopback by itself)
+        node_env = {k: v for k, v in ros_master.env.items() if k != "ROS_IP"}
+        node = Proc(["driver", *bus_cli_args(bus), "__name:=driver_base"], node_env)
         procs.append(node)
         node.wait_for("link ready", timeout=30.0)
         script = tmp / "probe.py"
@@ -643,3 +648,38 @@ def test_the_vendors_shelf_led_topic_reaches_the_bus(rig: dict[str, Any]) -> Non
         bus.shutdown()
     assert seen, "no LedCommand on the bus"
     assert (int(seen["Strip"]), int(seen["Submodule"]), int(seen["Color"])) == (1, 2, 0x123456)
+
+
+def _listening_addresses(pid: int) -> set[str]:
+    """Local addresses of the TCP sockets process ``pid`` listens on (from /proc)."""
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        with contextlib.suppress(OSError):
+            target = os.readlink(fd)
+            if target.startswith("socket:["):
+                inodes.add(target[8:-1])
+    found = set()
+    for table in ("tcp", "tcp6"):
+        for line in Path(f"/proc/{pid}/net/{table}").read_text().splitlines()[1:]:
+            fields = line.split()
+            if fields[3] == "0A" and fields[9] in inodes:  # 0A: LISTEN
+                found.add(fields[1].rsplit(":", 1)[0])
+    return found
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_the_node_listens_on_loopback_when_the_master_is_local(rig: dict[str, Any]) -> None:
+    """Started without ROS_IP/ROS_HOSTNAME against a master on 127.0.0.1 (as by default)."""
+    import xmlrpc.client
+
+    if os.environ.get("ROS_IP") or os.environ.get("ROS_HOSTNAME"):
+        pytest.skip("ROS_IP/ROS_HOSTNAME set in the test environment")
+    node: Proc = rig["node"]
+    assert any("listening on loopback only" in line for line in node.lines)
+    addresses = _listening_addresses(node.popen.pid)
+    assert len(addresses) >= 1  # XML-RPC and TCPROS servers
+    assert addresses == {"0100007F"}, addresses  # 127.0.0.1, nothing on 0.0.0.0
+    master = xmlrpc.client.ServerProxy(rig["env"]["ROS_MASTER_URI"])
+    _, _, uri = master.lookupNode("/pytest", "/driver_base")
+    assert uri.startswith("http://127.0.0.1:")

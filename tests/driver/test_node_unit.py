@@ -86,3 +86,20 @@ def test_launch_script_under_the_system_python_without_the_dependencies() -> Non
                             env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
     assert result.returncode == 1
     assert "Traceback" not in result.stderr and "python:=" in result.stderr
+
+
+@pytest.mark.parametrize(("environ", "uri", "args", "expected"), [
+    ({}, "http://localhost:11311", [], "127.0.0.1"),
+    ({}, "http://127.0.0.1:41234/", [], "127.0.0.1"),
+    ({}, "http://[::1]:11311", [], "::1"),
+    ({"ROS_IP": ""}, "http://localhost:11311", [], "127.0.0.1"),  # empty: unset
+    ({"ROS_IP": "192.168.1.5"}, "http://localhost:11311", [], None),  # the user's choice
+    ({"ROS_HOSTNAME": "robot"}, "http://localhost:11311", [], None),
+    ({}, "http://localhost:11311", ["__ip:=10.0.0.2"], None),
+    ({}, "http://robot-master:11311", [], None),  # a remote master: rospy's default
+])
+def test_loopback_address(environ: dict[str, str], uri: str, args: list[str],
+                          expected: str | None) -> None:
+    from lowerbase.driver.settings import loopback_address
+
+    assert loopback_address(environ, uri, args) == expected

@@ -384,7 +384,7 @@ def test_cli_generates_and_writes_pth(tmp_path: Path, ros: None) -> None:
     assert (share / "msg" / "StepControlActionGoal.msg").is_file()
     assert (site / msggen.PTH_NAME).read_text().strip() == str(out.resolve())
     # a second run replaces the output cleanly and leaves no temporary directory behind
-    assert msggen.main([str(out)]) == 0
+    assert msggen.main([str(out), "--no-pth"]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["share", "woosh_msgs"]
 
 
@@ -393,6 +393,69 @@ def test_cli_reports_a_bad_pth_dir(
 ) -> None:
     assert msggen.main([str(tmp_path / "out"), "--pth", str(tmp_path / "nope")]) == 1
     assert "not a directory" in capsys.readouterr().err
+
+
+def test_by_default_it_installs_into_the_active_environment(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, ros: None
+) -> None:
+    """pip route: no arguments -> OUTDIR inside sys.prefix, .pth into its site-packages."""
+    prefix, site = tmp_path / "venv", tmp_path / "venv" / "site-packages"
+    site.mkdir(parents=True)
+    monkeypatch.setattr(sys, "prefix", str(prefix))
+    monkeypatch.setattr(msggen, "site_packages", lambda: site)
+    assert msggen.main([]) == 0
+    out = prefix / "share" / "lowerbase" / "ros"
+    assert (site / msggen.PTH_NAME).read_text().strip() == str(out.resolve())
+    # the .pth makes woosh_msgs importable where site-packages is processed
+    code = f"import site; site.addsitedir({str(site)!r}); import woosh_msgs.msg as m; " \
+        "print(m.Battery._md5sum)"
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    done = subprocess.run([sys.executable, "-S", "-c", code], env=env, capture_output=True,
+                          text=True, timeout=60, cwd=tmp_path)
+    if done.returncode and "genpy" in done.stderr:  # -S hides the system genpy: allow it back
+        done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                              text=True, timeout=60, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split()[-1] == VENDOR_MD5["Battery"]
+
+
+def test_ros_env_line_lets_the_ros_tools_find_woosh_msgs_and_the_driver(
+    woosh_msgs_build: Path, tmp_path: Path
+) -> None:
+    """`eval "$(lowerbase ros-env)"` alone (no PYTHONPATH for the tools): rosmsg sees
+    woosh_msgs, roslaunch finds the package lowerbase_driver."""
+    if shutil.which("rosmsg") is None or shutil.which("roslaunch") is None:
+        pytest.skip("rosmsg/roslaunch not installed")
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "ROS_PACKAGE_PATH")}
+    env["ROS_HOME"] = str(tmp_path / "ros_home")
+    lb = f"PYTHONPATH={woosh_msgs_build} {sys.executable} -m lowerbase"
+    for command in (f"{lb} ros-env", f"PYTHONPATH={woosh_msgs_build} {sys.executable} -m "
+                    "lowerbase.driver.msggen --print-env"):
+        script = (f'eval "$({command})" && rosmsg md5 woosh_msgs/Parameter && '
+                  "roslaunch --files lowerbase_driver driver_base.launch")
+        out = subprocess.run(["bash", "-c", script], env=env, capture_output=True, text=True,
+                             timeout=60, cwd=tmp_path)
+        assert out.returncode == 0, out.stderr
+        md5, launch = out.stdout.split()
+        assert md5 == VENDOR_MD5["Parameter"]
+        assert Path(launch) == Path(msggen.__file__).resolve().parent / "launch" / \
+            "driver_base.launch"
+
+
+def test_ros_env_says_what_to_run_when_nothing_was_generated(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import importlib.util
+
+    from lowerbase.cli import main
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "woosh_msgs" else real(name, *a))
+    assert main(["ros-env"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("lowerbase ros-env: error: woosh_msgs is not generated")
+    assert "-m lowerbase.driver.msggen" in err and "make" not in err.split()
 
 
 def test_ros_tools_find_the_package(woosh_msgs_build: Path) -> None:

@@ -17,10 +17,14 @@ def _samples() -> list[tuple[str, int, dict[str, float | int], bytes]]:
     rng = random.Random(1)
     out = []
     for m in codec:
-        for _ in range(20):
+        sets = list(m.variants.items()) or [(0, m.signals)]  # multiplexed: every value in turn
+        for i in range(20):
+            mux, signals = sets[i % len(sets)]
             values: dict[str, float | int] = {}
-            for s in m.signals:
-                if s.is_float:
+            for s in signals:
+                if s.is_multiplexer:
+                    values[s.name] = mux
+                elif s.is_float:
                     values[s.name] = round(rng.uniform(-1000, 1000), 2)
                 else:
                     raw = rng.randint(s.raw_min, s.raw_max)

@@ -71,6 +71,8 @@ def _frames_from_log(path: Path) -> Iterator[tuple[float | None, int, bytes] | s
 def format_signals(values: dict[str, Any], codec_msg: Any) -> str:
     parts = []
     for s in codec_msg.signals:
+        if s.name not in values:  # multiplexed: another multiplexer value's signal
+            continue
         v = values[s.name]
         text = f"{v:.6g}" if isinstance(v, float) else str(v)
         unit = f" {s.unit}" if s.unit and not isinstance(v, str) else ""

@@ -634,13 +634,13 @@ class Mcu:
         name = msg.name
         if name == "WheelFeedback":
             rows = []
-            for wheel, side in ((0, "left"), (1, "right")):
-                motor, enc = self._motors[side], self._encoders[side]
+            for wheel, side in ((0, "left"), (1, "right")):  # multiplexed: Left*/Right*
+                motor, enc, s = self._motors[side], self._encoders[side], side.title()
                 rows.append({
-                    "Count": enc.count,
-                    "Velocity": _clip(self.wheel_velocity(side), msg, "Velocity"),
-                    "Current": _clip(motor.current, msg, "Current"), "Wheel": wheel,
-                    "DriverStatus": motor.status_bits | enc.status_bits})
+                    f"{s}Count": enc.count,
+                    f"{s}Velocity": _clip(self.wheel_velocity(side), msg, f"{s}Velocity"),
+                    f"{s}Current": _clip(motor.current, msg, f"{s}Current"), "Wheel": wheel,
+                    f"{s}DriverStatus": motor.status_bits | enc.status_bits})
             return rows
         if name == "MotionState":
             v, w = self._measured_twist()

@@ -7,6 +7,11 @@ The arithmetic is cantools' own (``raw * scale + offset`` to decode, ``round((v 
 to encode, exact integer division where scale and offset are integers), so results agree with
 ``cantools`` bit for bit; a property test holds them to it.
 
+A multiplexed message (one multiplexer signal, as WheelFeedback's ``Wheel``) compiles into one
+function per direction that branches on the multiplexer value: decode returns the multiplexer,
+the signals present in every frame and only the selected value's signals, as cantools does;
+encode takes the multiplexer value and exactly those signals.
+
 Strict by design: a wrong payload length, an unknown frame ID or name, a missing or unknown
 signal, a non-finite value or a value outside the catalog's range raises a typed
 :class:`~lowerbase.errors.ProtocolError`; nothing is clipped or guessed silently.
@@ -20,7 +25,7 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, NoReturn, Protocol
 
 import cantools
 from cantools.database.conversion import (
@@ -33,6 +38,7 @@ from cantools.database.conversion import (
 from lowerbase.errors import (
     EncodeError,
     FrameLengthError,
+    ProtocolError,
     SignalRangeError,
     UnknownMessageError,
 )
@@ -74,6 +80,10 @@ class SignalSpec:
     raw_max: int
     #: how cantools converts: "identity", "int" (integer scale/offset) or "linear"
     kind: str
+    #: the message's multiplexer signal (selects which other signals a frame carries)
+    is_multiplexer: bool = False
+    #: multiplexer values whose frames carry this signal; empty = every frame
+    multiplexer_ids: tuple[int, ...] = ()
 
     @property
     def mask(self) -> int:
@@ -108,12 +118,31 @@ def _conversion_kind(conv: Any) -> str:
     raise TypeError(f"unsupported cantools conversion {conv!r}")
 
 
+def _tree_order(tree: list[Any]) -> list[str]:
+    """Signal names in cantools' signal-tree order: a multiplexer, then its values' signals."""
+    names: list[str] = []
+    for node in tree:
+        if isinstance(node, str):
+            names.append(node)
+            continue
+        for mux, by_value in node.items():
+            names.append(mux)
+            for sub in by_value.values():
+                names += [n for n in _tree_order(sub) if n not in names]
+    return names
+
+
+def _direct_var(s: SignalSpec) -> str | None:
+    """The struct field of a signal that fills whole, aligned bytes of size 1, 2, 4 or 8."""
+    return f"d{s.start // 8}" if s.start % 8 == 0 and s.length in (8, 16, 32, 64) else None
+
+
 class MessageCodec:
     """Encoder and decoder of one catalog message."""
 
     def __init__(self, msg: Any) -> None:
-        if msg.is_multiplexed() or msg.is_container:
-            raise TypeError(f"{msg.name}: multiplexed/container messages are not used here")
+        if msg.is_container:
+            raise TypeError(f"{msg.name}: container messages are not supported")
         self.name: str = msg.name
         self.frame_id: int = msg.frame_id
         self.is_extended_id: bool = msg.is_extended_frame
@@ -123,7 +152,8 @@ class MessageCodec:
         self.senders: tuple[str, ...] = tuple(msg.senders)
         self.comment: str = msg.comment or ""
         specs = []
-        for sig in msg.signals:
+        by_name = {sig.name: sig for sig in msg.signals}
+        for sig in (by_name[n] for n in _tree_order(msg.signal_tree)):
             if sig.byte_order != "little_endian":
                 raise TypeError(f"{msg.name}.{sig.name}: the catalog is little-endian only")
             kind = _conversion_kind(sig.conversion)
@@ -145,9 +175,24 @@ class MessageCodec:
                     raw_min=lo,
                     raw_max=hi,
                     kind=kind,
+                    is_multiplexer=bool(sig.is_multiplexer),
+                    multiplexer_ids=tuple(sig.multiplexer_ids or ()),
                 )
             )
         self.signals: tuple[SignalSpec, ...] = tuple(specs)
+        muxes = [s for s in specs if s.is_multiplexer]
+        if len(muxes) > 1 or any(s.multiplexer_ids for s in muxes):
+            raise TypeError(f"{msg.name}: one multiplexer per message is supported, no nesting")
+        #: the multiplexer signal, or None for a plain message
+        self.multiplexer: SignalSpec | None = muxes[0] if muxes else None
+        if self.multiplexer and (self.multiplexer.kind != "identity"
+                                 or self.multiplexer.is_signed):
+            raise TypeError(f"{msg.name}: the multiplexer must be an unsigned integer signal")
+        #: multiplexer value -> the signals a frame with that value carries ({} if plain)
+        self.variants: dict[int, tuple[SignalSpec, ...]] = {
+            k: tuple(s for s in specs if not s.multiplexer_ids or k in s.multiplexer_ids)
+            for k in sorted({k for s in specs for k in s.multiplexer_ids})
+        }
         self.signal_names: frozenset[str] = frozenset(s.name for s in specs)
         self._by_name = {s.name: s for s in specs}
         self._choice_numbers = {
@@ -161,6 +206,25 @@ class MessageCodec:
     @property
     def is_periodic(self) -> bool:
         return self.cycle_time is not None
+
+    @property
+    def is_multiplexed(self) -> bool:
+        return self.multiplexer is not None
+
+    @property
+    def signal_sets(self) -> tuple[tuple[SignalSpec, ...], ...]:
+        """The signal sets a frame can carry: one per multiplexer value, or all signals."""
+        return tuple(self.variants.values()) or (self.signals,)
+
+    def signals_of(self, values: Mapping[str, Any]) -> tuple[SignalSpec, ...]:
+        """The signals of the frame these (decoded or to be encoded) values select."""
+        if self.multiplexer is None:
+            return self.signals
+        mux = _to_number(self, self.multiplexer.name, values.get(self.multiplexer.name, 0))
+        found = self.variants.get(int(mux)) if math.isfinite(mux) and mux == int(mux) else None
+        if found is None:
+            _mux_error(self, mux)
+        return found
 
     @property
     def has_counter(self) -> bool:
@@ -184,7 +248,7 @@ class MessageCodec:
         values: Signals = self._decode(data, strict)  # type: ignore[arg-type]  # any buffer
         if decode_choices:
             for name, table in ((s.name, s.choices) for s in self.signals if s.choices):
-                raw = values[name]
+                raw = values.get(name)
                 if isinstance(raw, int) and raw in table:
                     values[name] = table[raw]
         return values
@@ -193,13 +257,15 @@ class MessageCodec:
         """Encode physical values (numbers, or choice names) into a payload.
 
         With ``strict`` every signal must be given and no unknown one; without it, missing
-        signals encode as 0 where 0 is in range.
+        signals encode as 0 where 0 is in range. A multiplexed message takes the multiplexer
+        value and exactly the signals it selects (non-strict: a missing multiplexer is 0).
         """
         if not strict:
-            unknown = sorted(set(values) - self.signal_names)
+            signals = self.signals_of(values)
+            unknown = sorted(set(values) - {s.name for s in signals})
             if unknown:
                 raise EncodeError(f"{self.name}: unknown signals {unknown}")
-            values = {**{s.name: 0 for s in self.signals}, **values}
+            values = {**{s.name: 0 for s in signals}, **values}
         return self._encode(values)
 
     def choice_number(self, signal: str, name: str) -> int:
@@ -210,17 +276,17 @@ class MessageCodec:
 
     # -- code generation ----------------------------------------------------------------------
 
-    def _layout(self) -> tuple[str, list[tuple[str, int, int]]]:
+    def _layout(self, signals: tuple[SignalSpec, ...]) -> tuple[str, list[tuple[str, int, int]]]:
         """Split the payload into struct fields.
 
         A signal that fills whole, aligned bytes of size 1, 2, 4 or 8 is one struct field of its
-        own; the other bytes form maximal runs of unsigned fields from which the remaining
-        signals are shifted and masked. Returns the struct format and, per field, its variable
-        name, first bit and width.
+        own (``d<byte>``); the other bytes form maximal runs of unsigned fields (``p<byte>``) from
+        which the remaining signals are shifted and masked. Returns the struct format and, per
+        field, its variable name, first bit and width.
         """
         direct: dict[int, SignalSpec] = {}
-        for s in self.signals:
-            if s.start % 8 == 0 and s.length in (8, 16, 32, 64):
+        for s in signals:
+            if _direct_var(s):
                 direct[s.start // 8] = s
         covered = {b for i, s in direct.items() for b in range(i, i + s.length // 8)}
         fmt = "<"
@@ -235,7 +301,7 @@ class MessageCodec:
                 else:
                     code = {1: "b", 2: "h", 4: "i", 8: "q"}[n]
                     fmt += code if s.is_signed else code.upper()
-                fields.append((f"d_{s.name}", byte * 8, s.length))
+                fields.append((f"d{byte}", byte * 8, s.length))
                 byte += n
                 continue
             if byte in covered:  # pragma: no cover - overlapping signals are rejected by cantools
@@ -271,12 +337,25 @@ class MessageCodec:
             expr = f"{expr} & {s.mask:#x}"
         return expr
 
-    def _table_bytes(self, direct: set[int]) -> dict[int, list[SignalSpec]]:
+    def _raw_expr(self, s: SignalSpec, fields: list[tuple[str, int, int]]) -> str:
+        """Expression of the unsigned raw bits of ``s`` from the decode fields (the
+        multiplexer, read before the branch on its value)."""
+        names = {f[0] for f in fields}
+        if _direct_var(s) in names:
+            return str(_direct_var(s))
+        byte = s.start // 8
+        if f"t{byte}" in names and (s.start + s.length - 1) // 8 == byte:
+            shift = s.start - 8 * byte
+            return f"(t{byte} >> {shift}) & {s.mask:#x}" if shift else f"t{byte} & {s.mask:#x}"
+        return self._piece_expr(s, [f for f in fields if f[0].startswith("p")])
+
+    def _table_bytes(self, signals: tuple[SignalSpec, ...],
+                     direct: set[int]) -> dict[int, list[SignalSpec]]:
         """Bytes (not part of a direct field) whose signals all lie within that byte: they are
         decoded through a 256-entry table instead of shifts and masks."""
         by_byte: dict[int, list[SignalSpec]] = {}
         spanning: set[int] = set()
-        for sig in self.signals:
+        for sig in signals:
             first, last = sig.start // 8, (sig.start + sig.length - 1) // 8
             if first == last:
                 by_byte.setdefault(first, []).append(sig)
@@ -293,23 +372,21 @@ class MessageCodec:
             return raw * sig.scale
         return raw * sig.scale + sig.offset
 
-    def _compile_decode(self) -> Callable[[bytes, bool], Signals]:
-        """Generate ``decode(data, strict)``: one struct unpack; bytes of small bit fields
-        through lookup tables; wider fields by shifts and masks."""
-        fmt, fields = self._layout()
-        direct_bytes = {b for name, first, width in fields if name.startswith("d_")
+    def _decode_layout(self, signals: tuple[SignalSpec, ...]) -> tuple[
+            str, list[tuple[str, int, int]], dict[int, list[SignalSpec]]]:
+        """The struct of ``decode``: the layout with the table bytes cut out as single ``B``
+        fields (``t<byte>``); returns the format, the fields and the table bytes."""
+        fmt, fields = self._layout(signals)
+        direct_bytes = {b for name, first, width in fields if name.startswith("d")
                         for b in range(first // 8, (first + width) // 8)}
-        tables = self._table_bytes(direct_bytes)
-        # re-cut the struct: table bytes become single 'B' fields of their own
+        tables = self._table_bytes(signals, direct_bytes)
         new_fmt = "<"
         new_fields: list[tuple[str, int, int]] = []
-        codes = fmt[1:]
-        for (name, first, width), code in zip(fields, codes, strict=True):
-            if name.startswith("d_"):
+        for (name, first, width), code in zip(fields, fmt[1:], strict=True):
+            if name.startswith("d"):
                 new_fmt += code
                 new_fields.append((name, first, width))
                 continue
-            byte = first // 8
             pending: list[int] = []
 
             def flush(pending: list[int]) -> None:
@@ -322,7 +399,7 @@ class MessageCodec:
                     pos += n
                 pending.clear()
 
-            for b in range(byte, byte + width // 8):
+            for b in range(first // 8, (first + width) // 8):
                 if b in tables:
                     flush(pending)
                     new_fmt += "B"
@@ -330,26 +407,17 @@ class MessageCodec:
                 else:
                     pending.append(b)
             flush(pending)
-        fields = new_fields
-        direct = {f[0] for f in fields if f[0].startswith("d_")}
+        return new_fmt, new_fields, tables
+
+    def _decode_body(
+        self, signals: tuple[SignalSpec, ...], fields: list[tuple[str, int, int]],
+        tables: dict[int, list[SignalSpec]], tag: str, namespace: dict[str, Any],
+    ) -> list[str]:
+        """Lines (indented by 4) that decode ``signals`` from the unpacked ``fields`` and end
+        in ``return {...}``; lookup tables go into ``namespace`` with the suffix ``tag``."""
+        direct = {f[0] for f in fields if f[0].startswith("d")}
         pieces = [f for f in fields if f[0].startswith("p")]
-        namespace: dict[str, Any] = {
-            "FrameLengthError": FrameLengthError,
-            "_StructError": struct.error,
-            "_F32": _F32,
-            "_F64": _F64,
-            "_unpack": struct.Struct(new_fmt).unpack,
-            "_out_of_range": _out_of_range,
-            "codec": self,
-        }
-        lines = [
-            "def decode(data, strict):",
-            "    try:",
-            f"        {', '.join(f[0] for f in fields)}, = _unpack(data)",
-            "    except _StructError:",
-            f"        raise FrameLengthError('{self.name}: payload of %d bytes, the catalog "
-            f"says {self.length}' % len(data)) from None",
-        ]
+        lines: list[str] = []
         table_var: dict[str, str] = {}
         for b, sigs in sorted(tables.items()):
             loose: list[tuple[int | float, ...]] = []
@@ -371,27 +439,28 @@ class MessageCodec:
             target = ", ".join(names)
             if len(sigs) == 1:  # a table of values, not of 1-tuples
                 loose = [row[0] for row in loose]  # type: ignore[misc]
-            namespace[f"_TL{b}"] = tuple(loose)
+            namespace[f"_TL{b}{tag}"] = tuple(loose)
             if all(valid):
-                lines.append(f"    {target} = _TL{b}[t{b}]")
+                lines.append(f"    {target} = _TL{b}{tag}[t{b}]")
             else:
-                namespace[f"_TS{b}"] = tuple(r if ok else None for r, ok in
-                                              zip(loose, valid, strict=True))
-                lines.append(f"    e{b} = (_TS{b} if strict else _TL{b})[t{b}]")
+                namespace[f"_TS{b}{tag}"] = tuple(r if ok else None for r, ok in
+                                                   zip(loose, valid, strict=True))
+                lines.append(f"    e{b} = (_TS{b}{tag} if strict else _TL{b}{tag})[t{b}]")
                 lines.append(f"    if e{b} is None:")
                 lines.append("        _out_of_range(codec, decode_loose(data))")
                 lines.append(f"    {target} = e{b}")
         checks: list[str] = []
         out = []
-        for i, s in enumerate(self.signals):
+        for s in signals:
+            i = self.signals.index(s)
             if s.name in table_var:
                 out.append(f"'{s.name}': {table_var[s.name]}")
                 continue
             full_lo = -(1 << (s.length - 1)) if s.is_signed else 0
             full_hi = (1 << (s.length - 1)) - 1 if s.is_signed else (1 << s.length) - 1
             needs_var = s.is_float or s.is_signed or (s.raw_min, s.raw_max) != (full_lo, full_hi)
-            if f"d_{s.name}" in direct:
-                v = f"d_{s.name}"
+            if _direct_var(s) in direct:
+                v = str(_direct_var(s))
             elif not needs_var:
                 v = f"({self._piece_expr(s, pieces)})"  # used once: inline in the result
             else:
@@ -424,10 +493,54 @@ class MessageCodec:
             lines.append(f"    if strict and ({' or '.join(checks)}):")
             lines.append("        _out_of_range(codec, decode_loose(data))")
         lines.append("    return {" + ", ".join(out) + "}")
+        return lines
+
+    def _compile_decode(self) -> Callable[[bytes, bool], Signals]:
+        """Generate ``decode(data, strict)``: one struct unpack; bytes of small bit fields
+        through lookup tables; wider fields by shifts and masks. A multiplexed message unpacks
+        once and branches on the multiplexer value to that value's signals."""
+        cuts = [self._decode_layout(sigs) for sigs in self.signal_sets]
+        fmt, fields, _ = cuts[0]
+        if any((f, fl) != (fmt, fields) for f, fl, _ in cuts[1:]):
+            raise TypeError(f"{self.name}: the multiplexed signal sets must share one byte "
+                            "layout (same positions, widths and types)")
+        namespace: dict[str, Any] = {
+            "FrameLengthError": FrameLengthError,
+            "_StructError": struct.error,
+            "_F32": _F32,
+            "_F64": _F64,
+            "_unpack": struct.Struct(fmt).unpack,
+            "_out_of_range": _out_of_range,
+            "_unknown_mux": _unknown_mux,
+            "codec": self,
+        }
+        body: list[str] = []
+        if self.multiplexer is None:
+            body = self._decode_body(self.signals, fields, cuts[0][2], "", namespace)
+        else:
+            body.append(f"    mux = {self._raw_expr(self.multiplexer, fields)}")
+            # when the values cover every raw multiplexer value, the last needs no test
+            every = len(self.variants) == 1 << self.multiplexer.length
+            for n, ((k, sigs), (_, _, tables)) in enumerate(
+                    zip(self.variants.items(), cuts, strict=True)):
+                body.append("    if True:" if every and n == len(cuts) - 1 else
+                            f"    if mux == {k}:")
+                body += ["    " + ln for ln in
+                         self._decode_body(sigs, fields, tables, f"_{k}", namespace)]
+            if not every:
+                body.append("    _unknown_mux(codec, mux)")
+        head = [
+            "    try:",
+            f"        {', '.join(f[0] for f in fields)}, = _unpack(data)",
+            "    except _StructError:",
+            f"        raise FrameLengthError('{self.name}: payload of %d bytes, the catalog "
+            f"says {self.length}' % len(data)) from None",
+        ]
         # the same body returning (name, values), for Codec.decode's hot path
-        named = [ln.replace("def decode(", "def decode_named(") for ln in lines]
-        named[-1] = named[-1].replace("    return {", f"    return '{self.name}', {{", 1)
-        lines += named
+        named = [ln.replace("return {", f"return '{self.name}', {{", 1)
+                 if ln.lstrip().startswith("return {") else ln for ln in body]
+        lines = ["def decode(data, strict):", *head, *body,
+                 "def decode_named(data, strict):", *head, *named]
         self._decode_source = "\n".join(lines)
         exec(compile(self._decode_source, f"<lowerbase codec {self.name}.decode>", "exec"),
              namespace)
@@ -436,26 +549,29 @@ class MessageCodec:
         self._decode_named = namespace["decode_named"]
         return decode
 
-    def _compile_encode(self) -> Callable[[Mapping[str, Any]], bytes]:
-        """Generate ``encode(values)``: cantools' rounding, raw range checks, one struct pack."""
-        fmt, fields = self._layout()
-        n = len(self.signals)
+    def _encode_body(self, signals: tuple[SignalSpec, ...], tag: str,
+                     namespace: dict[str, Any]) -> list[str]:
+        """Lines (indented by 4) that check and pack ``signals`` from ``values``."""
+        fmt, fields = self._layout(signals)
+        namespace[f"_S{tag}"] = struct.Struct(fmt)
+        namespace[f"_N{tag}"] = frozenset(s.name for s in signals)
+        index = {s.name: self.signals.index(s) for s in signals}
         lines = [
-            "def encode(values):",
-            f"    if len(values) != {n}:",
-            "        _keys(codec, values)",
+            f"    if len(values) != {len(signals)}:",
+            f"        _keys(codec, values, _N{tag})",
             "    try:",
         ]
-        lines += [f"        v{i} = values['{s.name}']" for i, s in enumerate(self.signals)]
-        lines += ["    except KeyError:", "        _keys(codec, values)"]
-        for i, s in enumerate(self.signals):
-            v, r = f"v{i}", f"r{i}"
+        lines += [f"        v{index[s.name]} = values['{s.name}']" for s in signals]
+        lines += ["    except KeyError:", f"        _keys(codec, values, _N{tag})"]
+        direct = {f[0] for f in fields if f[0].startswith("d")}
+        for s in signals:
+            v, r = f"v{index[s.name]}", f"r{index[s.name]}"
             lines.append(f"    if {v}.__class__ is not float and {v}.__class__ is not int:")
             lines.append(f"        {v} = _number(codec, '{s.name}', {v})")
             if s.is_float:
                 lines.append(f"    if not ({s.minimum!r} <= {v} <= {s.maximum!r}):")
                 lines.append(f"        _range(codec, '{s.name}', {v})")
-                if f"d_{s.name}" not in {f[0] for f in fields}:
+                if _direct_var(s) not in direct:
                     packer = "_F32" if s.length == 32 else "_F64"
                     lines.append(f"    {r} = int.from_bytes({packer}.pack({v}), 'little')")
                 else:
@@ -478,33 +594,56 @@ class MessageCodec:
             lines.append(f"        _range(codec, '{s.name}', {v})")
         args = []
         for name, first, width in fields:
-            if name.startswith("d_"):
-                i = next(k for k, s in enumerate(self.signals) if f"d_{s.name}" == name)
-                args.append(f"r{i}")
+            if name in direct:
+                s = next(s for s in signals if _direct_var(s) == name)
+                args.append(f"r{index[s.name]}")
                 continue
             terms = []
-            for i, s in enumerate(self.signals):
-                if f"d_{s.name}" in {f[0] for f in fields}:
+            for s in signals:
+                if _direct_var(s) in direct:
                     continue
                 if s.start >= first + width or s.start + s.length <= first:
                     continue
-                # the part of signal i that falls into this piece
+                # the part of signal s that falls into this piece
                 shift = s.start - first
-                term = f"(r{i} & {s.mask:#x})" if s.is_signed or s.is_float else f"r{i}"
+                r = f"r{index[s.name]}"
+                term = f"({r} & {s.mask:#x})" if s.is_signed or s.is_float else r
                 terms.append(f"({term} << {shift})" if shift > 0 else
                              (f"({term} >> {-shift})" if shift < 0 else term))
             expr = " | ".join(terms) if terms else "0"
             args.append(f"({expr}) & {(1 << width) - 1:#x}")
-        lines.append(f"    return _S.pack({', '.join(args)})")
+        lines.append(f"    return _S{tag}.pack({', '.join(args)})")
+        return lines
+
+    def _compile_encode(self) -> Callable[[Mapping[str, Any]], bytes]:
+        """Generate ``encode(values)``: cantools' rounding, raw range checks, one struct pack;
+        a multiplexed message first branches on the multiplexer value."""
         namespace: dict[str, Any] = {
             "_F32": _F32,
             "_F64": _F64,
-            "_S": struct.Struct(fmt),
             "_number": _to_number,
             "_range": _range_error,
             "_keys": _keys_error,
+            "_mux_error": _mux_error,
             "codec": self,
         }
+        lines = ["def encode(values):"]
+        mux = self.multiplexer
+        if mux is None:
+            lines += self._encode_body(self.signals, "", namespace)
+        else:
+            lines += [
+                "    try:",
+                f"        mux = values['{mux.name}']",
+                "    except KeyError:",
+                "        _mux_error(codec, None)",
+                "    if mux.__class__ is not int:",
+                f"        mux = _number(codec, '{mux.name}', mux)",
+            ]
+            for k, sigs in self.variants.items():
+                lines.append(f"    if mux == {k}:")
+                lines += ["    " + ln for ln in self._encode_body(sigs, f"_{k}", namespace)]
+            lines.append("    _mux_error(codec, mux)")
         self._encode_source = "\n".join(lines)
         exec(compile(self._encode_source, f"<lowerbase codec {self.name}.encode>", "exec"),
              namespace)
@@ -534,20 +673,44 @@ def _to_number(codec: MessageCodec, name: str, value: Any) -> int | float:
         ) from None
 
 
-def _keys_error(codec: MessageCodec, values: Mapping[str, Any]) -> None:
-    missing = sorted(codec.signal_names - values.keys())
-    unknown = sorted(set(values) - codec.signal_names)
+def _keys_error(codec: MessageCodec, values: Mapping[str, Any], names: frozenset[str]) -> None:
+    missing = sorted(names - values.keys())
+    unknown = sorted(set(values) - names)
+    mux = codec.multiplexer
     raise EncodeError(
         f"{codec.name}: "
+        + (f"{mux.name} = {values[mux.name]!r} selects " if mux and mux.name in values else "")
         + (f"missing signals {missing}" if missing else "")
         + ("; " if missing and unknown else "")
         + (f"unknown signals {unknown}" if unknown else "")
     )
 
 
+def _mux_error(codec: MessageCodec, value: Any) -> NoReturn:
+    """Encode: the multiplexer is missing, out of range or selects no signals."""
+    mux = codec.multiplexer
+    assert mux is not None
+    if value is None:
+        raise EncodeError(f"{codec.name}: missing the multiplexer signal {mux.name!r}")
+    if not (mux.minimum <= value <= mux.maximum):  # NaN: False
+        _range_error(codec, mux.name, value)
+    raise EncodeError(f"{codec.name}: {mux.name} = {value!r} selects no signals (the catalog "
+                      f"defines {sorted(codec.variants)})")
+
+
+def _unknown_mux(codec: MessageCodec, value: int) -> NoReturn:
+    """Decode: a multiplexer value that the catalog gives no signals."""
+    mux = codec.multiplexer
+    assert mux is not None
+    raise ProtocolError(f"{codec.name}: {mux.name} = {value} selects no signals (the catalog "
+                        f"defines {sorted(codec.variants)})")
+
+
 def _out_of_range(codec: MessageCodec, values: Signals) -> None:
     """Raise for the first signal of a decoded payload that is outside its range."""
     for s in codec.signals:
+        if s.name not in values:  # another multiplexer value's signal
+            continue
         v = values[s.name]
         if not (s.minimum <= v <= s.maximum):  # type: ignore[operator]
             raise SignalRangeError(

@@ -21,6 +21,23 @@ def _bitrate(codec: Codec) -> int:
     return int(attr.value) if attr is not None else 500_000
 
 
+def _multiplexing(m: MessageCodec) -> list[str]:
+    """A multiplexed message: which signals each multiplexer value selects."""
+    if m.multiplexer is None:
+        return []
+    mux = m.multiplexer
+    sets = []
+    for k, sigs in m.variants.items():
+        label = f" ({mux.choices[k]})" if k in mux.choices else ""
+        names = ", ".join(s.name for s in sigs if s.multiplexer_ids)
+        sets.append(f"{mux.name} = {k}{label}: {names}")
+    return [
+        f"Multiplexed: {mux.name} (M) selects the signals of each frame; "
+        + "; ".join(sets) + " (m<value> in the table). The other signals are in every frame.",
+        "",
+    ]
+
+
 def _message_section(m: MessageCodec) -> list[str]:
     cycle = f"{m.cycle_time * 1000:g} ms" if m.cycle_time else "event"
     lines = [
@@ -31,6 +48,7 @@ def _message_section(m: MessageCodec) -> list[str]:
         f"DLC {m.length}, {cycle}, sent by {', '.join(m.senders)}; "
         f"{m.length + OVERHEAD} bytes in the serial framing.",
         "",
+        *_multiplexing(m),
         "| signal | bits | type | scale | offset | range | unit | values | comment |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
@@ -38,8 +56,9 @@ def _message_section(m: MessageCodec) -> list[str]:
         kind = "float32" if s.is_float else ("int" if s.is_signed else "uint") + str(s.length)
         bits = f"{s.start}..{s.start + s.length - 1}"
         values = ", ".join(f"{k}={v}" for k, v in s.choices.items())
+        mark = " (M)" if s.is_multiplexer else "".join(f" (m{k})" for k in s.multiplexer_ids)
         lines.append(
-            f"| {s.name} | {bits} | {kind} | {_fmt(s.scale)} | {_fmt(s.offset)} | "
+            f"| {s.name}{mark} | {bits} | {kind} | {_fmt(s.scale)} | {_fmt(s.offset)} | "
             f"{_fmt(s.minimum)} .. {_fmt(s.maximum)} | {s.unit} | {values} | {s.comment} |"
         )
     lines.append("")

@@ -30,7 +30,8 @@ def _drive_and_check(client: LowerClient) -> None:
     moving = client.expect("MotionState", lambda v: v["Linear"] > 0.25, timeout=1.0,
                            since=end - 1.0)
     assert moving is not None
-    counts = [f.values["Count"] for f in client.frames("WheelFeedback", since=start.t)]
+    counts = [f.values["LeftCount"] for f in client.frames("WheelFeedback", since=start.t)
+              if f.values["Wheel"] == 0]
     assert counts[-1] > counts[0]
     # stop sending: the watchdog brakes within commandTimeout + the ramp
     stopped = client.expect(

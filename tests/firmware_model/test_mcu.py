@@ -49,9 +49,9 @@ def test_straight_line_gives_exactly_the_predicted_pulses() -> None:
     assert rig.mcu.truth.y == pytest.approx(0.0, abs=1e-12)
     left, right = (f.values for f in rig.frames("WheelFeedback")[-2:])
     assert (left["Wheel"], right["Wheel"]) == (0, 1)
-    assert left["Count"] == right["Count"]
+    assert left["LeftCount"] == right["RightCount"]
     per_cycle = v * 0.02 / c.wheel_perimeter * c.ratio_left * c.pulse_per_circle
-    assert expected - per_cycle <= left["Count"] <= expected  # sent within the last cycle
+    assert expected - per_cycle <= left["LeftCount"] <= expected  # sent within the last cycle
 
 
 def test_rotation_in_place() -> None:
@@ -355,8 +355,8 @@ def test_encoder_dropout_and_imu_freeze_show_in_status() -> None:
     assert code & StatusBit.IMU_FAULT
     wf = [f.values for f in rig.frames("WheelFeedback", since=rig.now - 0.1)]
     right = [v for v in wf if v["Wheel"] == 1]
-    assert right and all(v["DriverStatus"] & 0b100 for v in right)
-    assert len({v["Count"] for v in right}) == 1  # frozen
+    assert right and all(v["RightDriverStatus"] & 0b100 for v in right)
+    assert len({v["RightCount"] for v in right}) == 1  # frozen
 
 
 def test_output_faults_drop_delay_corrupt_silence() -> None:

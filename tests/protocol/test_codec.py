@@ -6,6 +6,7 @@ import contextlib
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import cantools
 import pytest
@@ -16,14 +17,17 @@ from lowerbase.errors import (
     EncodeError,
     FrameLengthError,
     LowerbaseError,
+    ProtocolError,
     SignalRangeError,
     UnknownMessageError,
 )
-from lowerbase.protocol.codec import DBC_PATH, MessageCodec, SignalSpec, default_codec
+from lowerbase.protocol.codec import DBC_PATH, Codec, MessageCodec, SignalSpec, default_codec
 
 CODEC = default_codec()
 DB = cantools.database.load_file(str(DBC_PATH))
 NAMES = [m.name for m in CODEC]
+#: (message, multiplexer value or None): every signal set a frame can carry
+CASES = [(m.name, k) for m in CODEC for k in (list(m.variants) or [None])]
 
 CONTRACT = {
     "MotionCommand", "LedCommand", "ControlCommand", "ParameterRequest", "VersionRequest",
@@ -38,9 +42,14 @@ def physical(msg: MessageCodec, spec: SignalSpec, raw: int) -> int | float:
     return sig.conversion.raw_to_scaled(raw, decode_choices=False)  # type: ignore[no-any-return]
 
 
-def signal_values(msg: MessageCodec) -> st.SearchStrategy[dict[str, int | float]]:
-    fields = {}
-    for s in msg.signals:
+def signal_values(
+    msg: MessageCodec, mux: int | None = None
+) -> st.SearchStrategy[dict[str, int | float]]:
+    fields: dict[str, st.SearchStrategy[int | float]] = {}
+    for s in msg.signals if mux is None else msg.variants[mux]:
+        if s.is_multiplexer:
+            fields[s.name] = st.just(mux)  # type: ignore[arg-type]
+            continue
         if s.is_float:
             fields[s.name] = st.floats(
                 min_value=s.minimum, max_value=s.maximum, width=32, allow_nan=False
@@ -79,13 +88,13 @@ def test_every_signal_is_documented_and_periodic_frames_count() -> None:
     assert commands == ids[:2]  # the highest CAN priority is safety and commands
 
 
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize(("name", "mux"), CASES)
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
-def test_encode_decode_equal_cantools(name: str, data: st.DataObject) -> None:
+def test_encode_decode_equal_cantools(name: str, mux: int | None, data: st.DataObject) -> None:
     msg = CODEC.message(name)
     ref = DB.get_message_by_name(name)
-    values = data.draw(signal_values(msg))
+    values = data.draw(signal_values(msg, mux))
     ours = msg.encode(values)
     assert ours == ref.encode(values, strict=True)
     assert msg.decode(ours) == ref.decode(ours, decode_choices=False)
@@ -117,8 +126,8 @@ def test_random_payloads_decode_like_cantools_or_raise_typed(
         strict = msg.decode(payload)
     except SignalRangeError:
         out_of_range = [
-            s for s in msg.signals
-            if not (s.minimum <= expected[s.name] <= s.maximum)  # type: ignore[operator]
+            s for s in msg.signals if s.name in expected
+            and not (s.minimum <= expected[s.name] <= s.maximum)  # type: ignore[operator]
         ]
         assert out_of_range
     else:
@@ -160,7 +169,96 @@ def test_typed_errors() -> None:
 
 def test_counter_and_choices_round_trip() -> None:
     wf = CODEC.message("WheelFeedback")
-    values = {"Count": -(2**31), "Velocity": -1.234, "Current": 31.75, "Wheel": "Right",
-              "DriverStatus": 5, "Counter": 15}
+    values = {"RightCount": -(2**31), "RightVelocity": -1.234, "RightCurrent": 31.75,
+              "Wheel": "Right", "RightDriverStatus": 5, "Counter": 15}
     decoded = wf.decode(wf.encode(values), decode_choices=True)
-    assert decoded == {**values, "Velocity": pytest.approx(-1.234)}
+    assert decoded == {**values, "RightVelocity": pytest.approx(-1.234)}
+
+
+#: WheelFeedback bytes from the codec before the message was multiplexed (plain Wheel, Count,
+#: Velocity, Current, DriverStatus, Counter): (wheel, count, velocity, current, status, counter)
+WHEEL_FEEDBACK_WIRE = [
+    (0, 0, 0.0, 0.0, 0, 0, "0000000000000000"),
+    (0, 123456, 0.512, 1.25, 0, 7, "40e2010000020570"),
+    (1, 123457, 0.498, -1.5, 4, 7, "41e20100f201fa79"),
+    (0, -2147483648, -10.0, -32.0, 7, 15, "00000080f0d880fe"),
+    (1, 2147483647, 10.0, 31.75, 5, 15, "ffffff7f10277ffb"),
+    (1, -1, -0.001, -0.25, 2, 1, "ffffffffffffff15"),
+]
+
+
+@pytest.mark.parametrize("row", WHEEL_FEEDBACK_WIRE)
+def test_wheel_feedback_multiplexed_keeps_the_wire_bytes(row: tuple) -> None:
+    wheel, count, velocity, current, status, counter, wire = row
+    side = ("Left", "Right")[wheel]
+    values = {"Wheel": wheel, f"{side}Count": count, f"{side}Velocity": velocity,
+              f"{side}Current": current, f"{side}DriverStatus": status, "Counter": counter}
+    ref = DB.get_message_by_name("WheelFeedback")
+    assert ref.is_multiplexed()
+    assert CODEC.encode("WheelFeedback", values).hex() == wire
+    assert ref.encode(values, strict=True).hex() == wire
+    decoded = CODEC.message("WheelFeedback").decode(bytes.fromhex(wire))
+    assert decoded == ref.decode(bytes.fromhex(wire), decode_choices=False)
+    assert decoded == {**values, f"{side}Velocity": pytest.approx(velocity)}
+    assert CODEC.decode(0x100, bytes.fromhex(wire), decode_choices=True)[1]["Wheel"] == side
+
+
+def test_multiplexed_message_api_and_typed_errors() -> None:
+    wf = CODEC.message("WheelFeedback")
+    assert wf.is_multiplexed and wf.multiplexer is not None and wf.multiplexer.name == "Wheel"
+    left, right = (wf.variants[k] for k in (0, 1))
+    assert [s.name for s in left] == ["Wheel", "LeftCount", "LeftVelocity", "LeftCurrent",
+                                      "LeftDriverStatus", "Counter"]
+    assert wf.signal_sets == (left, right) and wf.signal("RightCount").multiplexer_ids == (1,)
+    assert not CODEC.message("MotionState").is_multiplexed
+    good = {"Wheel": 0, "LeftCount": 1, "LeftVelocity": 0.0, "LeftCurrent": 0.0,
+            "LeftDriverStatus": 0, "Counter": 0}
+    assert wf.encode(good) == wf.encode({"Wheel": "Left", "LeftCount": 1}, strict=False)
+    with pytest.raises(EncodeError, match="missing the multiplexer signal 'Wheel'"):
+        wf.encode({k: v for k, v in good.items() if k != "Wheel"})
+    with pytest.raises(SignalRangeError, match="Wheel = 2"):
+        wf.encode({**good, "Wheel": 2})
+    with pytest.raises(SignalRangeError, match="Wheel = nan"):
+        wf.encode({**good, "Wheel": math.nan})
+    with pytest.raises(EncodeError, match=r"Wheel = 1 selects missing signals \['RightCount'"):
+        wf.encode({**good, "Wheel": 1})
+    with pytest.raises(EncodeError, match="unknown signals"):
+        wf.encode({"Wheel": 1, "LeftCount": 1}, strict=False)
+    with pytest.raises(EncodeError, match="choice"):
+        wf.encode({**good, "Wheel": "Middle"})
+    with pytest.raises(FrameLengthError):
+        wf.decode(bytes(7))
+
+
+SYNTHETIC = """VERSION ""
+BS_:
+BU_: A
+BO_ 1 Mux2: 4 A
+ SG_ Sel M : 0|2@1+ (1,0) [0|3] "" A
+ SG_ Low m0 : 8|12@1+ (1,0) [0|4095] "" A
+ SG_ High m1 : 8|12@1- (0.5,0) [-1024|1023.5] "V" A
+ SG_ Tail : 20|12@1+ (1,0) [0|4095] "" A
+"""
+
+
+def test_multiplexer_with_undefined_values_and_shifted_signals(tmp_path: Path) -> None:
+    path = tmp_path / "mux.dbc"
+    path.write_text(SYNTHETIC)
+    ours, ref = Codec(path).message("Mux2"), cantools.database.load_file(str(path))
+    ref_msg = ref.get_message_by_name("Mux2")
+    for values in ({"Sel": 0, "Low": 4095, "Tail": 7}, {"Sel": 1, "High": -3.5, "Tail": 4095}):
+        data = ours.encode(values)
+        assert data == ref_msg.encode(values, strict=True)
+        assert ours.decode(data) == ref_msg.decode(data, decode_choices=False) == values
+    with pytest.raises(ProtocolError, match="Sel = 2 selects no signals"):
+        ours.decode(bytes([2, 0, 0, 0]))
+    with pytest.raises(EncodeError, match="Sel = 3 selects no signals"):
+        ours.encode({"Sel": 3, "Tail": 0})
+
+
+def test_multiplexed_sets_with_different_layouts_are_refused(tmp_path: Path) -> None:
+    path = tmp_path / "mux.dbc"
+    path.write_text(SYNTHETIC.replace("High m1 : 8|12@1-", "High m1 : 8|8@1-")
+                    .replace("[-1024|1023.5]", "[-64|63.5]"))
+    with pytest.raises(TypeError, match="share one byte layout"):
+        Codec(path)

@@ -7,7 +7,7 @@ for the arc formula to be well conditioned, no velocity estimate over a too shor
 non-finite input ignored.
 
 Conventions (REP-103): x forward, y left, yaw counter-clockwise [rad]. Forward motion of the base
-increases both wheel counts (chassis.dbc, WheelFeedback.Count).
+increases both wheel counts (chassis.dbc, WheelFeedback.LeftCount/RightCount).
 
 Covariances are first-order and honest rather than decorative:
 

@@ -2,7 +2,7 @@
 
 The exact count is carried as an unbounded integer plus a fractional remainder in [0, 1), so
 no pulse is lost however long the robot runs; the reported count is the floor of the exact
-value, wrapped to int32 like the hardware register (WheelFeedback.Count).
+value, wrapped to int32 like the hardware register (WheelFeedback.LeftCount/RightCount).
 
 Direction: on our wire BOTH counts increase for forward motion of the base (the firmware
 un-mirrors the right motor, which turns the other way on the real robot). Pass
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-STATUS_ENCODER_FAULT = 0x4  # WheelFeedback.DriverStatus bit 2
+STATUS_ENCODER_FAULT = 0x4  # WheelFeedback.Left/RightDriverStatus bit 2
 
 _TWO_POW_31 = 1 << 31
 _TWO_POW_32 = 1 << 32

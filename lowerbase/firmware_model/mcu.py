@@ -397,8 +397,8 @@ class Mcu:
         return c.wheel_perimeter / (ratio * c.pulse_per_circle)
 
     def wheel_velocity(self, side: str) -> float:
-        """The reported rim speed [m/s] (WheelFeedback.Velocity): the real motor speed as the
-        encoder measures it, converted with the believed pulsePerCircle, ratio and perimeter."""
+        """The reported rim speed [m/s] (WheelFeedback.Left/RightVelocity): the real motor speed as
+        the encoder measures it, converted with the believed pulsePerCircle, ratio and perimeter."""
         motor, enc = self._motors[side], self._encoders[side]
         pulses_per_s = motor.omega * enc.pulses_per_wheel_rad()
         return pulses_per_s * self._belief_per_pulse(side)

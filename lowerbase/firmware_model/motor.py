@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from lowerbase.firmware_model.kinematics import Side, motor_rpm_to_wheel_rad_s
 from lowerbase.firmware_model.profile import STANDARD_GRAVITY, ChassisParams, MotorParams
 
-STATUS_OVER_CURRENT = 0x1  # WheelFeedback.DriverStatus bit 0
+STATUS_OVER_CURRENT = 0x1  # WheelFeedback.Left/RightDriverStatus bit 0
 STATUS_STALLED = 0x2  # bit 1 (bit 2, encoder fault, belongs to the encoder)
 
 

@@ -78,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
     from lowerbase.firmware_model.runner import run as run_mcu
     from lowerbase.protocol.codec import default_codec
     from lowerbase.transport import config_from_args, describe, open_bus
+    from lowerbase.transport.peers import PeerMonitor
 
     if args.simulated and args.duration is None:
         raise ConfigError("--simulated needs --duration (it runs as fast as the CPU allows)")
@@ -99,9 +100,12 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     clock = SimClock() if args.simulated else RealClock(stop)
     try:
-        # transmit errors (a bus-off adapter, a full socket buffer) are counted in mcu.stats
-        send = bus_sender(bus, lambda key: mcu.stats.update([key]))
         codec = default_codec()
+        # warns once when another lower computer (emulator or firmware) shares this bus
+        peers = PeerMonitor(codec)
+        # transmit errors (a bus-off adapter, a full socket buffer) are counted in mcu.stats
+        send = bus_sender(bus, lambda key: mcu.stats.update([key]),
+                          on_sent=lambda fid, data: peers.on_sent(fid, data, clock.now()))
         if args.print_frames:
             inner = send
 
@@ -134,7 +138,8 @@ def run(args: argparse.Namespace) -> int:
 
             truth = TruthLog(args.truth)
         with contextlib.suppress(KeyboardInterrupt):
-            run_mcu(mcu, bus, clock, duration=args.duration, stop=stop, on_step=truth)
+            run_mcu(mcu, bus, clock, duration=args.duration, stop=stop, on_step=truth,
+                    peers=peers)
         if truth is not None:
             truth.close()
         mcu.shutdown()

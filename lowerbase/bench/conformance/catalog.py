@@ -3,6 +3,10 @@ WheelFeedback rows are told apart)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
 from lowerbase.protocol.codec import Codec, MessageCodec
 from lowerbase.protocol.status_codes import StatusBit
 
@@ -24,6 +28,33 @@ CONDITIONAL: dict[str, StatusBit] = {
 }
 
 
+@dataclass(frozen=True)
+class WheelSample:
+    """One wheel's feedback at one reception time."""
+
+    t: float  #: reception time [s] (time.monotonic)
+    count: int  #: encoder register [pulses], int32
+    velocity: float  #: rim speed [m/s]
+
+
+#: WheelFeedback's wheel numbers (the catalog: 0 left, 1 right)
+WHEELS = {0: "left", 1: "right"}
+
+
+def wheel_samples(frames: Iterable[tuple[float, Mapping[str, Any]]]
+                  ) -> dict[str, list[WheelSample]]:
+    """WheelFeedback frames (reception time, decoded values) by wheel name, in order.
+
+    The one place of the suite that knows how WheelFeedback carries the wheels."""
+    out: dict[str, list[WheelSample]] = {name: [] for name in WHEELS.values()}
+    for t, v in frames:
+        side = WHEELS.get(int(v["Wheel"]))
+        if side is not None:  # multiplexed: Wheel selects LeftCount.. or RightCount..
+            s = "" if "Count" in v else side.title()  # also the older per-frame layout
+            out[side].append(WheelSample(t, int(v[f"{s}Count"]), float(v[f"{s}Velocity"])))
+    return out
+
+
 def periodic_lower_messages(codec: Codec) -> list[MessageCodec]:
     """Every periodic message the lower computer sends, in catalog order."""
     return [m for m in codec if m.is_periodic and "Lower" in m.senders]
@@ -32,6 +63,12 @@ def periodic_lower_messages(codec: Codec) -> list[MessageCodec]:
 def shared_counter(msg: MessageCodec) -> bool:
     """Whether the frames of one cycle share the counter (the Counter comment says so)."""
     return msg.has_counter and "shared" in msg.signal("Counter").comment.lower()
+
+
+def control_period(codec: Codec) -> float:
+    """An upper bound of the lower computer's control period [s]: the catalog's shortest
+    cycle (a firmware cannot send a frame every 10 ms from a slower loop)."""
+    return min(m.cycle_time or float("inf") for m in periodic_lower_messages(codec))
 
 
 def protocol_version(codec: Codec) -> int:

@@ -43,6 +43,8 @@ class Context:
         self.param_cache: dict[int, float] = {}  #: index -> value read
         self.to_restore: dict[int, float] = {}  #: index -> value to write back at the end
         self.versions: dict[int, str] = {}
+        #: measurements shared by the checks of one family (e.g. the physics segments)
+        self.shared: dict[str, Any] = {}
         self._reboot: tuple[float, Received] | CheckFailed | None = None
         self._last_control = -math.inf  #: time.monotonic() of the last ControlCommand
 

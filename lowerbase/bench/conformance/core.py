@@ -114,6 +114,5 @@ class Settings:
     link_timeout: float = 3.0  #: [s] to hear the lower computer at all
     reply_timeout: float = 1.0  #: [s] for a response or a state change
     boot_timeout: float = 10.0  #: [s] from ControlCommand Reboot to the boot-up Heartbeat
-    watchdog_margin: float = 1.0  #: [s] beyond commandTimeout for the watchdog stop
     speed: float = 0.1  #: [m/s] the MotionCommand the suite sends (robot on blocks)
     motion: bool = True  #: False skips the checks that turn the wheels

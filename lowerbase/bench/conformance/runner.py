@@ -24,6 +24,13 @@ from lowerbase.bench.conformance.core import (
     skipped,
 )
 from lowerbase.bench.conformance.frames import frame_checks
+from lowerbase.bench.conformance.physics import (
+    check_gravity,
+    check_gyro,
+    check_motion_state,
+    check_wheel_count,
+    check_wheel_velocity,
+)
 from lowerbase.bench.conformance.request_response import (
     WRITE_PARAMETER,
     check_led,
@@ -87,6 +94,16 @@ def registry(codec: Codec | None = None) -> list[Check]:
         Check("safety.estop", "EStopSet stops and latches, EStopRelease -> Standby",
               check_estop),
         Check("safety.standby", "ControlCommand Standby from Active", check_standby),
+        Check("physics.gravity", "at rest the accelerometer reads gravity on +z",
+              check_gravity),
+        Check("physics.wheel_velocity", "wheel Velocity follows the commanded motion",
+              check_wheel_velocity),
+        Check("physics.wheel_count", "Count deltas agree with the integrated Velocity",
+              check_wheel_count),
+        Check("physics.motion_state", "MotionState agrees with the wheel kinematics",
+              check_motion_state),
+        Check("physics.gyro", "the integrated gyro z agrees with MotionState (or is 0 on "
+              "blocks)", check_gyro),
         Check("robust.unknown_id", "frames on unknown IDs are ignored", check_unknown_ids),
         Check("robust.extended_id", "extended frames on catalog IDs are ignored",
               check_extended_ids),

@@ -1,0 +1,132 @@
+"""Certification means catching wrong firmware: a correct emulator seen through a mutating proxy
+(wrong scales, sign flips, swapped wheels, late frames, a late watchdog) must fail exactly the
+checks the defect breaks, and the unchanged emulator (several seeds) must pass them all."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import can
+import pytest
+
+from lowerbase.bench.conformance import registry, select
+from lowerbase.cli import main
+from lowerbase.protocol.codec import default_codec
+from tests.bench.mutating_proxy import MutatingProxy, Mutation, swap_wheels
+from tests.conftest import TEST_GROUP, Proc, bus_cli_args, free_udp_port
+
+pytestmark = pytest.mark.process
+
+ALL_IDS = [c.id for c in registry(default_codec())]
+#: the checks every defect run selects: the mutations must fail exactly their share of these
+ONLY = "param.read,safety.enable,safety.watchdog,physics.*"
+_channels = itertools.count()
+
+
+def _run_suite(capsys: pytest.CaptureFixture[str], bus: list[str], only: str = ONLY
+               ) -> tuple[dict[str, str], str]:
+    main(["conformance", *bus, "--only", only])
+    out = capsys.readouterr().out
+    results = {}
+    for line in out.splitlines():
+        parts = line.split(maxsplit=2)
+        if len(parts) >= 2 and parts[0] in ALL_IDS:
+            results[parts[0]] = parts[1]
+    assert list(results) == [c.id for c in select(registry(default_codec()), [only])], out
+    return results, out
+
+
+def _failed(results: dict[str, str]) -> set[str]:
+    return {cid for cid, result in results.items() if result in ("FAIL", "ERROR")}
+
+
+@pytest.fixture(scope="module")
+def proxied() -> Iterator[tuple[MutatingProxy, list[str]]]:
+    """One emulator process for the module, behind a proxy; the suite's bus arguments."""
+    config: dict[str, Any] = {"interface": "udp_multicast", "channel": TEST_GROUP,
+                              "port": free_udp_port(), "hop_limit": 0}
+    proc = Proc(["emulate", *bus_cli_args(config), "--no-bms"])
+    proc.wait_for("lower computer on")
+    channel = f"conformance-proxy-{next(_channels)}-{config['port']}"
+    lower = can.Bus(**config)
+    upper = can.Bus(interface="virtual", channel=channel)
+    proxy = MutatingProxy(lower, upper)
+    try:
+        yield proxy, ["-i", "virtual", "-c", channel]
+    finally:
+        proxy.close()
+        lower.shutdown()
+        upper.shutdown()
+        proc.stop()
+
+
+def _wheel(n: int) -> Any:
+    return lambda v: v["Wheel"] == n
+
+
+DEFECTS: dict[str, tuple[list[Mutation], float, set[str]]] = {
+    # (mutations, hold_commands [s], the checks that must fail)
+    "gyro-z-doubled": ([Mutation("ImuGyro", "Z", scale=2.0)], 0.0, {"physics.gyro"}),
+    "gyro-z-sign": ([Mutation("ImuGyro", "Z", scale=-1.0)], 0.0, {"physics.gyro"}),
+    "accel-z-doubled": ([Mutation("ImuAccel", "Z", scale=2.0)], 0.0, {"physics.gravity"}),
+    "accel-z-sign": ([Mutation("ImuAccel", "Z", scale=-1.0)], 0.0, {"physics.gravity"}),
+    "motion-linear-doubled": ([Mutation("MotionState", "Linear", scale=2.0)], 0.0,
+                              {"physics.motion_state"}),
+    "motion-angular-doubled": ([Mutation("MotionState", "Angular", scale=2.0)], 0.0,
+                               {"physics.motion_state", "physics.gyro"}),
+    "velocity-doubled": ([Mutation("WheelFeedback", "Velocity", scale=2.0)], 0.0,
+                         {"physics.wheel_velocity", "physics.wheel_count",
+                          "physics.motion_state"}),
+    "count-doubled": ([Mutation("WheelFeedback", "Count", scale=2.0)], 0.0,
+                      {"physics.wheel_count"}),
+    # the firmware's ratioLeft 10 % off its gearbox: the left Count runs 10 % fast
+    "count-left-10pct": ([Mutation("WheelFeedback", "Count", scale=1.1, where=_wheel(0))], 0.0,
+                         {"physics.wheel_count"}),
+    "wheels-swapped": ([Mutation("WheelFeedback", transform=swap_wheels)], 0.0,
+                       {"physics.wheel_velocity", "physics.motion_state"}),
+    "watchdog-300ms-late": ([], 0.3, {"safety.watchdog"}),
+    "system-status-300ms-late": ([Mutation("SystemStatus", delay=0.3)], 0.0,
+                                 {"safety.watchdog"}),
+    "motion-state-300ms-late": ([Mutation("MotionState", delay=0.3)], 0.0,
+                                {"safety.watchdog"}),
+}
+
+
+def test_the_proxy_itself_changes_nothing(proxied: tuple[MutatingProxy, list[str]],
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    proxy, bus = proxied
+    proxy.set()
+    only = "link.*,frame.WheelFeedback.*,frame.MotionState.*,frame.ImuGyro.*," + ONLY
+    results, out = _run_suite(capsys, bus, only)
+    assert set(results.values()) == {"PASS"}, out
+
+
+@pytest.mark.parametrize("defect", list(DEFECTS))
+def test_defect_fails_exactly_its_checks(proxied: tuple[MutatingProxy, list[str]],
+                                         capsys: pytest.CaptureFixture[str],
+                                         defect: str) -> None:
+    proxy, bus = proxied
+    mutations, hold, expected = DEFECTS[defect]
+    proxy.set(mutations, hold_commands=hold)
+    try:
+        results, out = _run_suite(capsys, bus)
+    finally:
+        proxy.set()
+    assert _failed(results) == expected, out
+    assert "SKIP" not in results.values(), out
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_emulator_passes_the_physics_with_any_seed(
+        lowerbase_proc: Any, udp_bus_config: dict[str, Any], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str], seed: int) -> None:
+    profile = tmp_path / "profile.toml"
+    profile.write_text(f"[imu]\nseed = {seed}\n\n[truth]\nseed = {seed + 100}\n")
+    bus = bus_cli_args(udp_bus_config)
+    proc = lowerbase_proc("emulate", *bus, "--no-bms", "--profile", str(profile))
+    proc.wait_for("lower computer on")
+    results, out = _run_suite(capsys, bus, "safety.watchdog,physics.*")
+    assert set(results.values()) == {"PASS"}, out

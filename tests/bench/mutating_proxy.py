@@ -110,7 +110,7 @@ class MutatingProxy:
                 return
             delay = max(delay, x.delay)
             for name in _targets(values, x.signal) if x.signal is not None else ():
-                values[name] = self._clip(m, name, values[name] * x.scale + x.offset)
+                values[name] = self._clip(m, name, float(values[name]) * x.scale + x.offset)
             if x.transform is not None:
                 values = x.transform(values)
         out = can.Message(arbitration_id=msg.arbitration_id, data=m.encode(values),

@@ -54,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
         if args.signals:
             for s in m.signals:
                 rng = f"[{s.minimum:g} .. {s.maximum:g}]" if s.minimum is not None else ""
-                print(f"          {s.name:<16} {s.start:>2}|{s.length:<2} x{s.scale:g} "
-                      f"{rng} {s.unit}")
+                mux = "M" if s.is_multiplexer else ",".join(f"m{k}" for k in s.multiplexer_ids)
+                print(f"          {s.name:<17} {mux:<3} {s.start:>2}|{s.length:<2} x{s.scale:g} "
+                      f"{rng} {s.unit}".rstrip())
     return 0

@@ -1,9 +1,13 @@
-"""What the tools show of the multiplexed WheelFeedback: docs/protocol.md and ``lowerbase decode``."""
+"""What the tools show of the multiplexed WheelFeedback: docs/protocol.md, `lowerbase decode`
+and `lowerbase dbc --signals`."""
 
 from __future__ import annotations
 
 import io
 
+import pytest
+
+from lowerbase.cli import main
 from lowerbase.cli.decode import _frames_from_text, decode_stream
 from lowerbase.protocol.docs import render
 
@@ -36,3 +40,14 @@ def test_decode_prints_each_wheel_with_its_own_signals() -> None:
                          "LeftCurrent=1.25 A LeftDriverStatus=0 Counter=7")
     assert right.endswith("Wheel=Right RightCount=123457 pulses RightVelocity=0.498 m/s "
                           "RightCurrent=-1.5 A RightDriverStatus=4 Counter=7")
+
+
+def test_dbc_signals_marks_the_multiplexer_and_its_values(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["dbc", "--signals"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    start = next(i for i, line in enumerate(lines) if "WheelFeedback" in line)
+    rows = [line.split()[:2] for line in lines[start + 1:start + 11]]
+    assert rows[:3] == [["Wheel", "M"], ["LeftCount", "m0"], ["LeftVelocity", "m0"]]
+    assert rows[5] == ["RightCount", "m1"] and rows[9][0] == "Counter"
+    assert rows[9][1] == "60|4"  # in every frame: no marker

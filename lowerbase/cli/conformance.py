@@ -99,7 +99,10 @@ def run(args: argparse.Namespace) -> int:
         print(_row(result.check.id, result.outcome.status.value.upper(),
                    result.outcome.detail), flush=True)
 
-    client = ConformanceClient(bus)
+    def warn(text: str) -> None:
+        print(f"lowerbase conformance: WARNING: {text}", file=sys.stderr, flush=True)
+
+    client = ConformanceClient(bus, on_warning=warn)
     try:
         report = run_suite(client, checks, settings, on_result=show)
     finally:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -12,6 +13,7 @@ import can
 
 from lowerbase.bench.client import LowerClient
 from lowerbase.protocol.codec import Codec
+from lowerbase.transport.peers import PeerMonitor
 
 # -- the client ---------------------------------------------------------------------------------
 
@@ -27,7 +29,12 @@ class ConformanceClient(LowerClient):
     """A :class:`LowerClient` that also keeps every raw frame of the lower computer's IDs
     (also those that do not decode), sends raw payloads, and serialises sends across threads."""
 
-    def __init__(self, bus: can.BusABC, codec: Codec | None = None) -> None:
+    def __init__(self, bus: can.BusABC, codec: Codec | None = None,
+                 on_warning: Callable[[str], None] | None = None) -> None:
+        #: notices a second lower computer on the bus (its Heartbeats); warns once
+        self.peers = PeerMonitor(codec)
+        self.warnings: list[str] = []
+        self._on_warning = on_warning
         self.raw: dict[int, list[RawFrame]] = {}
         self._raw_lock = threading.Lock()
         self._send_lock = threading.Lock()
@@ -42,6 +49,10 @@ class ConformanceClient(LowerClient):
             frame = RawFrame(time.monotonic(), msg.timestamp or time.time(), bytes(msg.data))
             with self._raw_lock:
                 self.raw.setdefault(msg.arbitration_id, []).append(frame)
+            if self.peers.on_frame(msg.arbitration_id, frame.data, frame.t):
+                self.warnings.append(self.peers.warning)
+                if self._on_warning is not None:
+                    self._on_warning(self.peers.warning)
         super().on_message_received(msg)
 
     def raw_frames(self, frame_id: int, since: float = 0.0, until: float = math.inf

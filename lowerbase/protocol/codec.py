@@ -183,16 +183,17 @@ class MessageCodec:
         muxes = [s for s in specs if s.is_multiplexer]
         if len(muxes) > 1 or any(s.multiplexer_ids for s in muxes):
             raise TypeError(f"{msg.name}: one multiplexer per message is supported, no nesting")
-        #: the multiplexer signal, or None for a plain message
-        self.multiplexer: SignalSpec | None = muxes[0] if muxes else None
-        if self.multiplexer and (self.multiplexer.kind != "identity"
-                                 or self.multiplexer.is_signed):
-            raise TypeError(f"{msg.name}: the multiplexer must be an unsigned integer signal")
         #: multiplexer value -> the signals a frame with that value carries ({} if plain)
         self.variants: dict[int, tuple[SignalSpec, ...]] = {
             k: tuple(s for s in specs if not s.multiplexer_ids or k in s.multiplexer_ids)
             for k in sorted({k for s in specs for k in s.multiplexer_ids})
         }
+        #: the multiplexer signal, or None for a plain message (also one whose multiplexer
+        #: selects nothing: every frame then carries every signal)
+        self.multiplexer: SignalSpec | None = muxes[0] if muxes and self.variants else None
+        if self.multiplexer and (self.multiplexer.kind != "identity"
+                                 or self.multiplexer.is_signed):
+            raise TypeError(f"{msg.name}: the multiplexer must be an unsigned integer signal")
         self.signal_names: frozenset[str] = frozenset(s.name for s in specs)
         self._by_name = {s.name: s for s in specs}
         self._choice_numbers = {

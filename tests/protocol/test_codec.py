@@ -262,3 +262,15 @@ def test_multiplexed_sets_with_different_layouts_are_refused(tmp_path: Path) -> 
                     .replace("[-1024|1023.5]", "[-64|63.5]"))
     with pytest.raises(TypeError, match="share one byte layout"):
         Codec(path)
+
+
+def test_multiplexer_that_selects_nothing_is_a_plain_signal(tmp_path: Path) -> None:
+    path = tmp_path / "mux.dbc"
+    path.write_text(SYNTHETIC.replace(" SG_ Low m0 : 8|12@1+ (1,0) [0|4095] \"\" A\n", "")
+                    .replace(" SG_ High m1 : 8|12@1- (0.5,0) [-1024|1023.5] \"V\" A\n", ""))
+    msg = Codec(path).message("Mux2")
+    assert not msg.is_multiplexed and msg.signal_sets == (msg.signals,)
+    data = msg.encode({"Sel": 3, "Tail": 9})
+    ref = cantools.database.load_file(str(path)).get_message_by_name("Mux2")
+    assert data == ref.encode({"Sel": 3, "Tail": 9}, strict=True)
+    assert msg.decode(data) == ref.decode(data, decode_choices=False) == {"Sel": 3, "Tail": 9}

@@ -1,0 +1,95 @@
+"""Replaying a recording that starts after the driver's parameter exchange (issue 9 item 18)."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import can
+import pytest
+
+from lowerbase.bench.simloop import SimLoop
+from lowerbase.clock import SimClock
+from lowerbase.driver.core import DriverCore, LinkState
+from lowerbase.driver.links import ReplayLink
+from lowerbase.firmware_model.profile import load_profile
+
+PARAMETERS = load_profile().chassis.as_wire_dict()
+
+
+def record(path: Path, start: float) -> None:
+    """A run (2 s standing, 2 s at 0.5 m/s), recorded from ``start`` [s] of the run on."""
+    with can.Logger(str(path)) as logger:
+        def tap(t: float, side: str, frame_id: int, data: bytes) -> None:
+            if t >= start:
+                logger.on_message_received(can.Message(
+                    timestamp=1000.0 + t, arbitration_id=frame_id, data=data,
+                    is_extended_id=False, is_rx=side == "lower"))
+
+        loop = SimLoop(tap=tap)
+        loop.run(2.0)
+        loop.drive(0.5, 0.0, 2.0)
+        assert loop.driver.state == LinkState.READY  # the recorded driver was configured
+
+
+def replay(link: ReplayLink, clock: SimClock) -> DriverCore:
+    core = DriverCore(link.send, clock)
+
+    def on_frame(frame_id: int, data: bytes) -> None:
+        core.on_frame(frame_id, data)
+        core.tick()
+
+    link.run_reader(on_frame, threading.Event())
+    return core
+
+
+@pytest.fixture(scope="module")
+def late(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("replay") / "late.log"
+    record(path, start=1.5)  # the exchange is over after about 0.1 s
+    return path
+
+
+@pytest.fixture(scope="module")
+def whole(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("replay") / "whole.log"
+    record(path, start=0.0)
+    return path
+
+
+def test_a_late_recording_is_named_and_the_way_out_offered(late: Path) -> None:
+    clock = SimClock()
+    link = ReplayLink(late, clock=clock)
+    assert not link.has_parameter_exchange and not link.answering
+    assert link.advice is not None
+    assert "starts after the driver's parameter exchange" in link.advice
+    assert "--replay-profile" in link.advice and "--replay-param" in link.advice
+    core = replay(link, clock)
+    assert core.state == LinkState.CONFIGURING  # what the advice warns about
+    assert core.odometry is None
+
+
+def test_a_late_recording_replays_with_given_parameters(late: Path) -> None:
+    clock = SimClock()
+    link = ReplayLink(late, parameters=PARAMETERS, clock=clock)
+    assert link.answering and link.advice is not None and "answered" in link.advice
+    core = replay(link, clock)
+    assert link.answered == len(PARAMETERS)  # each read once, as the lower computer would
+    assert core.state == LinkState.READY
+    assert core.parameters == pytest.approx(PARAMETERS, rel=1e-6)  # float32 on the wire
+    assert core.odometry is not None
+    assert 0.7 < core.odometry.x < 1.1  # most of the 1 m driven after the first Heartbeat
+
+
+def test_a_whole_recording_uses_its_own_parameters(whole: Path) -> None:
+    clock = SimClock()
+    wrong = {**PARAMETERS, "wheelPerimeter": 2 * PARAMETERS["wheelPerimeter"]}
+    link = ReplayLink(whole, parameters=wrong, clock=clock)
+    assert link.has_parameter_exchange and not link.answering
+    assert link.advice is not None and "ignored" in link.advice
+    core = replay(link, clock)
+    assert link.answered == 0
+    assert core.state == LinkState.READY
+    assert core.parameters["wheelPerimeter"] == pytest.approx(PARAMETERS["wheelPerimeter"])
+    assert core.odometry is not None and 0.8 < core.odometry.x < 1.1
+    assert ReplayLink(whole).advice is None  # nothing to say about an ordinary recording

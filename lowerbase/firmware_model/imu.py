@@ -1,12 +1,20 @@
-"""6-axis MEMS IMU model (Kalibr noise model plus turn-on bias, scale error and saturation).
+"""6-axis MEMS IMU model: the datasheet noise terms as an Allan analysis reads them back.
 
-Per axis: ``out = (1 + scale) * true + bias + n``, where ``n`` is white noise with discrete
-sigma ``density * sqrt(rate_hz)`` and ``bias`` = turn-on bias (drawn once) + a random walk
-``b += random_walk * sqrt(dt) * N(0, 1)`` that reflects at +-``bias_walk_bound`` x the bias
-instability around the turn-on value, so it stays bounded over hours. The accelerometer
-measures specific force: the base acceleration plus ``gravity`` on +z (+9.81 m/s^2 at rest,
-base assumed level). With ``noise = false`` the sensor is ideal and outputs are exact; the
-fault hooks (:meth:`ImuModel.bias_step`, :meth:`ImuModel.freeze`) work either way.
+Per axis: ``out = (1 + scale) * true + turn_on + flicker + walk + white``:
+
+- white noise, discrete sigma ``density * sqrt(rate_hz)`` (Allan: density / sqrt(tau));
+- bias instability as flicker: a sum of first-order Gauss-Markov processes with correlation
+  times every half decade from 0.3 s to 30000 s (ripple about 4 %), scaled so that the
+  MINIMUM of the model's Allan deviation (white + flicker + walk) is 0.664 x the datasheet
+  bias instability, which is how a datasheet figure is read (IEEE 952);
+- rate random walk ``b += random_walk * sqrt(dt) * N(0, 1)`` (Allan: K sqrt(tau / 3)), which
+  reflects at +-``bias_walk_bound`` x its one-hour sigma (K x 60 s^0.5) so it stays bounded;
+- turn-on bias drawn once per boot; scale error; saturation.
+
+The bias processes are generated in blocks of samples with numpy (an hour at 100 Hz takes well
+under a second). The accelerometer measures specific force: the base acceleration plus
+``gravity`` on +z. With ``noise = false`` the sensor is ideal and outputs are exact; the fault
+hooks (:meth:`ImuModel.bias_step`, :meth:`ImuModel.freeze`) work either way.
 """
 
 from __future__ import annotations
@@ -15,6 +23,7 @@ import math
 
 import numpy as np
 
+from lowerbase.errors import ConfigError
 from lowerbase.firmware_model.profile import STANDARD_GRAVITY, ImuParams
 
 Vec3 = tuple[float, float, float]
@@ -22,6 +31,9 @@ Vec3 = tuple[float, float, float]
 DEG = math.pi / 180.0  # [rad/deg]
 DEG_PER_HOUR = DEG / 3600.0  # [rad/s per deg/h]
 MICRO_G = 1e-6 * STANDARD_GRAVITY  # [m/s^2 per ug] (datasheet g is the standard one)
+ALLAN_FLOOR = 0.664  #: Allan deviation minimum of flicker noise / bias instability (IEEE 952)
+FLICKER_TAUS = tuple(10.0 ** (k / 2.0) for k in range(-1, 10))  #: [s] 0.3 .. 31623
+_TAU_GRID = np.logspace(-3.0, 6.0, 1000)  # [s] where the model's Allan minimum is searched
 
 
 def gyro_sigma(params: ImuParams) -> float:
@@ -34,32 +46,70 @@ def accel_sigma(params: ImuParams) -> float:
     return params.accel_noise_density * MICRO_G * math.sqrt(params.rate_hz)
 
 
-def reflect(x: np.ndarray, center: np.ndarray, bound: float) -> np.ndarray:
-    """Reflect ``x`` into [center - bound, center + bound] (elementwise; clipped after one fold)."""
-    y = x - center
-    y = np.where(y > bound, 2.0 * bound - y, y)
-    y = np.where(y < -bound, -2.0 * bound - y, y)
-    return center + np.clip(y, -bound, bound)
+def gauss_markov_avar(tau: np.ndarray, corr_time: float) -> np.ndarray:
+    """Allan variance of a unit-variance first-order Gauss-Markov process (correlation time
+    ``corr_time`` [s]) at averaging times ``tau`` [s]."""
+    x = tau / corr_time
+    with np.errstate(over="ignore", invalid="ignore"):
+        exact = (2.0 / x) * (1.0 - (3.0 - 4.0 * np.exp(-x) + np.exp(-2.0 * x)) / (2.0 * x))
+    series = 2.0 * (x / 3.0 - x * x / 4.0)  # small x: the exact form cancels
+    return np.where(x < 1e-3, series, exact)
 
 
-def _reflect1(x: float, center: float, bound: float) -> float:
-    """Scalar :func:`reflect`."""
-    y = x - center
-    if y > bound:
-        y = 2.0 * bound - y
-    if y < -bound:
-        y = -2.0 * bound - y
-    return center + min(max(y, -bound), bound)
+def model_avar(tau: np.ndarray, density: float, flicker: float, walk: float) -> np.ndarray:
+    """Allan variance of white (``density``) + flicker (``flicker`` = sigma of each
+    Gauss-Markov term) + random walk (``walk``); SI units."""
+    gm = sum(gauss_markov_avar(tau, t) for t in FLICKER_TAUS)
+    return density**2 / tau + flicker**2 * gm + walk**2 * tau / 3.0
 
 
-_BLOCK = 256  # samples of normals drawn from the generator at once
+def flicker_sigma(density: float, instability: float, walk: float, what: str = "imu") -> float:
+    """Sigma of each Gauss-Markov term such that the Allan deviation's minimum is
+    ``ALLAN_FLOOR * instability`` (SI units; 0 gives no flicker). ConfigError when white
+    noise and random walk alone already lie above that floor."""
+    if instability <= 0.0:
+        return 0.0
+    target = (ALLAN_FLOOR * instability) ** 2
+    floor = float(model_avar(_TAU_GRID, density, 0.0, walk).min())
+    if floor >= target:
+        raise ConfigError(
+            f"{what} is below the Allan minimum that the noise density and random walk alone "
+            f"give ({math.sqrt(floor) / ALLAN_FLOOR:.3g} in SI units); raise it, lower those, "
+            "or set it to 0 for no flicker")
+    lo, hi = 0.0, 10.0 * ALLAN_FLOOR * instability
+    for _ in range(60):  # bisection: the minimum grows with the flicker sigma
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if model_avar(_TAU_GRID, density, mid, walk).min() < target else (
+            lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def check_instabilities(p: ImuParams) -> None:
+    """ConfigError (one line, naming the key) when a bias instability cannot be the Allan
+    minimum because white noise and random walk alone lie above it."""
+    flicker_sigma(p.gyro_noise_density * DEG, p.gyro_bias_instability * DEG_PER_HOUR,
+                  p.gyro_random_walk, f"imu.gyro_bias_instability = {p.gyro_bias_instability:g}")
+    flicker_sigma(p.accel_noise_density * MICRO_G, p.accel_bias_instability * MICRO_G,
+                  p.accel_random_walk,
+                  f"imu.accel_bias_instability = {p.accel_bias_instability:g}")
+
+
+_BLOCK = 256  # samples of bias and noise generated at once
+
+
+def _fold(x: np.ndarray, bound: np.ndarray) -> np.ndarray:
+    """``x`` reflected into [-bound, bound] (a triangle wave of period 4 bound; bound 0 -> 0)."""
+    b = np.where(bound > 0.0, bound, 1.0)
+    y = np.mod(x + b, 4.0 * b)
+    return np.where(bound > 0.0, np.where(y < 2.0 * b, y, 4.0 * b - y) - b, 0.0)
 
 
 class ImuModel:
     """Stateful IMU: call :meth:`sample` once per output sample (nominally at ``rate_hz``).
 
-    Plain floats per axis (a sample costs microseconds); the normals come from the numpy
-    generator in blocks, so a seed gives the same sequence on every machine.
+    The six bias processes and white noises come from the numpy generator in blocks, so a seed
+    gives the same sequence on every machine; samples are assumed evenly spaced by the ``dt``
+    of the call that starts a block.
     """
 
     def __init__(self, params: ImuParams, rng: np.random.Generator | None = None) -> None:
@@ -72,17 +122,30 @@ class ImuModel:
             self.accel_turn_on: list[float] = [float(x) for x in a0]
         else:
             self.gyro_turn_on, self.accel_turn_on = [0.0] * 3, [0.0] * 3
-        self.gyro_bias = list(self.gyro_turn_on)  # [rad/s] turn-on + walk
-        self.accel_bias = list(self.accel_turn_on)  # [m/s^2] turn-on + walk
+        self.gyro_bias = list(self.gyro_turn_on)  # [rad/s] turn-on + flicker + walk, now
+        self.accel_bias = list(self.accel_turn_on)  # [m/s^2] turn-on + flicker + walk, now
         self.gyro_fault = [0.0, 0.0, 0.0]  # [rad/s] injected bias steps
         self.accel_fault = [0.0, 0.0, 0.0]  # [m/s^2] injected bias steps
         self.frozen = False
         self._last: tuple[Vec3, Vec3] = ((0.0, 0.0, 0.0), (0.0, 0.0, params.gravity))
-        self._normals: list[float] = []
-        self._g_sigma = gyro_sigma(params)
-        self._a_sigma = accel_sigma(params)
-        self._g_bound = params.bias_walk_bound * params.gyro_bias_instability * DEG_PER_HOUR
-        self._a_bound = params.bias_walk_bound * params.accel_bias_instability * MICRO_G
+        p = params
+        g_n, a_n = p.gyro_noise_density * DEG, p.accel_noise_density * MICRO_G
+        self._white = np.array([gyro_sigma(p)] * 3 + [accel_sigma(p)] * 3)
+        self._walk = np.array([p.gyro_random_walk] * 3 + [p.accel_random_walk] * 3)
+        self._flicker = np.array(
+            [flicker_sigma(g_n, p.gyro_bias_instability * DEG_PER_HOUR, p.gyro_random_walk,
+                           "imu.gyro_bias_instability")] * 3
+            + [flicker_sigma(a_n, p.accel_bias_instability * MICRO_G, p.accel_random_walk,
+                             "imu.accel_bias_instability")] * 3) if p.noise else np.zeros(6)
+        self._bound = p.bias_walk_bound * self._walk * 60.0  # one-hour sigma x bound
+        n_gm = len(FLICKER_TAUS)
+        # stationary start: each Gauss-Markov term drawn from its steady-state distribution
+        self._gm = self.rng.standard_normal((n_gm, 6)) * self._flicker if p.noise else np.zeros(
+            (n_gm, 6))
+        self._rw = np.zeros(6)  # the free (unreflected) walk
+        self._filter_dt = -1.0
+        self._lower = self._decay = self._drive = np.zeros(0)
+        self._rows: list[list[float]] = []  # pending samples: 6 biases + 6 white noises
 
     def bias_step(self, gyro: Vec3 = (0.0, 0.0, 0.0), accel: Vec3 = (0.0, 0.0, 0.0)) -> None:
         """Fault: add a bias step [rad/s] to the gyro and [m/s^2] to the accelerometer."""
@@ -94,12 +157,49 @@ class ImuModel:
         """Fault: while frozen, every sample repeats the last one (the model keeps running)."""
         self.frozen = on
 
-    def _draw(self) -> list[float]:
-        if not self._normals:
-            self._normals = self.rng.standard_normal(12 * _BLOCK).tolist()
-            self._normals.reverse()
-        normals = self._normals
-        return [normals.pop() for _ in range(12)]
+    def _block(self, dt: float) -> None:
+        """The next _BLOCK samples of bias (flicker + walk) and white noise, all six axes.
+
+        Each Gauss-Markov term is the exact AR(1) recursion, written as one lower-triangular
+        matrix product per block; the reflected walk is the free walk folded into +-bound
+        (reflection at both walls is that fold of the free path)."""
+        n, taus = _BLOCK, np.array(FLICKER_TAUS)
+        if self._filter_dt != dt:
+            phi = np.exp(-dt / taus)
+            lag = np.arange(n)[:, None] - np.arange(n)[None, :]
+            self._lower = np.where(lag >= 0, phi[:, None, None] ** np.maximum(lag, 0), 0.0)
+            self._decay = phi[:, None] ** np.arange(1, n + 1)[None, :]
+            self._drive = np.sqrt(-np.expm1(-2.0 * dt / taus))[:, None] * self._flicker
+            self._filter_dt = dt
+        z = self.rng.standard_normal((len(taus), n, 6)) * self._drive[:, None, :]
+        gm = np.matmul(self._lower, z) + self._decay[:, :, None] * self._gm[:, None, :]
+        self._gm = gm[:, -1, :]
+        free = self._rw + np.cumsum(self.rng.standard_normal((n, 6)), axis=0) * (
+            self._walk * math.sqrt(dt))
+        self._rw = free[-1]
+        white = self.rng.standard_normal((n, 6)) * self._white
+        rows = np.hstack([gm.sum(axis=0) + _fold(free, self._bound), white]).tolist()
+        rows.reverse()
+        self._rows = rows
+
+    def at_rest(self, n: int, dt: float) -> np.ndarray:
+        """``n`` samples of a base at rest, shape (n, 6): gyro xyz, accel xyz; the same values
+        ``n`` calls of :meth:`sample` give (without faults; for long analyses in bulk)."""
+        p = self.params
+        gain = np.array([1.0 + p.gyro_scale_error] * 3 + [1.0 + p.accel_scale_error] * 3)
+        true = np.array([0.0, 0.0, 0.0, 0.0, 0.0, p.gravity]) * gain
+        if not p.noise:
+            return np.tile(true, (n, 1))
+        rows: list[list[float]] = []
+        while len(rows) < n:
+            if not self._rows:
+                self._block(dt)
+            take = min(n - len(rows), len(self._rows))
+            rows.extend(reversed(self._rows[-take:]))
+            del self._rows[-take:]
+        z = np.array(rows)
+        turn_on = np.array(self.gyro_turn_on + self.accel_turn_on)
+        return true + turn_on + z[:, :6] + z[:, 6:]
 
     def sample(self, omega_body: Vec3, accel_body: Vec3, dt: float) -> tuple[Vec3, Vec3]:
         """One sample: true angular velocity [rad/s] and base acceleration [m/s^2] (without
@@ -108,18 +208,15 @@ class ImuModel:
         omega = [float(omega_body[0]), float(omega_body[1]), float(omega_body[2])]
         force = [float(accel_body[0]), float(accel_body[1]), float(accel_body[2]) + p.gravity]
         if p.noise:
-            z = self._draw()
-            root_dt = math.sqrt(max(dt, 0.0))
+            if not self._rows:
+                self._block(dt if dt > 0.0 else 1.0 / p.rate_hz)
+            z = self._rows.pop()
             gs, as_ = 1.0 + p.gyro_scale_error, 1.0 + p.accel_scale_error
             for i in range(3):
-                self.gyro_bias[i] = _reflect1(
-                    self.gyro_bias[i] + p.gyro_random_walk * root_dt * z[6 + i],
-                    self.gyro_turn_on[i], self._g_bound)
-                self.accel_bias[i] = _reflect1(
-                    self.accel_bias[i] + p.accel_random_walk * root_dt * z[9 + i],
-                    self.accel_turn_on[i], self._a_bound)
-                omega[i] = gs * omega[i] + self.gyro_bias[i] + self._g_sigma * z[i]
-                force[i] = as_ * force[i] + self.accel_bias[i] + self._a_sigma * z[3 + i]
+                self.gyro_bias[i] = self.gyro_turn_on[i] + z[i]
+                self.accel_bias[i] = self.accel_turn_on[i] + z[3 + i]
+                omega[i] = gs * omega[i] + self.gyro_bias[i] + z[6 + i]
+                force[i] = as_ * force[i] + self.accel_bias[i] + z[9 + i]
         g_max, a_max = p.gyro_full_scale * DEG, p.accel_full_scale * STANDARD_GRAVITY
         gyro = tuple(min(max(omega[i] + self.gyro_fault[i], -g_max), g_max) for i in range(3))
         accel = tuple(min(max(force[i] + self.accel_fault[i], -a_max), a_max) for i in range(3))

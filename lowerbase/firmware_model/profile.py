@@ -219,9 +219,9 @@ class ImuParams(_Validated):
     accel_noise_density: float = _num(70.0, 0.0, 10_000.0, "ug/sqrt(Hz)")  # white (VRW)
     gyro_random_walk: float = _num(5e-7, 0.0, 1e-2, "rad/s^2/sqrt(Hz)")  # Kalibr bias walk
     accel_random_walk: float = _num(1e-5, 0.0, 1.0, "m/s^3/sqrt(Hz)")  # Kalibr bias walk
-    gyro_bias_instability: float = _num(3.0, 0.0, 1000.0, "deg/h")  # sets the walk bound
-    accel_bias_instability: float = _num(50.0, 0.0, 10_000.0, "ug")  # sets the walk bound
-    bias_walk_bound: float = _num(3.0, 0.1, 100.0)  # walk reflects at +-this x instability
+    gyro_bias_instability: float = _num(3.0, 0.0, 1000.0, "deg/h")  # Allan minimum / 0.664
+    accel_bias_instability: float = _num(50.0, 0.0, 10_000.0, "ug")  # Allan minimum / 0.664
+    bias_walk_bound: float = _num(3.0, 0.1, 100.0)  # walk reflects at +-this x its 1 h sigma
     gyro_turn_on_bias: float = _num(0.5, 0.0, 30.0, "deg/s")  # sigma per axis, drawn at boot
     accel_turn_on_bias: float = _num(20.0, 0.0, 200.0, "mg")  # sigma per axis, drawn at boot
     gyro_scale_error: float = _num(0.003, -0.1, 0.1)  # output = (1 + e) * true
@@ -231,6 +231,12 @@ class ImuParams(_Validated):
     gravity: float = _num(STANDARD_GRAVITY, 9.7, 9.9, "m/s^2")  # local g, added on +z
     seed: int = _num(42, 0, 2**63 - 1, integer=True)  # noise generator seed
     noise: bool = True  # false: an ideal sensor (no noise, bias, walk or scale error)
+
+    def _check_relations(self) -> None:
+        """The bias instabilities must lie above the Allan floor of white noise + walk."""
+        from lowerbase.firmware_model.imu import check_instabilities
+
+        check_instabilities(self)
 
 
 @dataclass(frozen=True)

@@ -8,15 +8,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from lowerbase.firmware_model.imu import DEG, DEG_PER_HOUR, MICRO_G, ImuModel, accel_sigma
+from lowerbase.errors import ConfigError
+from lowerbase.firmware_model.imu import DEG, ImuModel, accel_sigma
 from lowerbase.firmware_model.imu import gyro_sigma as gyro_sigma_of
 from lowerbase.firmware_model.profile import STANDARD_GRAVITY, ImuParams
 
 IDEAL = ImuParams(noise=False)
-# Noise on, but only the white noise: no turn-on bias, walk or scale error.
+# Noise on, but only the white noise: no turn-on bias, flicker, walk or scale error.
 WHITE = ImuParams(
     gyro_random_walk=0.0,
     accel_random_walk=0.0,
+    gyro_bias_instability=0.0,
+    accel_bias_instability=0.0,
     gyro_turn_on_bias=0.0,
     accel_turn_on_bias=0.0,
     gyro_scale_error=0.0,
@@ -53,10 +56,11 @@ def test_same_seed_same_samples() -> None:
 
 
 def test_bias_random_walk_stays_within_its_bound() -> None:
-    params = replace(WHITE, gyro_random_walk=1e-4, accel_random_walk=1e-3, gyro_turn_on_bias=1.0)
+    params = replace(WHITE, gyro_random_walk=1e-4, accel_random_walk=1e-3, gyro_turn_on_bias=1.0,
+                     bias_walk_bound=0.1)
     imu = ImuModel(params, np.random.default_rng(2))
-    g_bound = 3.0 * 3.0 * DEG_PER_HOUR  # bias_walk_bound x gyro_bias_instability
-    a_bound = 3.0 * 50.0 * MICRO_G
+    g_bound = 0.1 * 1e-4 * 60.0  # bias_walk_bound x the walk's one-hour sigma (K x 60 s^0.5)
+    a_bound = 0.1 * 1e-3 * 60.0  # 6 K, reached within the 200 s (sigma 14 K)
     g_dev, a_dev = [], []
     for _ in range(20_000):
         imu.sample((0, 0, 0), (0, 0, 0), 0.01)
@@ -88,3 +92,9 @@ def test_bias_step_freeze_and_saturation() -> None:
     gyro, accel = imu.sample((0.0, 0.0, 100.0), (0.0, 0.0, 500.0), 0.01)
     assert gyro[2] == pytest.approx(2000 * DEG)
     assert accel[2] == pytest.approx(16 * STANDARD_GRAVITY)
+
+
+def test_an_instability_below_the_white_and_walk_floor_is_one_clear_error() -> None:
+    with pytest.raises(ConfigError, match=r"imu.gyro_bias_instability = 0.5 is below the Allan"):
+        ImuParams(gyro_bias_instability=0.5, gyro_random_walk=1e-5)
+    ImuParams(gyro_bias_instability=0.0, gyro_random_walk=1e-5)  # 0: no flicker term

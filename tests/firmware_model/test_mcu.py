@@ -208,6 +208,7 @@ def test_every_periodic_frame_at_its_rate() -> None:
             continue
         frames = rig.frames(msg.name)
         n = per_cycle.get(msg.name, 1)
+        assert msg.cycle_time is not None
         assert len(frames) == pytest.approx(10.0 / msg.cycle_time * n, abs=n), msg.name
         times = sorted({f.t for f in frames})
         gaps = {round(b - a, 6) for a, b in itertools.pairwise(times)}
@@ -374,7 +375,7 @@ def test_output_faults_drop_delay_corrupt_silence() -> None:
     corrupt = SimRig(faults=["corrupt:1"])
     corrupt.keep = False
     sizes = []
-    corrupt.mcu._send = lambda fid, data: sizes.append(  # type: ignore[method-assign]
+    corrupt.mcu._send = lambda fid, data: sizes.append(
         len(data) == default_codec().message(fid).length)
     corrupt.run(0.5)
     assert sizes and not any(sizes)

@@ -53,6 +53,13 @@ def add_subparser(subparsers: Any) -> None:
                    help="feed a python-can log (.log, .asc, .blf, ...) through the driver "
                    "instead of a live bus, with its original timing; the node stops at its "
                    "end (commands go nowhere)")
+    p.add_argument("--replay-profile", metavar="FILE",
+                   help="for a recording that starts after the driver's parameter exchange: "
+                   "answer the driver's parameter reads with the [chassis] parameters of this "
+                   "robot profile ('default': the packaged one)")
+    p.add_argument("--replay-param", action="append", default=[], metavar="NAME=VALUE",
+                   help="one such parameter by its wire name (e.g. wheelPerimeter=0.6283), "
+                   "over --replay-profile or the packaged profile (repeatable)")
     p.add_argument("ros_args", nargs="*", metavar="NAME:=VALUE",
                    help="ROS remappings and special keys (see below)")
     p.set_defaults(func=run)
@@ -74,20 +81,50 @@ def split_ros_args(args: list[str]) -> list[str]:
     return list(args)
 
 
+def replay_parameters(args: argparse.Namespace) -> dict[str, float] | None:
+    """The parameters --replay-profile/--replay-param give (wire names), or None."""
+    from lowerbase.errors import ConfigError
+    from lowerbase.firmware_model.profile import ChassisParams, load_profile
+
+    profile = getattr(args, "replay_profile", None)
+    pairs = getattr(args, "replay_param", None) or []
+    if profile is None and not pairs:
+        return None
+    if not args.replay:
+        raise ConfigError("--replay-profile and --replay-param go with --replay FILE")
+    base = load_profile(None if profile in (None, "default") else profile).chassis
+    values: dict[str, float] = {}
+    for pair in pairs:
+        name, sep, text = pair.partition("=")
+        try:
+            values[name.strip()] = float(text)
+        except ValueError:
+            sep = ""
+        if not sep:
+            raise ConfigError(f"--replay-param {pair!r}: expected NAME=VALUE, e.g. "
+                              "wheelPerimeter=0.6283") from None
+    return ChassisParams.from_wire_dict(values, base).as_wire_dict()
+
+
 def run(args: argparse.Namespace) -> int:
     from lowerbase.driver import node
     from lowerbase.errors import ConfigError
 
     ros_args = split_ros_args(args.ros_args)
+    parameters = replay_parameters(args)
     node.import_ros()  # one clear line when ROS or woosh_msgs is missing, before anything else
     if args.replay:
         if args.serial or getattr(args, "interface", None) or getattr(args, "channel", None):
             raise ConfigError("--replay replaces the bus: drop the bus options")
-        path = args.replay
-        node.ReplayLink(path)  # validate the file before starting rospy
+        import sys
+
+        replay = node.ReplayLink(args.replay, parameters=parameters)  # checked before rospy
+        if replay.advice:
+            print(f"lowerbase driver: {replay.advice}", file=sys.stderr, flush=True)
 
         def link_factory(finished: Any) -> Any:
-            return node.ReplayLink(path, finished=finished)
+            replay.finished = finished
+            return replay
     else:
         from lowerbase.transport import config_from_args
 

@@ -93,3 +93,56 @@ def test_a_whole_recording_uses_its_own_parameters(whole: Path) -> None:
     assert core.parameters["wheelPerimeter"] == pytest.approx(PARAMETERS["wheelPerimeter"])
     assert core.odometry is not None and 0.8 < core.odometry.x < 1.1
     assert ReplayLink(whole).advice is None  # nothing to say about an ordinary recording
+
+
+# -- lowerbase driver --replay FILE --replay-profile/--replay-param --------------------------
+
+
+@pytest.mark.parametrize(("argv", "says"), [
+    (["--replay-param", "wheelPerimeter=0.7"], "go with --replay FILE"),
+    (["REPLAY", "--replay-param", "wheelPerimeter"], "expected NAME=VALUE"),
+    (["REPLAY", "--replay-param", "wheelPerimeter=fast"], "expected NAME=VALUE"),
+    (["REPLAY", "--replay-param", "wheelSize=0.7"], "unknown chassis parameter"),
+    (["REPLAY", "--replay-param", "wheelPerimeter=-1"], "wheel_perimeter"),
+    (["REPLAY", "--replay-profile", "missing.toml"], "missing.toml"),
+])
+def test_cli_replay_parameters_errors_are_one_line(
+        argv: list[str], says: str, late: Path, capsys: pytest.CaptureFixture[str],
+        woosh_msgs: object) -> None:
+    from lowerbase.cli import main
+
+    argv = ["--replay", str(late), *argv[1:]] if argv[0] == "REPLAY" else argv
+    assert main(["driver", *argv]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("lowerbase driver: error: ") and "\n" not in err
+    assert says in err
+
+
+def _run_cli(argv: list[str], monkeypatch: pytest.MonkeyPatch) -> ReplayLink:
+    from lowerbase.cli import main
+    from lowerbase.driver import node
+
+    links: list[ReplayLink] = []
+
+    def fake_run(link_factory: object, ros_args: object) -> int:  # no rospy needed
+        links.append(link_factory(lambda: None))  # type: ignore[operator]
+        return 0
+
+    monkeypatch.setattr(node, "run", fake_run)
+    assert main(["driver", *argv]) == 0
+    return links[0]
+
+
+def test_cli_says_when_a_recording_starts_late_and_replays_it_with_parameters(
+        late: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+        woosh_msgs: object) -> None:
+    link = _run_cli(["--replay", str(late)], monkeypatch)
+    err = capsys.readouterr().err
+    assert "lowerbase driver: late.log starts after the driver's parameter exchange" in err
+    assert "--replay-profile FILE" in err and not link.answering
+
+    link = _run_cli(["--replay", str(late), "--replay-profile", "default",
+                     "--replay-param", "wheelPerimeter=0.7"], monkeypatch)
+    assert "answered with the given parameters" in capsys.readouterr().err
+    assert link.answering and link.finished is not None
+    assert link.parameters == {**PARAMETERS, "wheelPerimeter": 0.7}

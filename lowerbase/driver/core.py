@@ -215,7 +215,8 @@ class DriverCore:
         handler = getattr(self, f"_on_{name}", None)
         if handler is not None:
             handler(values, now)
-        if self.state == LinkState.LOST:
+        if self.state == LinkState.LOST and now - self._last_heartbeat <= \
+                self.config.link_timeout:  # back with a Heartbeat (or a bus reopened)
             log.info("lower computer link is back")
             self._settle()
 
@@ -409,7 +410,7 @@ class DriverCore:
             self._enable_wanted = False
         if previous is not None and previous != v["RobotState"]:
             self._notify("system_status")
-        if self.state != LinkState.LOST:
+        if self.state not in (LinkState.LOST, LinkState.WAITING):  # a Heartbeat comes first
             self._settle()
 
     def _on_LedState(self, v: dict[str, Any], now: float) -> None:

@@ -200,3 +200,51 @@ def test_motion_commands_resync_after_a_stall_without_a_burst() -> None:
         core.tick()
         clock.advance(0.02)
     assert len(sent) == 1 + 10  # one per tick after the stall, not 50 at once
+
+
+def _mcu_frames(seconds: float) -> list[tuple[float, int, bytes]]:
+    """What an emulated lower computer sends in its first ``seconds`` (no BMS), stamped."""
+    from lowerbase.firmware_model.mcu import Mcu
+
+    clock = SimClock()
+    frames: list[tuple[float, int, bytes]] = []
+    mcu = Mcu(load_profile(), clock, lambda fid, data: frames.append((clock.now(), fid, data)))
+    for _ in range(round(seconds / 0.01)):
+        mcu.step()
+        clock.advance(0.01)
+    return frames
+
+
+def test_frames_before_a_heartbeat_never_flap_the_link() -> None:
+    """A driver that starts mid-stream hears SystemStatus (100 ms) before the first Heartbeat
+    (500 ms); a link lost by silence comes back with its Heartbeat, not its first frame.
+    Neither makes the link flap lost/back on every frame (it did: 'no Heartbeat for inf s')."""
+    heartbeat_id = default_codec().message("Heartbeat").frame_id
+    clock = SimClock()
+    core = DriverCore(lambda fid, data: None, clock)
+    states: list[LinkState] = []
+    core.listeners.append(lambda what, c: states.append(c.state) if what == "link" else None)
+
+    def feed(frames: list[tuple[float, int, bytes]], start: float) -> None:
+        for stamp, fid, data in frames:
+            if stamp >= start:
+                clock.advance(max(stamp - clock.now(), 0.0))
+                core.on_frame(fid, data)
+                core.tick()
+
+    frames = _mcu_frames(6.0)
+    first_heartbeat = min(s for s, fid, _ in frames if fid == heartbeat_id and s >= 2.01)
+    feed([f for f in frames if f[0] < first_heartbeat], 2.01)  # no Heartbeat among them
+    assert core.state == LinkState.WAITING and core.stats["link_lost"] == 0
+    feed([f for f in frames if f[0] < 3.0], first_heartbeat)
+    assert core.state == LinkState.CONFIGURING and core.stats["link_lost"] == 0
+    clock.advance(2.0)  # silence
+    core.tick()
+    assert core.state == LinkState.LOST and core.stats["link_lost"] == 1
+    later = [(s + 2.0, fid, data) for s, fid, data in frames if s >= 3.0]
+    next_heartbeat = min(s for s, fid, _ in later if fid == heartbeat_id and s >= 5.01)
+    feed([f for f in later if f[0] < next_heartbeat], 5.01)
+    assert core.state == LinkState.LOST and core.stats["link_lost"] == 1
+    feed(later, next_heartbeat)
+    assert core.state == LinkState.CONFIGURING and core.stats["link_lost"] == 1
+    assert states.count(LinkState.LOST) == 1 and states[-1] == LinkState.CONFIGURING

@@ -52,3 +52,16 @@ def write_atomic(path: str | Path, text: str) -> None:
             os.fsync(dir_fd)
         finally:
             os.close(dir_fd)
+
+
+def remove_stale_temps(path: str | Path) -> list[Path]:
+    """Remove what a crash in :func:`write_atomic` left beside ``path`` (its temporary files,
+    ``.<name>.*.tmp``); call at start, before any write. Returns the files removed."""
+    p = Path(path)
+    removed = []
+    with contextlib.suppress(OSError):
+        for tmp in p.parent.glob(f".{p.name}.*.tmp"):
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+                removed.append(tmp)
+    return removed

@@ -176,7 +176,9 @@ class Mcu:
         }
         self._enc_stuck = {"left": 0.0, "right": 0.0}
         self.smoother = VelocitySmoother(SmootherLimits.from_chassis(self.chassis))
-        self.imu = ImuModel(self.profile.imu)
+        # a fresh turn-on bias and noise every boot, reproducible from the run seed
+        self.imu = ImuModel(self.profile.imu,
+                            np.random.default_rng([self.profile.imu.seed, self.boot_counter]))
         self._imu_last: tuple[Any, Any] | None = None
         self._imu_same = 0
         self._imu_due = now
@@ -357,8 +359,7 @@ class Mcu:
             return Result.ACK, value  # defect hook (conformance): acked, not applied
         if result != Result.ACK:
             return result, current
-        moving = any(abs(m.omega) > 1e-6 for m in self._motors.values())
-        if spec.only_at_rest and moving:
+        if spec.only_at_rest and not self.at_rest():
             return Result.NOT_ALLOWED_NOW, current
         try:
             new = self.chassis.with_wire_value(spec.name, int(value) if spec.integer else value)
@@ -372,6 +373,12 @@ class Mcu:
             return Result.STORAGE_ERROR, current
         self._apply_chassis()
         return Result.ACK, float(self.chassis.as_wire_dict()[spec.name])
+
+    def at_rest(self) -> bool:
+        """Both wheels report 0 (WheelFeedback Velocity as the upper side decodes it)."""
+        msg = self.codec.message("WheelFeedback")
+        scale = msg.signal("LeftVelocity").scale
+        return all(round(self.wheel_velocity(side) / scale) == 0 for side in ("left", "right"))
 
     def _apply_chassis(self) -> None:
         """New beliefs take effect; the hardware (motors' gears and wheels, encoders) stays."""
@@ -528,13 +535,15 @@ class Mcu:
         self.imu_sample = sample
 
     def load_current(self) -> float:
-        """Battery current drawn by the chassis [A] (positive = discharge)."""
+        """Battery current drawn by the motor drivers [A] (positive = discharge). The
+        electronics (computers, sensors, LEDs) are the battery's ``idle_current_a``, counted
+        by the pack model once."""
         total = self.profile.motor.idle_current * 2
         for motor in self._motors.values():
             # electrical power ~ torque current x motor speed share, at the pack voltage
             rpm_share = abs(motor.motor_rpm) / max(self.chassis.max_rpm, 1.0)
             total += abs(motor.current) * rpm_share
-        return total + 1.0  # computers, sensors, LEDs
+        return total
 
     def _update_bms(self, now: float, dt: float) -> None:
         if self.bms is None:

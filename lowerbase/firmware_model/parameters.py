@@ -18,7 +18,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from lowerbase.files import write_atomic
+from lowerbase.files import remove_stale_temps, write_atomic
 from lowerbase.protocol.codec import default_codec
 
 log = logging.getLogger(__name__)
@@ -103,6 +103,9 @@ class ParameterStore:
 
     def __init__(self, path: str | Path | None) -> None:
         self.path = Path(path) if path else None
+        if self.path is not None:  # a crash mid-write leaves its temporary file: clean it up
+            for tmp in remove_stale_temps(self.path):
+                log.warning("removed %s, left by an interrupted write", tmp)
 
     def load(self) -> tuple[dict[str, float], dict[str, Any], list[str]]:
         """(parameters, state, problems). Problems name what was unreadable or invalid."""

@@ -10,6 +10,8 @@ import sys
 import threading
 from typing import Any
 
+from lowerbase.cli.args import positive_seconds
+
 log = logging.getLogger("lowerbase.emulate")
 
 
@@ -38,7 +40,7 @@ def add_subparser(subparsers: Any) -> None:
                    help="parameter file, written atomically on every parameter write")
     p.add_argument("--fault", action="append", default=[], metavar="SPEC",
                    help="inject a fault (repeatable); see below")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument("--duration", type=positive_seconds, metavar="S", help="stop after S seconds")
     timing = p.add_mutually_exclusive_group()
     timing.add_argument("--realtime", dest="simulated", action="store_false",
                         help="run in real time (default)")

@@ -16,6 +16,8 @@ import threading
 import time
 from typing import Any
 
+from lowerbase.cli.args import positive_seconds
+
 
 def add_subparser(subparsers: Any) -> None:
     from lowerbase.transport import add_bus_arguments
@@ -28,7 +30,7 @@ def add_subparser(subparsers: Any) -> None:
     )
     p.add_argument("file", help="output file: .log, .asc, .blf, .csv or .trc")
     add_bus_arguments(p)
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument("--duration", type=positive_seconds, metavar="S", help="stop after S seconds")
     p.add_argument("--only", action="append", metavar="NAME",
                    help="record only these catalog messages (repeatable), e.g. --only "
                    "WheelFeedback")
@@ -46,8 +48,6 @@ def run(args: argparse.Namespace) -> int:
     from lowerbase.transport import config_from_args, describe, open_bus
 
     path = check_recording_path(args.file)
-    if args.duration is not None and not args.duration > 0:
-        raise ConfigError("--duration must be > 0")
     codec = default_codec()
     ids: set[int] | None = None
     if args.only:

@@ -53,7 +53,7 @@ KINDS: dict[str, tuple[str | None, bool]] = {
 }
 
 _SPEC = re.compile(
-    r"^(?P<kind>[a-z-]+)(?::(?P<arg>[^@+]+))?(?:@(?P<start>[0-9.]+))?(?:\+(?P<dur>[0-9.]+))?$"
+    r"^(?P<kind>[a-z-]+)(?::(?P<arg>[^@+]+))?(?:@(?P<start>[^+]*))?(?:\+(?P<dur>.*))?$"
 )
 
 
@@ -118,6 +118,18 @@ def parse_fault(spec: str) -> Fault:
     return Fault(
         kind=kind,
         arg=arg,
-        start=float(m["start"]) if m["start"] else 0.0,
-        duration=float(m["dur"]) if m["dur"] else None,
+        start=_seconds(spec, "start time @T", m["start"]) if m["start"] is not None else 0.0,
+        duration=_seconds(spec, "duration +D", m["dur"]) if m["dur"] is not None else None,
     )
+
+
+def _seconds(spec: str, what: str, text: str) -> float:
+    """A time of a fault spec: a finite number of seconds >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0):
+        raise ConfigError(f"fault {spec!r}: the {what} must be a number of seconds >= 0, "
+                          f"not {text!r} (e.g. stall:left@5+2)")
+    return value

@@ -115,8 +115,10 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         value = getattr(args, key, None)
         if value is not None:
             extra[key] = value
-    extra.update(getattr(args, "bus_kwargs", None) or {})
-    return bus_config(getattr(args, "interface", None), getattr(args, "channel", None), **extra)
+    from lowerbase.transport.options import checked_config  # --bus-kwargs checked, typed
+
+    return checked_config(getattr(args, "interface", None), getattr(args, "channel", None),
+                          extra, getattr(args, "bus_kwargs", None) or {})
 
 
 def open_bus(config: dict[str, Any] | None = None, **kwargs: Any) -> can.BusABC:

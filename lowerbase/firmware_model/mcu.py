@@ -65,7 +65,7 @@ BMS_LINK_TIMEOUT = 3.0  #: [s] without an answer -> BMS_LINK_LOST
 ENCODER_FAULT_TIME = 0.2  #: [s] commanded motion without pulses -> encoder fault
 IMU_FROZEN_SAMPLES = 20  #: identical consecutive samples -> IMU fault
 STANDBY_HINT_TIME = 1.0  #: [s] COMMAND_IN_STANDBY stays set after the last such command
-STATE_SAVE_PERIOD = 60.0  #: [s] odometer and boot counter persisted at least this often
+ODOMETER_SAVE_PERIOD = 1.0  #: [s] a changed odometer is persisted this often (a crash loses less)
 
 #: messages sent as several frames per cycle that share the cycle's counter (the catalog says)
 SHARED_COUNTER = frozenset({"WheelFeedback"})
@@ -204,6 +204,7 @@ class Mcu:
             self.status |= SB.PARAMETER_STORE_FAILED
             return
         self._last_save = self.clock.now()
+        self._saved_odometer = self.odometer
 
     def shutdown(self) -> None:
         """Persist the odometer and boot counter (a clean power-off)."""
@@ -460,7 +461,7 @@ class Mcu:
             self._imu_due += self._cycle("ImuGyro")
         self._update_bms(now, dt)
         self._update_status(now)
-        if now - self._last_save >= STATE_SAVE_PERIOD:
+        if self.odometer != self._saved_odometer and now - self._last_save >= ODOMETER_SAVE_PERIOD:
             self._save_state()
         self._emit_due(now)
         self._release_delayed(now)

@@ -54,3 +54,18 @@ def test_a_stray_temporary_parameter_file_is_removed_at_start(tmp_path: Path) ->
     assert not stray.exists()
     assert other.exists() and path.exists()
     ParameterStore(path)  # nothing left to clean: no error
+
+
+def test_a_crash_keeps_the_odometer_within_one_save_period(tmp_path: Path) -> None:
+    """No shutdown() (kill -9): the next boot reads what the periodic save wrote."""
+    from lowerbase.firmware_model.mcu import ODOMETER_SAVE_PERIOD
+
+    path = tmp_path / "params.json"
+    rig = SimRig(params_path=path)
+    rig.enable()
+    v = 0.5
+    rig.drive(v, 0.0, 3.3)
+    driven = rig.mcu.odometer
+    reborn = SimRig(params_path=path)  # the process died; a new one boots from the file
+    assert reborn.mcu.odometer > 0.0
+    assert driven - reborn.mcu.odometer <= v * ODOMETER_SAVE_PERIOD + 1e-6

@@ -68,8 +68,8 @@ def test_decode_counts_unknown_and_malformed() -> None:
 
     out = io.StringIO()
     counts = decode_stream(_frames_from_text(io.StringIO(text)), raw=False, only=None, out=out)
-    assert counts == {"frames": 3, "decoded": 1, "unknown_id": 1, "malformed": 1,
-                      "unparsed_lines": 1}
+    assert counts == {"frames": 3, "decoded": 1, "unknown_id": 1, "not_catalog": 0,
+                      "malformed": 1, "unparsed_lines": 1, "corrupt": 0}
     assert "MotionCommand" in out.getvalue() and "Mode=Smoothed" in out.getvalue()
 
 

@@ -4,8 +4,8 @@ Files written to the report directory:
 
 * ``trajectory.png``: ground truth, /odom_raw (wheel odometry) and /odom (EKF) in the plane;
 * ``velocities.png``: commanded, measured (MotionState) and true linear and angular velocity;
-* ``battery.png``: SOC (reported by the BMS frames, and the pack model's when in process),
-  pack voltage and current;
+* ``battery.png``: SOC (BmsPack's integer percent, BmsCapacity remain/full, and the pack
+  model's exact one when in process), pack voltage and current;
 * ``status.png``: every StatusCode bit that was set, and the robot and link states, over time;
 * ``summary.json``: pass/fail per expectation, final poses, events, file names;
 * ``junit.xml``: one testcase per expectation (for CI);
@@ -203,7 +203,7 @@ def plot_all(result: RunResult, out: Path) -> None:
 
 def plot_trajectory(trace: Trace, events: list[tuple[float, str]], title: str) -> Any:
     plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(7.5, 6.5), layout="constrained")
+    fig, ax = plt.subplots(figsize=(9.5, 6.5), layout="constrained")
     lines = (("truth", "ground truth", "black", "-", 2.0),
              ("raw", "/odom_raw (wheel odometry)", "tab:orange", "--", 1.5),
              ("ekf", "/odom (EKF: wheels + gyro)", "tab:blue", "-", 1.2))
@@ -231,9 +231,16 @@ def plot_trajectory(trace: Trace, events: list[tuple[float, str]], title: str) -
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.grid(True, alpha=0.4)
-    ax.legend(loc="best", fontsize=9)
+    _legend_outside(ax, fontsize=9)
     ax.set_title(f"{title}: trajectory")
     return fig
+
+
+def _legend_outside(ax: Any, fontsize: int = 8) -> Any:
+    """The legend to the right of the axes, where it cannot cover data (constrained layout
+    makes room for it)."""
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0,
+                     fontsize=fontsize)
 
 
 def _events(axes: Any, events: list[tuple[float, str]]) -> None:
@@ -268,7 +275,7 @@ def plot_velocities(trace: Trace, events: list[tuple[float, str]], title: str) -
         ax.plot(t, trace[f"meas_{key}"], color="tab:blue", lw=1.0, label="measured (MotionState)")
         ax.set_ylabel(f"{name} [{unit}]")
         ax.grid(True, alpha=0.4)
-        ax.legend(loc="upper right", fontsize=8)
+        _legend_outside(ax)
     axes[-1].set_xlabel("t [s]")
     _events(axes, events)
     fig.suptitle(f"{title}: velocities")
@@ -281,13 +288,16 @@ def plot_battery(trace: Trace, events: list[tuple[float, str]], title: str) -> A
     t = trace["t"]
     ax = axes[0]
     if trace.has("soc"):
-        ax.step(t, trace["soc"], where="post", color="tab:green", label="reported (BmsPack)")
+        ax.step(t, trace["soc"], where="post", color="tab:green", label="BmsPack Soc (integer)")
+    if trace.has("capacity_soc"):
+        ax.plot(t, trace["capacity_soc"], color="tab:blue", lw=1.2,
+                label="BmsCapacity remain/full")
     if trace.has("pack_soc"):
-        ax.plot(t, trace["pack_soc"], color="black", lw=1.0, label="pack model")
+        ax.plot(t, trace["pack_soc"], color="black", ls="--", lw=1.0, label="pack model (exact)")
     ax.set_ylabel("SOC [%]")
     ax.grid(True, alpha=0.4)
-    if trace.has("soc") or trace.has("pack_soc"):
-        ax.legend(loc="best", fontsize=8)
+    if trace.has("soc") or trace.has("pack_soc") or trace.has("capacity_soc"):
+        _legend_outside(ax)
     else:
         ax.text(0.5, 0.5, "no battery frames", transform=ax.transAxes, ha="center")
     ax = axes[1]

@@ -291,6 +291,8 @@ def _sample(now: float, harness: Harness, publisher: _Publisher) -> dict[str, fl
         s["soc"] = float(battery["batteryPercentage"])
         s["voltage"] = float(battery["batteryVoltage"])
         s["current"] = float(battery["batteryCurrent"])
+        if battery["capacityFull"] > 0:  # finer than the integer SOC, also over a bus
+            s["capacity_soc"] = 100.0 * battery["capacityRemain"] / battery["capacityFull"]
     pack = harness.pack_soc()
     if pack is not None:
         s["pack_soc"] = pack

@@ -218,6 +218,7 @@ COLUMNS: dict[str, str] = {
     "meas_v": "m/s", "meas_w": "rad/s",  # MotionState (measured twist)
     "cmd_v": "m/s", "cmd_w": "rad/s",  # the twist the scenario publishes
     "soc": "%", "pack_soc": "%", "voltage": "V", "current": "A",
+    "capacity_soc": "%",  # BmsCapacity remain/full: the model's SOC in 0.01 Ah steps
     "status": "",  # StatusCode as the driver received it
     "robot_state": "",  # SystemStatus RobotState (-1 until received)
     "link": "",  # index into LINK_STATES

@@ -3,7 +3,9 @@
 A thin layer over python-can's writers (``can.Logger``); python-can's own ``python -m
 can.logger`` records too. This adds what it lacks for this protocol: lowerbase's default
 transport, a filter by catalog message name (``--only``), a decoded echo (``--print``) and an
-end after ``--duration`` seconds.
+end after ``--duration`` seconds. On a terminal, a status line shows the frame count as it
+grows (rewritten in place, at most twice a second); when stderr is not a terminal, or with
+``--print``, only the start and end lines are printed.
 """
 
 from __future__ import annotations
@@ -14,9 +16,43 @@ import signal
 import sys
 import threading
 import time
-from typing import Any
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TextIO
 
 from lowerbase.cli.args import positive_seconds
+
+
+class LiveCount:
+    """``recording: N frame(s), R/s -> FILE`` on a terminal, rewritten in place at most every
+    ``period`` [s] of ``clock``; silent when ``stream`` is not a terminal."""
+
+    def __init__(self, stream: TextIO, path: Path, *, enabled: bool = True, period: float = 0.5,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.stream, self.path, self.period, self.clock = stream, path, period, clock
+        self.enabled = enabled and stream.isatty()
+        self._t0 = clock()
+        self._last = -float("inf")
+        self._shown = False
+
+    def update(self, count: int) -> None:
+        if not self.enabled:
+            return
+        now = self.clock()
+        if now - self._last < self.period:
+            return
+        self._last = now
+        rate = count / (now - self._t0) if now > self._t0 else 0.0
+        self.stream.write(f"\rrecording: {count} frame(s), {rate:.0f}/s -> {self.path}\x1b[K")
+        self.stream.flush()
+        self._shown = True
+
+    def done(self) -> None:
+        """Erase the status line (the caller prints the final count)."""
+        if self._shown:
+            self.stream.write("\r\x1b[K")
+            self.stream.flush()
+            self._shown = False
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -70,9 +106,11 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"cannot write {path}: {exc}") from None
     print(f"lowerbase record: {describe(config)} -> {path}; Ctrl-C stops", file=sys.stderr)
     end = time.monotonic() + args.duration if args.duration is not None else None
+    live = LiveCount(sys.stderr, path, enabled=not args.print_frames)
     try:
         with contextlib.suppress(KeyboardInterrupt):
             while not stop.is_set():
+                live.update(count)
                 timeout = 0.2 if end is None else min(0.2, end - time.monotonic())
                 if timeout <= 0:
                     break
@@ -89,6 +127,7 @@ def run(args: argparse.Namespace) -> int:
                         name, values = f"0x{msg.arbitration_id:03X}", {"error": str(exc)}
                     print(f"{msg.timestamp:.6f} {name:<18} {values}", flush=True)
     finally:
+        live.done()
         writer.stop()
         with contextlib.suppress(can.CanError):
             bus.shutdown()

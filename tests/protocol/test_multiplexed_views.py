@@ -39,7 +39,7 @@ def test_decode_prints_each_wheel_with_its_own_signals() -> None:
     assert left.endswith("Wheel=Left LeftCount=123456 pulses LeftVelocity=0.512 m/s "
                          "LeftCurrent=1.25 A LeftDriverStatus=0 Counter=7")
     assert right.endswith("Wheel=Right RightCount=123457 pulses RightVelocity=0.498 m/s "
-                          "RightCurrent=-1.5 A RightDriverStatus=4 Counter=7")
+                          "RightCurrent=-1.50 A RightDriverStatus=4 Counter=7")  # 0.25 A steps
 
 
 def test_dbc_signals_marks_the_multiplexer_and_its_values(

@@ -53,3 +53,11 @@ class ModbusDeviceError(DeviceError):
 
 class RosUnavailableError(LowerbaseError):
     """rospy or the generated woosh_msgs cannot be imported."""
+
+
+class MapError(ConfigError):
+    """A map that cannot be used: a malformed map file, a bad resolution, an unknown name."""
+
+
+class WorldError(LowerbaseError):
+    """A world request that cannot be met: a pose inside a wall, a sensor outside the base, ..."""

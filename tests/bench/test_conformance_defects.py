@@ -15,6 +15,7 @@ import pytest
 from lowerbase.bench.conformance import registry, select
 from lowerbase.cli import main
 from lowerbase.protocol.codec import default_codec
+from lowerbase.transport import open_bus
 from tests.bench.mutating_proxy import MutatingProxy, Mutation, swap_wheels
 from tests.conftest import TEST_GROUP, Proc, bus_cli_args, free_udp_port
 
@@ -51,7 +52,7 @@ def proxied() -> Iterator[tuple[MutatingProxy, list[str]]]:
     proc = Proc(["emulate", *bus_cli_args(config), "--no-bms"])
     proc.wait_for("lower computer on")
     channel = f"conformance-proxy-{next(_channels)}-{config['port']}"
-    lower = can.Bus(**config)
+    lower = open_bus(config)  # lowerbase's udp_multicast (loopback only), as the emulator's
     upper = can.Bus(interface="virtual", channel=channel)
     proxy = MutatingProxy(lower, upper)
     try:

@@ -1,0 +1,230 @@
+"""The emulator's frame trace is pinned: same seed, same frames, bit for bit.
+
+A standard drive (boot, raw and smoothed driving, LEDs, parameters, version strings, a rejected
+command, the watchdog, and every fault kind including the conformance defects, a FaultClear
+and a reboot) is recorded as every frame's (simulated time, id, bytes) plus the ground truth
+at the end of each segment. The SHA-256 of each segment was recorded with the emulator as it
+was before the speed work of issue 10 (the general control loop, one method call per
+concern); any change of behaviour, however small, changes a hash. The lean loop used when no
+fault or defect is active must give exactly the trace the general loop gives.
+
+The hashes depend on IEEE doubles and numpy's PCG64 streams, which are the same on every
+platform CPython and numpy support; a different libm could in principle change a last bit of
+sin/cos/expm1 (it has not on x86_64 glibc, where they were recorded).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+from collections.abc import Callable
+from typing import Any
+
+from lowerbase.bms.adapter import McuBmsAdapter
+from lowerbase.firmware_model.mcu import Command
+from lowerbase.firmware_model.profile import Profile, load_profile
+from lowerbase.firmware_model.sim import SimRig
+from lowerbase.protocol.status_codes import StatusBit
+
+#: segment name -> (frames, sha256 of frames + truth) recorded before the speed work
+EXPECTED: dict[str, tuple[int, str]] = {
+    "boot_and_drive":
+        (3065, "50bdf411e8c795b0238f8e29fd866bab502a4392ae595bc4f6ecf2d521afea70"),
+    "requests":
+        (1146, "3f04a3948299fdb2e6e8b278ae6bd2765fcfd5d2e4295158ce0ebd7482c5bb2a"),
+    "bus_faults":
+        (1036, "a9ee62ca38e826d1713dc22747551d2d3cbe8d5bb7cf97105fe03468d3bc1856"),
+    "motion_faults":
+        (1459, "da912a7b9992befa7b9daf82db4f4ff644ae3f5b5e3c9338383608fcff33c8ab"),
+    "sensor_faults":
+        (3078, "196e9bcfb5e9f95c11c8858fd12c3ed0420d84b16a9e18053e0e8c7c5436f459"),
+    "estop_and_defects":
+        (2667, "ede811db5a57895f34dfd0e26c5a7f5ed5fdafd9dd166d0cb0be34e7e26f2f29"),
+    "reboot":
+        (1180, "4f57574f50dea9ee7fd95f407fd807a159336eea4fc85bf19cdc0dc22669794d"),
+    "ideal/boot_and_drive":
+        (3030, "2684cadf2c5335189afb1b0c27221074a5c216a996574b6eb21b23a1a8e29f86"),
+    "ideal/reboot":
+        (1170, "a4dec6fc630f3f35771396602de6bae0483bcd463d48f1a7dbc5db05f1bbc509"),
+}
+
+
+class TraceRig(SimRig):
+    """A SimRig that keeps every frame as (t, id, data), nothing decoded."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        self.trace: list[tuple[float, int, bytes]] = []
+        super().__init__(**kwargs)
+
+    def _on_send(self, frame_id: int, data: bytes) -> None:
+        self.trace.append((self.clock.now(), frame_id, data))
+
+
+def _digest(rig: TraceRig, start: int) -> tuple[int, str]:
+    h = hashlib.sha256()
+    for t, frame_id, data in rig.trace[start:]:
+        h.update(f"{t!r} {frame_id} {data.hex()}\n".encode())
+    tr, m = rig.mcu.truth, rig.mcu
+    h.update(repr((tr.x, tr.y, tr.yaw, tr.v, tr.w, tr.distance, m.odometer,
+                   m.encoder_counts(), m.status, int(m.state))).encode())
+    return len(rig.trace) - start, h.hexdigest()
+
+
+def _segments() -> list[tuple[str, Callable[[TraceRig], None]]]:
+    def boot_and_drive(r: TraceRig) -> None:
+        r.enable()
+        r.drive(0.6, 0.2, 3.0)
+        r.drive(-0.4, -0.5, 2.0, smoothed=True)
+        r.drive(0.8, 0.0, 1.5, smoothed=True)
+        r.drive(2.5, 0.0, 0.3)  # beyond maxLinear: SPEED_LIMITED
+        r.drive(0.0, 0.0, 0.5)
+
+    def requests(r: TraceRig) -> None:
+        r.send("LedCommand", Strip=1, Submodule=0, Urgency=0xFF, Abnormal=0, Normal=0xA3,
+               Color=0x00FF00)
+        r.send("ParameterRequest", Index=1, Op=0, Value=0.0)
+        r.send("VersionRequest", Field=0)
+        r.mcu.command(math.nan, 0.0)  # rejected
+        r.mcu.receive(r.codec.message("MotionCommand").frame_id, b"\x01\x02")  # malformed
+        r.run(0.3)
+        r.send("ControlCommand", Command="FaultClear")
+        r.drive(0.3, 0.0, 1.0)
+        r.run(1.5)  # the watchdog brakes
+
+    def bus_faults(r: TraceRig) -> None:
+        r.mcu.inject("drop:0.2@0+1")  # relative to boot: started now by inject(start 0)
+        r.drive(0.5, 0.1, 1.2)
+        r.mcu.inject("corrupt:0.3")
+        r.drive(0.5, 0.1, 0.6)
+        r.mcu.clear_fault("corrupt")
+        r.mcu.inject("delay:0.03")
+        r.drive(0.5, 0.1, 0.6)
+        r.mcu.clear_fault("delay")
+        r.mcu.inject("silence")
+        r.drive(0.5, 0.1, 0.4)
+        r.mcu.clear_fault()
+        r.drive(0.5, 0.1, 0.4)
+
+    def motion_faults(r: TraceRig) -> None:
+        r.mcu.inject("stall:left")
+        r.drive(0.5, 0.0, 1.5)
+        r.mcu.clear_fault("stall")
+        r.send("ControlCommand", Command="FaultClear")
+        r.run(0.1)
+        r.send("ControlCommand", Command="EnableCanControl")
+        r.drive(0.5, 0.0, 0.5)
+        r.mcu.inject("encoder:right")
+        r.drive(0.5, 0.0, 0.6)
+        r.mcu.clear_fault("encoder")
+        r.mcu.inject("overcurrent:right")
+        r.drive(0.5, 0.0, 0.3)
+        r.mcu.clear_fault()
+        r.send("ControlCommand", Command="FaultClear")
+        r.run(0.1)
+        r.send("ControlCommand", Command="EnableCanControl")
+        r.drive(0.4, -0.3, 0.5)
+
+    def sensor_faults(r: TraceRig) -> None:
+        r.mcu.inject("imu-bias:0.05")
+        r.drive(0.4, 0.3, 0.7)
+        r.mcu.inject("imu-freeze")
+        r.drive(0.4, 0.3, 0.5)
+        r.mcu.clear_fault()
+        r.drive(0.4, 0.3, 0.3)
+        r.mcu.bms.connect_charger()
+        r.run(1.2)
+        r.mcu.bms.disconnect_charger()
+        r.mcu.inject("bms-silence")
+        r.drive(0.2, 0.0, 4.0)
+        r.mcu.clear_fault()
+        r.drive(0.2, 0.0, 1.0)
+
+    def estop_and_defects(r: TraceRig) -> None:
+        r.mcu.inject("estop")
+        r.drive(0.3, 0.0, 0.4)
+        r.mcu.clear_fault()
+        r.send("ControlCommand", Command="EStopRelease")
+        r.run(0.1)
+        r.send("ControlCommand", Command="EnableCanControl")
+        r.mcu.control(Command.ESTOP_SET)
+        r.run(0.2)
+        r.send("ControlCommand", Command="EStopRelease")
+        r.send("ControlCommand", Command="EnableCanControl")
+        for defect in ("counter-stuck", "slow-heartbeat", "no-watchdog"):
+            r.mcu.inject(f"defect:{defect}")
+            r.drive(0.3, 0.1, 0.6)
+            r.run(1.2)
+            r.mcu.clear_fault()
+        r.run(0.5)
+
+    def reboot(r: TraceRig) -> None:
+        r.send("ControlCommand", Command="Reboot")
+        r.enable()
+        r.drive(0.7, -0.2, 2.0)
+        r.send("ControlCommand", Command="OdometerReset")
+        r.drive(0.7, 0.4, 1.0, smoothed=True)
+
+    return [("boot_and_drive", boot_and_drive), ("requests", requests),
+            ("bus_faults", bus_faults), ("motion_faults", motion_faults),
+            ("sensor_faults", sensor_faults), ("estop_and_defects", estop_and_defects),
+            ("reboot", reboot)]
+
+
+def ideal_profile() -> Profile:
+    """No motor lag or ramp, no IMU noise: the other branches of the models."""
+    p = load_profile()
+    return p.replace(motor=dataclasses.replace(p.motor, time_constant=0.0, max_wheel_accel=0.0),
+                     imu=dataclasses.replace(p.imu, noise=False))
+
+
+def record() -> dict[str, tuple[int, str]]:
+    """Run the standard drive (default profile with its BMS), then the first and last
+    segments on the ideal profile without a BMS; segment name -> (frames, digest)."""
+    out = {}
+    p = load_profile()
+    runs = [("", TraceRig(profile=p, bms=McuBmsAdapter.from_battery_table(p.battery),
+                          keep=False), _segments()),
+            ("ideal/", TraceRig(profile=ideal_profile(), keep=False),
+             [_segments()[0], _segments()[-1]])]
+    for prefix, rig, segments in runs:
+        for name, segment in segments:
+            start = len(rig.trace)
+            segment(rig)
+            out[prefix + name] = _digest(rig, start)
+    return out
+
+
+def test_the_frame_trace_is_what_it_was() -> None:
+    got = record()
+    assert list(got) == list(EXPECTED)
+    for name in EXPECTED:
+        assert got[name] == EXPECTED[name], name
+
+
+def test_the_trace_covers_every_kind_of_frame() -> None:
+    """Not a trace of nothing: every frame the lower computer sends appears."""
+    p = load_profile()
+    rig = TraceRig(profile=p, bms=McuBmsAdapter.from_battery_table(p.battery), keep=False)
+    for _, segment in _segments():
+        segment(rig)
+    sent = {frame_id for _, frame_id, _ in rig.trace}
+    lower = {m.frame_id for m in rig.codec if "Lower" in m.senders}
+    assert lower <= sent
+    assert rig.mcu.stats["tx_dropped"] > 0 and rig.mcu.stats["tx_corrupted"] > 0
+    assert rig.mcu.stats["tx_silenced"] > 0
+    status = rig.codec.message("StatusCode")
+    seen = 0
+    for _, frame_id, data in rig.trace:
+        if frame_id == status.frame_id and len(data) == status.length:
+            seen |= int(status.decode(data)["Code"])
+    for bit in ("ESTOP_BUTTON", "ESTOP_COMMAND", "WATCHDOG_STOP", "COMMAND_REJECTED",
+                "COMMAND_IN_STANDBY", "LEFT_MOTOR_FAULT", "RIGHT_OVER_CURRENT",
+                "LEFT_MOTOR_STALLED", "RIGHT_ENCODER_FAULT", "IMU_FAULT", "BMS_LINK_LOST",
+                "BUS_ERROR", "SPEED_LIMITED", "CHARGING"):
+        assert seen & StatusBit[bit], bit
+
+
+if __name__ == "__main__":  # print the table to pin (after a deliberate behaviour change)
+    for name, (n, digest) in record().items():
+        print(f'    "{name}": ({n}, "{digest}"),')

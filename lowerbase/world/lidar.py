@@ -1,0 +1,269 @@
+"""2D lidars on the base, ray-cast against the map and the obstacles, merged into one /scan.
+
+Each :class:`Lidar` casts its beams from its mounting pose (numpy, :mod:`raycast`), adds the
+datasheet's range noise and dropouts from its own seeded generator, and reports in REP-117
+terms: ``+inf`` no return within ``range_max``, ``-inf`` a return closer than ``range_min``,
+``NaN`` a dropout (no valid measurement). :class:`ScanMerger` then does what the real chassis'
+"fusion of multiple lidars" does (as ira_laser_tools' laserscan_multi_merger): every valid return
+is projected into ``base_link`` and each merged beam takes the nearest return whose bearing from
+the base origin falls into it. The scan's motion during one sweep is not modelled.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lowerbase.errors import ConfigError
+from lowerbase.world.raycast import Scene, cast_grid, cast_solids, solids_taller_than
+
+TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class LaserScan:
+    """sensor_msgs/LaserScan without ROS (angles [rad], ranges [m] float32, stamp [s])."""
+
+    frame_id: str
+    stamp: float
+    angle_min: float
+    angle_max: float
+    angle_increment: float
+    time_increment: float
+    scan_time: float
+    range_min: float
+    range_max: float
+    ranges: np.ndarray
+
+    @property
+    def angles(self) -> np.ndarray:
+        return self.angle_min + np.arange(self.ranges.size) * self.angle_increment
+
+
+def _check(name: str, key: str, value: float, lo: float, hi: float, unit: str,
+           lo_open: bool = False) -> None:
+    ok = math.isfinite(value) and (value > lo if lo_open else value >= lo) and value <= hi
+    if not ok:
+        bound = f"{'>' if lo_open else '>='} {lo:g} and <= {hi:g}"
+        raise ConfigError(f"lidar {name!r}: {key} = {value!r} is invalid; allowed: {bound}{unit}")
+
+
+@dataclass(frozen=True)
+class LidarConfig:
+    """One 2D lidar. Angles in radians, lengths in metres; mounting pose on ``base_link``."""
+
+    name: str = "front"
+    frame_id: str = "laser_front"
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.2                 # scan plane height above the floor
+    yaw: float = 0.0
+    fov: float = math.radians(275.0)
+    angular_step: float = math.radians(1.0 / 6.0)
+    range_min: float = 0.05
+    range_max: float = 40.0
+    rate_hz: float = 25.0
+    range_sigma: float = 0.012     # [m] 1-sigma range noise at 0 m ...
+    range_sigma_per_m: float = 0.0  # ... growing by this many metres per metre of range
+    dropout_prob: float = 0.0      # probability that a beam has no valid measurement (NaN)
+    seed: int = 1
+
+    def __post_init__(self) -> None:
+        n = self.name
+        if not self.name or not self.frame_id:
+            raise ConfigError("lidar name and frame_id must be non-empty")
+        for key in ("x", "y", "yaw"):
+            _check(n, key, getattr(self, key), -100.0, 100.0, "")
+        _check(n, "z", self.z, 0.0, 10.0, " m")
+        _check(n, "fov", self.fov, 0.0, TWO_PI, " rad", lo_open=True)
+        _check(n, "angular_step", self.angular_step, 0.0, self.fov, " rad", lo_open=True)
+        _check(n, "range_min", self.range_min, 0.0, 1000.0, " m")
+        _check(n, "range_max", self.range_max, self.range_min, 1000.0, " m", lo_open=True)
+        _check(n, "rate_hz", self.rate_hz, 0.0, 1000.0, " Hz", lo_open=True)
+        _check(n, "range_sigma", self.range_sigma, 0.0, 10.0, " m")
+        _check(n, "range_sigma_per_m", self.range_sigma_per_m, 0.0, 1.0, "")
+        _check(n, "dropout_prob", self.dropout_prob, 0.0, 1.0, "")
+        if self.dropout_prob >= 1.0:
+            raise ConfigError(f"lidar {n!r}: dropout_prob = 1 leaves no measurement; "
+                              f"allowed: >= 0 and < 1")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ConfigError(f"lidar {n!r}: seed = {self.seed!r} must be an integer >= 0")
+        if self.beams < 1 or self.beams > 100_000:
+            raise ConfigError(f"lidar {n!r}: fov / angular_step gives {self.beams} beams; "
+                              f"allowed: 1..100000")
+
+    @property
+    def beams(self) -> int:
+        full = self.fov >= TWO_PI - 1e-9
+        steps = self.fov / self.angular_step
+        return round(steps) if full else math.floor(steps + 1e-4) + 1
+
+    @property
+    def angle_min(self) -> float:
+        return -math.pi if self.fov >= TWO_PI - 1e-9 else -self.fov / 2.0
+
+    @property
+    def angles(self) -> np.ndarray:
+        """Beam angles in the lidar frame [rad]."""
+        return self.angle_min + np.arange(self.beams) * self.angular_step
+
+
+class Lidar:
+    """One lidar: true ranges by ray casting, then noise and dropouts (seeded, stateful)."""
+
+    def __init__(self, config: LidarConfig) -> None:
+        self.config = config
+        self.rng = np.random.default_rng(config.seed)
+        self._angles = config.angles
+
+    def true_ranges(self, scene: Scene, pose: tuple[float, float, float]) -> np.ndarray:
+        """Exact distances [m] (inf: nothing within range_max) with the base at ``pose``
+        (x, y, theta in the map frame)."""
+        cfg = self.config
+        bx, by, bt = pose
+        c, s = math.cos(bt), math.sin(bt)
+        lx, ly = bx + c * cfg.x - s * cfg.y, by + s * cfg.x + c * cfg.y
+        world = self._angles + (bt + cfg.yaw)
+        dist = cast_grid(scene.mask, scene.grid, lx, ly, world, cfg.range_max).distance
+        solids = solids_taller_than(scene.solids, cfg.z)
+        if solids:
+            dist = np.minimum(dist, cast_solids(solids, lx, ly, world))
+        return np.where(dist <= cfg.range_max, dist, np.inf)
+
+    def measure(self, true: np.ndarray) -> np.ndarray:
+        """REP-117 ranges (float32) from true distances: noise, limits, dropouts."""
+        cfg = self.config
+        n = true.size
+        finite = np.isfinite(true)
+        sigma = cfg.range_sigma + cfg.range_sigma_per_m * np.where(finite, true, 0.0)
+        noisy = true + sigma * self.rng.standard_normal(n)
+        out = np.where(finite, np.clip(noisy, cfg.range_min, cfg.range_max), np.inf)
+        out = np.where(true < cfg.range_min, -np.inf, out)
+        if cfg.dropout_prob > 0:
+            out = np.where(self.rng.random(n) < cfg.dropout_prob, np.nan, out)
+        return out.astype(np.float32)
+
+    def scan(self, scene: Scene, pose: tuple[float, float, float], stamp: float) -> LaserScan:
+        cfg = self.config
+        period = 1.0 / cfg.rate_hz
+        return LaserScan(cfg.frame_id, stamp, cfg.angle_min,
+                         cfg.angle_min + (cfg.beams - 1) * cfg.angular_step, cfg.angular_step,
+                         period / cfg.beams, period, cfg.range_min, cfg.range_max,
+                         self.measure(self.true_ranges(scene, pose)))
+
+
+@dataclass(frozen=True)
+class MergedScanConfig:
+    """The fused /scan in base_link: ``beams`` bins from ``angle_min`` over ``fov`` [rad]."""
+
+    frame_id: str = "base_link"
+    beams: int = 720
+    angle_min: float = -math.pi
+    fov: float = TWO_PI
+
+    def __post_init__(self) -> None:
+        if isinstance(self.beams, bool) or not isinstance(self.beams, int) \
+                or not 1 <= self.beams <= 100_000:
+            raise ConfigError(f"scan.beams = {self.beams!r} is invalid; allowed: 1..100000")
+        if not (math.isfinite(self.fov) and 0 < self.fov <= TWO_PI):
+            raise ConfigError(f"scan.fov = {self.fov!r} is invalid; allowed: > 0 and <= 2 pi")
+        if not (math.isfinite(self.angle_min) and -TWO_PI <= self.angle_min <= TWO_PI):
+            raise ConfigError(f"scan.angle_min = {self.angle_min!r} is invalid; allowed: "
+                              f"-2 pi .. 2 pi")
+        if not self.frame_id:
+            raise ConfigError("scan.frame_id must be non-empty")
+
+    @property
+    def full_circle(self) -> bool:
+        return self.fov >= TWO_PI - 1e-9
+
+    @property
+    def increment(self) -> float:
+        return self.fov / (self.beams if self.full_circle else max(self.beams - 1, 1))
+
+
+@dataclass
+class ScanMerger:
+    """Fuses the lidars' scans into one LaserScan in base_link (nearest return per bin)."""
+
+    lidars: Sequence[LidarConfig]
+    merged: MergedScanConfig = field(default_factory=MergedScanConfig)
+
+    def __post_init__(self) -> None:
+        if not self.lidars:
+            raise ConfigError("at least one lidar is needed for /scan")
+        names = [lc.name for lc in self.lidars]
+        if len(set(names)) != len(names):
+            raise ConfigError(f"lidar names must be unique, got {names}")
+
+    @property
+    def rate_hz(self) -> float:
+        """The merged scan comes at the slowest lidar's rate."""
+        return min(lc.rate_hz for lc in self.lidars)
+
+    @property
+    def range_min(self) -> float:
+        return min(lc.range_min for lc in self.lidars)
+
+    @property
+    def range_max(self) -> float:
+        return max(lc.range_max + math.hypot(lc.x, lc.y) for lc in self.lidars)
+
+    def merge(self, scans: Sequence[LaserScan], stamp: float) -> LaserScan:
+        """Nearest valid return per merged beam. A beam with none is ``-inf`` if a lidar saw
+        something too close in it, else ``+inf`` if a lidar looked through it without a return,
+        else ``NaN`` (only dropouts, or no lidar covers it)."""
+        m = self.merged
+        n = m.beams
+        inc = m.increment
+        best = np.full(n, np.inf)
+        too_close = np.zeros(n, dtype=bool)
+        clear = np.zeros(n, dtype=bool)
+        for lc, scan in zip(self.lidars, scans, strict=True):
+            r = scan.ranges.astype(float)
+            beam = scan.angles + lc.yaw
+            finite = np.isfinite(r)
+            # Non-finite beams are binned along their direction (at range_max / range_min).
+            reach = np.where(finite, r, np.where(r == np.inf, lc.range_max, lc.range_min))
+            px = lc.x + reach * np.cos(beam)
+            py = lc.y + reach * np.sin(beam)
+            rel = np.arctan2(py, px) - m.angle_min
+            idx = np.round(np.mod(rel, TWO_PI) / inc).astype(np.int64)
+            if m.full_circle:
+                idx %= n
+            inside = (idx >= 0) & (idx < n)
+            valid = inside & finite
+            np.minimum.at(best, idx[valid], np.hypot(px[valid], py[valid]))
+            too_close[idx[inside & (r == -np.inf)]] = True
+            clear[idx[inside & (r == np.inf)]] = True
+        out = np.where(np.isfinite(best), best,
+                       np.where(too_close, -np.inf, np.where(clear, np.inf, np.nan)))
+        period = 1.0 / self.rate_hz
+        return LaserScan(m.frame_id, stamp, m.angle_min, m.angle_min + (n - 1) * inc, inc,
+                         period / n, period, self.range_min, self.range_max,
+                         out.astype(np.float32))
+
+
+class LidarRig:
+    """The robot's lidars and their merger: ``scan()`` is one /scan message."""
+
+    def __init__(self, lidars: Sequence[LidarConfig],
+                 merged: MergedScanConfig | None = None) -> None:
+        self.merger = ScanMerger(list(lidars), merged or MergedScanConfig())
+        self.lidars = [Lidar(lc) for lc in lidars]
+
+    @property
+    def rate_hz(self) -> float:
+        return self.merger.rate_hz
+
+    def scans(self, scene: Scene, pose: tuple[float, float, float],
+              stamp: float) -> list[LaserScan]:
+        """Each lidar's own scan, in its own frame."""
+        return [lidar.scan(scene, pose, stamp) for lidar in self.lidars]
+
+    def scan(self, scene: Scene, pose: tuple[float, float, float], stamp: float) -> LaserScan:
+        """The merged scan in base_link."""
+        return self.merger.merge(self.scans(scene, pose, stamp), stamp)

@@ -10,11 +10,13 @@ import pytest
 from PIL import Image
 
 from lowerbase.errors import MapError
+from lowerbase.world import mapgen
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.maps import (
     MAP_NAMES,
     MapMeta,
     load_map,
+    maps_dir,
     parse_map_yaml,
     pixels_to_cells,
     read_map,
@@ -200,3 +202,49 @@ def test_missing_yaml_and_unknown_name() -> None:
     assert str(err.value) == ("unknown map 'wearhouse': known maps are corridor_loop, "
                               "empty_room, warehouse (or give the path of a map .yaml)")
 
+
+
+def test_names_resolve_to_the_shipped_files() -> None:
+    for name in MAP_NAMES:
+        path = resolve_map(name)
+        assert path.name == f"{name}.yaml" and path.is_file()
+        grid = load_map(name)
+        assert grid.resolution == 0.05 and grid.origin == (0.0, 0.0, 0.0)
+    assert resolve_map() == resolve_map("warehouse")
+
+
+def test_shipped_files_are_what_the_generator_draws(tmp_path: Path) -> None:
+    written = mapgen.write_library(tmp_path)
+    assert sorted(p.name for p in written) == sorted(
+        f"{n}.{ext}" for n in MAP_NAMES for ext in ("yaml", "pgm"))
+    for path in written:
+        shipped = maps_dir() / path.name
+        assert shipped.read_bytes() == path.read_bytes(), (
+            f"{shipped} differs from the generator: run python -m lowerbase.world.mapgen")
+    for name, make in mapgen.GENERATORS.items():
+        assert np.array_equal(load_map(name).data, make().data)
+
+
+def test_warehouse_scale_and_aisles() -> None:
+    grid = load_map("warehouse")
+    assert grid.size_m == pytest.approx((30.0, 20.0))
+    occupied = grid.occupied()
+    for block, (centres, (x0, x1)) in mapgen.WAREHOUSE_AISLES.items():
+        c0, c1 = round(x0 / 0.05), round(x1 / 0.05)
+        for y in centres:
+            # the aisle is 1.5 m of free floor over the rack's whole length ...
+            r0, r1 = round((y - 0.75) / 0.05), round((y + 0.75) / 0.05)
+            assert (grid.data[r0:r1, c0:c1] == 0).all(), (block, y)
+            # ... bounded by racks (occupied) on both sides, at least where the racks are
+            assert occupied[r0 - 1, c0:c1].mean() > 0.5 and occupied[r1, c0:c1].mean() > 0.5
+    # the charging station sits on the south wall
+    cx0, cy0, cx1, cy1 = mapgen.WAREHOUSE_CHARGER
+    assert occupied[round(cy0 / 0.05):round(cy1 / 0.05), round(cx0 / 0.05):round(cx1 / 0.05)].all()
+
+
+@pytest.mark.parametrize("name", MAP_NAMES)
+def test_maps_are_not_symmetric(name: str) -> None:
+    """A localizer needs a map that differs from its mirror images and its 180-degree turn."""
+    occupied = load_map(name).occupied()
+    for other in (occupied[::-1], occupied[:, ::-1], occupied[::-1, ::-1]):
+        assert (occupied != other).sum() > 200, name

@@ -19,8 +19,9 @@ a 1.28 m circle).
 
 from __future__ import annotations
 
+import math
 import sys
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +29,7 @@ from skimage.draw import polygon as draw_polygon
 
 from lowerbase.world.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from lowerbase.world.maps import MAP_NAMES, maps_dir, write_map
+from lowerbase.world.places import Charger, Places, places_path, write_places
 
 RESOLUTION = 0.05
 WALL = 0.2
@@ -129,17 +131,56 @@ def warehouse() -> OccupancyGrid:
     return c.grid()
 
 
-GENERATORS = {"empty_room": empty_room, "corridor_loop": corridor_loop, "warehouse": warehouse}
+WEST, SOUTH = math.pi, -math.pi / 2
+
+
+def empty_room_places() -> Places:
+    return Places(storage={"R1": (8.0, 2.0, 0.0), "R2": (8.0, 6.0, 0.0)},
+                  charger=Charger((1.0, 4.0, WEST), (2.0, 4.0, WEST)),
+                  poses={"start": (5.0, 4.0, 0.0)})
+
+
+def corridor_loop_places() -> Places:
+    # the west leg is 2 m wide: the approach pose is only 0.4 m before the docked pose
+    return Places(storage={"C1": (12.0, 1.2, 0.0), "C2": (12.0, 12.8, math.pi),
+                           "C3": (22.8, 7.0, math.pi / 2)},
+                  charger=Charger((1.0, 8.0, WEST), (1.4, 8.0, WEST)),
+                  poses={"start": (6.0, 1.2, 0.0)})
+
+
+#: storage points along each aisle (x), facing east; mark_no "<block><aisle>-<slot>"
+WAREHOUSE_SLOTS = {"A": (9.5, 12.5, 15.5), "B": (21.0, 26.5)}
+
+
+def warehouse_places() -> Places:
+    storage = {}
+    for block, (centres, _) in WAREHOUSE_AISLES.items():
+        for aisle, y in enumerate(centres, start=1):
+            for slot, x in enumerate(WAREHOUSE_SLOTS[block], start=1):
+                storage[f"{block}{aisle}-{slot:02d}"] = (x, y, 0.0)
+    cx = (WAREHOUSE_CHARGER[0] + WAREHOUSE_CHARGER[2]) / 2
+    return Places(storage=storage, charger=Charger((cx, 1.0, SOUTH), (cx, 2.0, SOUTH)),
+                  poses={"start": (4.0, 4.0, 0.0), "office": (4.0, 17.0, 0.0)})
+
+
+GENERATORS: dict[str, tuple[Callable[[], OccupancyGrid], Callable[[], Places]]] = {
+    "empty_room": (empty_room, empty_room_places),
+    "corridor_loop": (corridor_loop, corridor_loop_places),
+    "warehouse": (warehouse, warehouse_places),
+}
 assert tuple(sorted(GENERATORS)) == MAP_NAMES
 
 
 def write_library(outdir: Path) -> list[Path]:
-    """Write every map (YAML + PGM) into ``outdir``; returns the files written."""
+    """Write every map (YAML + PGM + places) into ``outdir``; returns the files written."""
     outdir.mkdir(parents=True, exist_ok=True)
     written = []
-    for name, make in GENERATORS.items():
-        written.append(write_map(make(), outdir / f"{name}.yaml"))
-        written.append(outdir / f"{name}.pgm")
+    for name, (make_map, make_places) in GENERATORS.items():
+        yaml_path = write_map(make_map(), outdir / f"{name}.yaml")
+        written += [yaml_path, outdir / f"{name}.pgm"]
+        written.append(write_places(make_places(), places_path(yaml_path),
+                                    f"Named places of {name}.yaml: poses [x m, y m, yaw rad], "
+                                    "map frame (python -m lowerbase.world.mapgen)"))
     return written
 
 

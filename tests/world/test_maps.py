@@ -216,12 +216,12 @@ def test_names_resolve_to_the_shipped_files() -> None:
 def test_shipped_files_are_what_the_generator_draws(tmp_path: Path) -> None:
     written = mapgen.write_library(tmp_path)
     assert sorted(p.name for p in written) == sorted(
-        f"{n}.{ext}" for n in MAP_NAMES for ext in ("yaml", "pgm"))
+        f"{n}.{ext}" for n in MAP_NAMES for ext in ("yaml", "pgm", "places.yaml"))
     for path in written:
         shipped = maps_dir() / path.name
         assert shipped.read_bytes() == path.read_bytes(), (
             f"{shipped} differs from the generator: run python -m lowerbase.world.mapgen")
-    for name, make in mapgen.GENERATORS.items():
+    for name, (make, _) in mapgen.GENERATORS.items():
         assert np.array_equal(load_map(name).data, make().data)
 
 

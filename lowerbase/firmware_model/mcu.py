@@ -155,6 +155,7 @@ class Mcu:
         self._last_cmd_time = -math.inf
         self._standby_cmd_time = -math.inf
         self._watchdog = False
+        self._watchdog_ramp = False  # watchdog stop down the smoother's decel limits
         self._speed_limited = False
         self._next_due = {m.name: now + (m.cycle_time or 0.0) for m in self._periodic}
         # like a CANopen boot-up message: the first frame after a boot is the Heartbeat with
@@ -471,7 +472,7 @@ class Mcu:
         stop = bool(self.status & STOPPING) or self.estop_command or self.motion_fault
         if self.state != RobotState.ACTIVE or stop:
             self.smoother.reset(*self._measured_twist())
-            self._watchdog = False
+            self._watchdog = self._watchdog_ramp = False
             return 0.0, 0.0, True
         timed_out = now - self._last_cmd_time > self.chassis.command_timeout
         if timed_out and self._active("defect", "no-watchdog"):  # defect hook (conformance)
@@ -483,10 +484,19 @@ class Mcu:
             # by the watchdog
             asked = self._last_cmd is not None and (self._last_cmd[0] or self._last_cmd[1])
             self._watchdog = self._watchdog or moving or bool(asked)
+            if self._last_cmd is not None:  # the deadline has just passed
+                self._watchdog_ramp = self._last_cmd[2] == 1
             self._last_cmd = None
+            if self._watchdog_ramp and (self.smoother.v or self.smoother.w):
+                # after Smoothed commands: slow down at linear/angularDecelLimit, as ROS
+                # diff_drive_controller's limiter does on a command timeout (a load on the
+                # robot stays put), then brake; Raw commands brake at the motor's limit
+                v, w = self.smoother.step(0.0, 0.0, self.dt)
+                return v, w, False
+            self._watchdog_ramp = False
             self.smoother.reset(*self._measured_twist())
             return 0.0, 0.0, True
-        self._watchdog = False
+        self._watchdog = self._watchdog_ramp = False
         v, w, mode = self._last_cmd
         if mode == 1:
             v, w = self.smoother.step(v, w, self.dt)

@@ -47,7 +47,7 @@ class StatusBit(enum.IntFlag):
 DESCRIPTIONS: dict[StatusBit, tuple[bool, str]] = {
     StatusBit.ESTOP_BUTTON: (True, "Emergency-stop button pressed; motors braked, released by EStopRelease once the button is up."),
     StatusBit.ESTOP_COMMAND: (True, "Emergency stop set by ControlCommand EStopSet; released by EStopRelease."),
-    StatusBit.WATCHDOG_STOP: (False, "No MotionCommand within commandTimeout while moving under CAN control: braked to zero. Clears on the next valid command."),
+    StatusBit.WATCHDOG_STOP: (False, "No MotionCommand within commandTimeout while moving under CAN control: stopped (at linear/angularDecelLimit after Smoothed commands, at the motor's limit after Raw ones) and held braked. Clears on the next valid command."),
     StatusBit.COMMAND_REJECTED: (True, "A MotionCommand was rejected: NaN, infinite, outside the catalog range or not decodable. Cleared by FaultClear."),
     StatusBit.COMMAND_IN_STANDBY: (False, "MotionCommands arrive while the chassis is in standby (CAN control not enabled); they are ignored."),
     StatusBit.LEFT_MOTOR_FAULT: (True, "Left motor driver fault (stall or over-current persisted); motors stopped until FaultClear."),

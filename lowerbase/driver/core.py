@@ -102,7 +102,15 @@ class DriverCore:
         self.clock = clock
         self.config = config or DriverConfig()
         self.codec = codec or default_codec()
-        self._decoders = self.codec.decoders()
+        # frame ID -> (compiled decoder, handler or None, sent by the lower computer): one
+        # dict lookup per frame instead of a catalog lookup and a getattr by name
+        self._dispatch: dict[int, tuple[Callable[[bytes, bool], tuple[str, Any]],
+                                        Callable[[dict[str, Any], float], None] | None,
+                                        bool]] = {}
+        for frame_id, decode in self.codec.decoders().items():
+            msg = self.codec.message(frame_id)
+            self._dispatch[frame_id] = (decode, getattr(self, f"_on_{msg.name}", None),
+                                        "Lower" in msg.senders)
         mc = self.codec.message("MotionCommand")
         #: the wire range of MotionCommand's Linear [m/s] and Angular [rad/s]
         self._twist_range = tuple(
@@ -196,23 +204,22 @@ class DriverCore:
         """Handle one frame. Unknown and malformed frames are counted and logged, not raised."""
         now = self.clock.now() if stamp is None else stamp
         self.stats["frames"] += 1
-        decode = self._decoders.get(frame_id)
-        if decode is None:
+        entry = self._dispatch.get(frame_id)
+        if entry is None:
             self._malformed(frame_id, UnknownMessageError(f"unknown ID {frame_id:#05x}"), now)
             return
+        decode, handler, from_lower = entry
         try:
-            name, values = decode(data, True)
+            _name, values = decode(data, True)
         except ProtocolError as exc:
             self._malformed(frame_id, exc, now)
             return
-        msg = self.codec.message(frame_id)
-        if "Lower" not in msg.senders:
+        if not from_lower:
             return  # our own commands, heard back on a shared bus
         if frame_id == self.peers.heartbeat_id and self.peers.on_frame(frame_id, data, now):
             self.stats["two_lower_computers"] += 1
             log.warning("%s", self.peers.warning)
             self._notify("two_lower_computers")
-        handler = getattr(self, f"_on_{name}", None)
         if handler is not None:
             handler(values, now)
         if self.state == LinkState.LOST and now - self._last_heartbeat <= \
@@ -380,8 +387,9 @@ class DriverCore:
         self.imu_stamp = now
         if self.odometry is not None and not self.status_code & _IMU_FAULT:
             # the gyro is the EKF's yaw-rate reference; once the lower computer flags the
-            # IMU as faulty (frozen output) the EKF runs on the wheels alone
-            self.ekf.update_gyro(gyro[2], stamp=now, sigma=self.config.gyro_sigma)
+            # IMU as faulty (frozen output) the EKF runs on the wheels alone. The samples
+            # are queued and fused as one with the next wheel update (one EKF step per cycle)
+            self.ekf.add_gyro(gyro[2], now, sigma=self.config.gyro_sigma)
 
     def _on_ImuAccel(self, v: dict[str, Any], now: float) -> None:
         gyro = self.imu[0] if self.imu is not None else (0.0, 0.0, 0.0)
@@ -399,6 +407,8 @@ class DriverCore:
 
     def _on_StatusCode(self, v: dict[str, Any], now: float) -> None:
         self.status_code = int(v["Code"])
+        if self.status_code & _IMU_FAULT:
+            self.ekf.discard_gyro()  # queued samples of a gyro now known to be frozen
         self._notify("status_code")
 
     def _on_SystemStatus(self, v: dict[str, Any], now: float) -> None:

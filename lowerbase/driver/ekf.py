@@ -21,7 +21,11 @@ velocity [m/s], yaw rate [rad/s] and the z-gyro's bias [rad/s].
   then ``w`` is rejected and ``v`` down-weighted (a slipping wheel corrupts it by half the
   slip); only if both disagree is the whole measurement dropped.
 * Gyro update: measures ``w + b``, gated as well; the bias is updated only at standstill
-  (while moving it is a consider state, so wheel errors cannot leak into it).
+  (while moving it is a consider state, so wheel errors cannot leak into it). The driver
+  queues the gyro samples (:meth:`PlanarEkf.add_gyro`, 100 Hz) and fuses their mean, with
+  variance sigma^2/n, right before each wheel update (50 Hz): one predict and two small
+  updates per wheel cycle instead of three of each. The summed rate, hence the integrated
+  heading, is the same; the yaw rate used between updates is one gyro sample later.
 * Standstill: when the wheels have reported exactly no motion for ``standstill_time``, a
   zero-velocity pseudo-measurement pins ``v`` and ``w`` to zero, so the gyro then measures pure
   bias and the bias converges (physical-data.md 5.2: a standstill bias estimate is mandatory).
@@ -36,7 +40,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import Enum
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
@@ -46,6 +50,7 @@ from lowerbase.errors import ConfigError
 #: state indices
 X, Y, YAW, V, W, B = range(6)
 DIM_X = 6
+_EYE = np.eye(DIM_X)
 
 # Chi-square quantiles at 99.9 % for 1 and 2 degrees of freedom.
 CHI2_999_1DOF = 10.828
@@ -138,20 +143,20 @@ class Gate(Enum):
 def motion_model(x: np.ndarray, dt: float) -> np.ndarray:
     """State after ``dt`` [s] of constant v and w (midpoint position step)."""
     out = np.array(x, dtype=float, copy=True)
-    v, w = float(x[V, 0]), float(x[W, 0])
-    mid = float(x[YAW, 0]) + 0.5 * w * dt
+    v, w, yaw = out.item(V, 0), out.item(W, 0), out.item(YAW, 0)
+    mid = yaw + 0.5 * w * dt
     out[X, 0] += v * dt * math.cos(mid)
     out[Y, 0] += v * dt * math.sin(mid)
-    out[YAW, 0] += w * dt
+    out[YAW, 0] = yaw + w * dt
     return out
 
 
 def motion_jacobian(x: np.ndarray, dt: float) -> np.ndarray:
     """d motion_model / d x at ``x`` for a step of ``dt`` [s]."""
-    v, w = float(x[V, 0]), float(x[W, 0])
-    mid = float(x[YAW, 0]) + 0.5 * w * dt
+    v, w = x.item(V, 0), x.item(W, 0)
+    mid = x.item(YAW, 0) + 0.5 * w * dt
     c, s = math.cos(mid), math.sin(mid)
-    f = np.eye(DIM_X)
+    f = _EYE.copy()
     f[X, YAW] = -v * dt * s
     f[X, V] = dt * c
     f[X, W] = -v * dt * s * 0.5 * dt
@@ -164,22 +169,22 @@ def motion_jacobian(x: np.ndarray, dt: float) -> np.ndarray:
 
 def process_noise(x: np.ndarray, dt: float, noise: EkfNoise) -> np.ndarray:
     """Discrete process noise for a step of ``dt`` [s] (white-acceleration model)."""
-    q = np.zeros((DIM_X, DIM_X))
-    yaw = float(x[YAW, 0])
-    u = np.array([math.cos(yaw), math.sin(yaw)])
-    n = np.array([-math.sin(yaw), math.cos(yaw)])
-    qa = noise.linear_accel**2
-    q[X : Y + 1, X : Y + 1] = qa * dt**3 / 3 * np.outer(
-        u, u
-    ) + noise.lateral_slip**2 * dt * np.outer(n, n)
-    q[X : Y + 1, V] = q[V, X : Y + 1] = qa * dt**2 / 2 * u
-    q[V, V] = qa * dt
-    qw = noise.angular_accel**2
-    q[YAW, YAW] = qw * dt**3 / 3
-    q[YAW, W] = q[W, YAW] = qw * dt**2 / 2
-    q[W, W] = qw * dt
-    q[B, B] = noise.gyro_bias_walk**2 * dt
-    return q
+    yaw = x.item(YAW, 0)
+    c, s = math.cos(yaw), math.sin(yaw)
+    qa, qw = noise.linear_accel**2, noise.angular_accel**2
+    pos = qa * dt**3 / 3  # along the heading u = (c, s)
+    lat = noise.lateral_slip**2 * dt  # across it, n = (-s, c)
+    xv, yv = qa * dt**2 / 2 * c, qa * dt**2 / 2 * s
+    xy = (pos - lat) * c * s
+    yaw_w = qw * dt**2 / 2
+    return np.array([
+        [pos * c * c + lat * s * s, xy, 0.0, xv, 0.0, 0.0],
+        [xy, pos * s * s + lat * c * c, 0.0, yv, 0.0, 0.0],
+        [0.0, 0.0, qw * dt**3 / 3, 0.0, yaw_w, 0.0],
+        [xv, yv, 0.0, qa * dt, 0.0, 0.0],
+        [0.0, 0.0, yaw_w, 0.0, qw * dt, 0.0],
+        [0.0, 0.0, 0.0, 0.0, 0.0, noise.gyro_bias_walk**2 * dt],
+    ])
 
 
 def _selector(*indices: int) -> np.ndarray:
@@ -195,6 +200,21 @@ _H_W = _selector(W)
 _H_GYRO = np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0]])
 #: states a moving wheel measurement may not correct (see the module docstring)
 _WHEEL_CONSIDER = (X, Y, YAW, B)
+#: gain masks: 0 for the consider states, 1 for the others (a column, broadcast over K)
+_KEEP: dict[tuple[int, ...], np.ndarray] = {
+    c: np.array([[0.0 if i in c else 1.0] for i in range(DIM_X)])
+    for c in (_WHEEL_CONSIDER, (B,))}
+#: covariance masks: 0 on the consider x consider block (kept by the update), 1 elsewhere
+_KEEP_BLOCK: dict[tuple[int, ...], np.ndarray] = {
+    c: 1.0 - (1.0 - m) @ (1.0 - m).T for c, m in _KEEP.items()}
+
+
+class _Innovation(NamedTuple):
+    y: np.ndarray  #: innovation z - H x
+    s: np.ndarray  #: its covariance H P H^T + R
+    si: np.ndarray  #: S^-1
+    pht: np.ndarray  #: P H^T
+    d2: float  #: Mahalanobis distance squared y^T S^-1 y
 
 
 class PlanarEkf:
@@ -243,6 +263,11 @@ class PlanarEkf:
         self._consecutive = {"wheel_linear": 0, "wheel_angular": 0, "gyro": 0}
         #: counts of gate outcomes, by sensor and outcome
         self.statistics: dict[str, int] = {}
+        self._r_default = np.diag([n.wheel_linear**2, n.wheel_angular**2])
+        # gyro samples queued by add_gyro: count, sum [rad/s], first and last stamp [s], sigma
+        self._gyro_n, self._gyro_sum = 0, 0.0
+        self._gyro_first = self._gyro_last = 0.0
+        self._gyro_sigma = n.gyro_noise
 
     # -- inspection --------------------------------------------------------------------------
 
@@ -357,12 +382,15 @@ class PlanarEkf:
 
         ``covariance`` is the 2x2 (or row-major 4-tuple) twist covariance of the odometry;
         default ``diag(wheel_linear^2, wheel_angular^2)``. Detects standstill and then applies
-        the zero-velocity update instead.
+        the zero-velocity update instead. Gyro samples queued by :meth:`add_gyro` are applied
+        first, as one measurement at this time.
         """
         if not (math.isfinite(linear) and math.isfinite(angular)):
             return self._count("wheel", Gate.INVALID)
         if stamp is not None:
             self.predict_to(stamp)
+        if self._gyro_n:
+            self._flush_gyro()
         n = self.noise
         if (
             abs(linear) <= n.standstill_threshold_linear
@@ -374,18 +402,20 @@ class PlanarEkf:
             self._still_since = None
         if self.is_standstill:
             r = np.diag([n.standstill_linear**2, n.standstill_angular**2])
-            self._apply(np.zeros((2, 1)), _H_TWIST, r)
+            z = np.zeros((2, 1))
+            self._apply(z, _H_TWIST, r, self._innovation(z, _H_TWIST, r))
             return self._count("wheel", Gate.STANDSTILL)
 
         r = self._twist_r(covariance)
         z = np.array([[linear], [angular]])
-        y, s, d2 = self._innovation(z, _H_TWIST, r)
+        inn = self._innovation(z, _H_TWIST, r)
+        y, s, d2 = inn.y, inn.s, inn.d2
         if d2 <= n.gate_2dof:
             self._consecutive["wheel_linear"] = self._consecutive["wheel_angular"] = 0
-            self._apply(z, _H_TWIST, r, consider=_WHEEL_CONSIDER)
+            self._apply(z, _H_TWIST, r, inn, consider=_WHEEL_CONSIDER)
             return self._count("wheel", Gate.ACCEPTED)
-        v_pass = float(y[0, 0] ** 2 / s[0, 0]) <= n.gate_1dof
-        w_pass = float(y[1, 0] ** 2 / s[1, 1]) <= n.gate_1dof
+        v_pass = y.item(0, 0) ** 2 / s.item(0, 0) <= n.gate_1dof
+        w_pass = y.item(1, 0) ** 2 / s.item(1, 1) <= n.gate_1dof
         v_ok = v_pass or self._force("wheel_linear")
         w_ok = w_pass or self._force("wheel_angular")
         if v_pass:
@@ -393,28 +423,80 @@ class PlanarEkf:
         if w_pass:
             self._consecutive["wheel_angular"] = 0
         if v_ok and w_ok:  # each plausible alone (jointly marginal), or forced back in
-            self._apply(z, _H_TWIST, r, consider=_WHEEL_CONSIDER)
+            self._apply(z, _H_TWIST, r, inn, consider=_WHEEL_CONSIDER)
             return self._count("wheel", Gate.ACCEPTED if v_pass and w_pass else Gate.FORCED)
         if v_ok:  # slipping wheel: yaw rate out, speed down-weighted
-            self._apply(z[:1], _H_V, r[:1, :1] * n.slip_inflation, consider=_WHEEL_CONSIDER)
+            z1, r1 = z[:1], r[:1, :1] * n.slip_inflation
+            self._apply(z1, _H_V, r1, self._innovation(z1, _H_V, r1, keep=False),
+                        consider=_WHEEL_CONSIDER)
             return self._count("wheel", Gate.ANGULAR_REJECTED)
         if w_ok:
-            self._apply(z[1:], _H_W, r[1:, 1:], consider=_WHEEL_CONSIDER)
+            z1, r1 = z[1:], r[1:, 1:]
+            self._apply(z1, _H_W, r1, self._innovation(z1, _H_W, r1, keep=False),
+                        consider=_WHEEL_CONSIDER)
             return self._count("wheel", Gate.LINEAR_REJECTED)
         return self._count("wheel", Gate.REJECTED)
 
     def update_gyro(
         self, rate: float, stamp: float | None = None, sigma: float | None = None
     ) -> Gate:
-        """z-gyro reading ``rate`` [rad/s] (measures ``w + b``), 1-sigma ``sigma`` [rad/s]."""
+        """z-gyro reading ``rate`` [rad/s] (measures ``w + b``), 1-sigma ``sigma`` [rad/s].
+
+        Applied at once (queued samples of :meth:`add_gyro` first)."""
         if not math.isfinite(rate):
             return self._count("gyro", Gate.INVALID)
         if stamp is not None:
             self.predict_to(stamp)
-        r = np.array([[(sigma if sigma is not None else self.noise.gyro_noise) ** 2]])
+        if self._gyro_n:
+            self._flush_gyro()
+        return self._gyro(rate, sigma if sigma is not None else self.noise.gyro_noise)
+
+    def add_gyro(self, rate: float, stamp: float, sigma: float | None = None) -> Gate | None:
+        """Queue a z-gyro sample [rad/s] taken at ``stamp`` [s] (1-sigma ``sigma``).
+
+        The samples between two wheel updates are applied as one measurement, their mean with
+        variance ``sigma^2 / n``, just before the next :meth:`update_wheels` (so the filter
+        runs once per wheel cycle, not once per gyro sample). Samples spanning more than
+        ``max_step`` (no wheels: an encoder fault) are applied without waiting. Returns
+        ``Gate.INVALID`` for a non-finite sample (dropped), else the gate of a measurement
+        applied now, or None when the sample was only queued.
+        """
+        if not (math.isfinite(rate) and math.isfinite(stamp)):
+            return self._count("gyro", Gate.INVALID)
+        sigma = self.noise.gyro_noise if sigma is None else sigma
+        gate = None
+        if self._gyro_n and (sigma != self._gyro_sigma
+                             or stamp - self._gyro_first > self.noise.max_step):
+            self.predict_to(self._gyro_last)
+            gate = self._flush_gyro()
+        if not self._gyro_n:
+            self._gyro_first, self._gyro_sigma = stamp, sigma
+        self._gyro_sum += rate
+        self._gyro_n += 1
+        self._gyro_last = stamp
+        return gate
+
+    @property
+    def pending_gyro(self) -> int:
+        """Gyro samples queued by :meth:`add_gyro`, not applied yet."""
+        return self._gyro_n
+
+    def discard_gyro(self) -> None:
+        """Drop the queued gyro samples (the gyro was found faulty)."""
+        self._gyro_n, self._gyro_sum = 0, 0.0
+
+    # -- internals ---------------------------------------------------------------------------
+
+    def _flush_gyro(self) -> Gate:
+        n, mean = self._gyro_n, self._gyro_sum / self._gyro_n
+        self.discard_gyro()
+        return self._gyro(mean, self._gyro_sigma / math.sqrt(n))
+
+    def _gyro(self, rate: float, sigma: float) -> Gate:
+        r = np.array([[sigma**2]])
         z = np.array([[rate]])
-        _, _, d2 = self._innovation(z, _H_GYRO, r)
-        gated = self.noise.gate_gyro and d2 > self.noise.gate_1dof
+        inn = self._innovation(z, _H_GYRO, r)
+        gated = self.noise.gate_gyro and inn.d2 > self.noise.gate_1dof
         if gated and not self._force("gyro"):
             return self._count("gyro", Gate.REJECTED)
         forced = gated
@@ -423,15 +505,12 @@ class PlanarEkf:
         # moving, a wheel/gyro disagreement is as likely a wheel radius or slip error as a
         # bias, and letting the bias absorb it turns a wheel error into a heading drift; so
         # the bias is a "consider" state then (its uncertainty counts, its value stays).
-        self._apply(z, _H_GYRO, r, consider=() if self.is_standstill else (B,))
+        self._apply(z, _H_GYRO, r, inn, consider=() if self.is_standstill else (B,))
         return self._count("gyro", Gate.FORCED if forced else Gate.ACCEPTED)
 
-    # -- internals ---------------------------------------------------------------------------
-
     def _twist_r(self, covariance: np.ndarray | tuple[float, ...] | None) -> np.ndarray:
-        n = self.noise
         if covariance is None:
-            return np.diag([n.wheel_linear**2, n.wheel_angular**2])
+            return self._r_default
         r = np.asarray(covariance, dtype=float).reshape(2, 2)
         if not np.all(np.isfinite(r)) or r[0, 0] <= 0 or r[1, 1] <= 0:
             raise ValueError(f"wheel twist covariance must be finite and positive, got {r}")
@@ -439,38 +518,59 @@ class PlanarEkf:
         return sym
 
     def _innovation(
-        self, z: np.ndarray, h: np.ndarray, r: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, float]:
-        y = z - h @ self.kf.x
-        s = h @ self.kf.P @ h.T + r
-        d2 = float((y.T @ np.linalg.solve(s, y)).item())
-        self.innovation, self.innovation_covariance, self.mahalanobis_sq = y, s, d2
-        return y, s, d2
+        self, z: np.ndarray, h: np.ndarray, r: np.ndarray, keep: bool = True
+    ) -> _Innovation:
+        """Innovation ``y``, its covariance ``S`` and inverse, ``P H^T`` and Mahalanobis^2.
+
+        ``keep``: also store y, S and the distance as the last gated measurement's."""
+        kf = self.kf
+        pht = kf.P @ h.T
+        s = h @ pht + r
+        y = z - h @ kf.x
+        if len(s) == 1:
+            si = 1.0 / s
+            d2 = y.item(0, 0) ** 2 * si.item(0, 0)
+        elif len(s) == 2:  # closed form: numpy's solve/inv cost more than the whole update
+            a, b, c, d = s.item(0, 0), s.item(0, 1), s.item(1, 0), s.item(1, 1)
+            det = a * d - b * c
+            si = np.array([[d / det, -b / det], [-c / det, a / det]])
+            y0, y1 = y.item(0, 0), y.item(1, 0)
+            d2 = (y0 * (d * y0 - b * y1) + y1 * (a * y1 - c * y0)) / det
+        else:  # pragma: no cover - every measurement here is 1-D or 2-D
+            si = np.linalg.inv(s)
+            d2 = float((y.T @ si @ y).item())
+        if keep:
+            self.innovation, self.innovation_covariance, self.mahalanobis_sq = y, s, d2
+        return _Innovation(y, s, si, pht, d2)
 
     def _apply(
-        self, z: np.ndarray, h: np.ndarray, r: np.ndarray, consider: tuple[int, ...] = ()
+        self, z: np.ndarray, h: np.ndarray, r: np.ndarray, inn: _Innovation,
+        consider: tuple[int, ...] = (),
     ) -> None:
+        """Kalman update with the gain's ``consider`` rows zeroed (Schmidt-Kalman).
+
+        With no consider state this is filterpy's ``ExtendedKalmanFilter.update`` for a linear
+        ``h`` (same attributes set). With consider states, those keep their value (zero gain)
+        while their uncertainty still weighs the measurement. P follows the Joseph form
+        ``(I - KH) P (I - KH)^T + K R K^T``, right for this sub-optimal gain too; for the gain
+        ``K = M P H^T S^-1`` (``M`` zeroes the consider rows) it reduces exactly to
+        ``P - C + N C N`` with ``C = P H^T S^-1 H P`` and ``N = I - M``: ``P - C``
+        everywhere but the consider x consider block, which keeps its P. Spelled out so, the
+        update is a handful of small products instead of LAPACK calls and 6x6 triple products.
+        """
         kf = self.kf
-        if not consider:
-            kf.update(z, lambda _x: h, lambda x: h @ x, R=r)
-        else:
-            # Schmidt-Kalman "consider" update: the states in ``consider`` keep their value
-            # (zero gain) but their uncertainty still weighs the measurement. The Joseph form
-            # keeps P right for this sub-optimal gain. Attributes as filterpy's update sets them.
-            pht = kf.P @ h.T
-            kf.S = h @ pht + r
-            kf.SI = np.linalg.inv(kf.S)
-            k = pht @ kf.SI
-            k[list(consider), :] = 0.0
-            kf.K = k
-            kf.y = z - h @ kf.x
-            kf.x = kf.x + k @ kf.y
-            i_kh = np.eye(DIM_X) - k @ h
-            kf.P = i_kh @ kf.P @ i_kh.T + k @ r @ k.T
-            kf.z = z.copy()
-            kf.x_post = kf.x.copy()
-            kf.P_post = kf.P.copy()
-        kf.P = 0.5 * (kf.P + kf.P.T)
+        gain = inn.pht @ inn.si  # the optimal gain
+        c = gain @ inn.pht.T
+        if consider:
+            gain = gain * _KEEP[consider]
+            c *= _KEEP_BLOCK[consider]
+        kf.S, kf.SI, kf.K, kf.y = inn.s, inn.si, gain, inn.y
+        kf.x = kf.x + gain @ inn.y
+        p = kf.P - c
+        kf.P = 0.5 * (p + p.T)
+        kf.z = z.copy()
+        kf.x_post = kf.x.copy()
+        kf.P_post = kf.P.copy()
 
     def _force(self, sensor: str) -> bool:
         self._consecutive[sensor] += 1

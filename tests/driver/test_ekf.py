@@ -263,6 +263,7 @@ def simulate(
     gyro_sigma: float = 0.002,
     seed: int = 42,
     laps: int = 2,
+    queue_gyro: bool = False,
 ) -> Run:
     rng = np.random.default_rng(seed)
     dt = 0.01
@@ -303,7 +304,12 @@ def simulate(
             # gyro at 100 Hz, quantised like ImuGyro.Z
             gz = w * (1 + gyro_scale_error) + gyro_bias + rng.normal(0, gyro_sigma)
             gz = round(gz / GYRO_LSB) * GYRO_LSB
-            run.gyro_gates.append(ekf.update_gyro(gz, stamp=t))
+            if queue_gyro:  # as the driver does: fused with the next wheel update
+                queued = ekf.add_gyro(gz, t)
+                if queued is not None:
+                    run.gyro_gates.append(queued)
+            else:
+                run.gyro_gates.append(ekf.update_gyro(gz, stamp=t))
             # wheels at 50 Hz
             if k % 2 == 0:
                 left = (math.floor(pos_l) + 2**31) % 2**32 - 2**31
@@ -320,9 +326,9 @@ def simulate(
     return run
 
 
-@pytest.fixture(scope="module")
-def p6_run() -> Run:
-    return simulate()
+@pytest.fixture(scope="module", params=[False, True], ids=["per-sample", "queued-gyro"])
+def p6_run(request: pytest.FixtureRequest) -> Run:
+    return simulate(queue_gyro=request.param)
 
 
 def _heading_errors(run: Run) -> tuple[np.ndarray, np.ndarray]:
@@ -414,3 +420,84 @@ def test_pose_covariance_does_not_grow_at_standstill_but_does_while_driving() ->
     start, after_60_s, driven = _stand_then_drive(61.0, 5.0)
     assert after_60_s == pytest.approx(start, rel=1e-6, abs=1e-12)
     assert driven > 2 * start  # moving: the pose uncertainty grows again
+
+
+# -- the update arithmetic against filterpy and the plain Joseph form -------------------------
+
+
+def _moving_filter(seed: int = 3) -> PlanarEkf:
+    rng = np.random.default_rng(seed)
+    ekf = PlanarEkf(stamp=0.0)
+    for k in range(1, 60):
+        ekf.update_gyro(0.2 + rng.normal(0, 0.01), stamp=0.01 * k)
+        if k % 2 == 0:
+            ekf.update_wheels(0.5 + rng.normal(0, 0.01), 0.2, stamp=0.01 * k)
+    return ekf
+
+
+def test_update_without_consider_states_is_filterpys() -> None:
+    from copy import deepcopy
+
+    ekf = _moving_filter()
+    reference = deepcopy(ekf.kf)
+    h = np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0]])
+    r = np.array([[3e-6]])
+    z = np.array([[0.25]])
+    reference.update(z, lambda _x: h, lambda x: h @ x, R=r)
+    ekf._apply(z, h, r, ekf._innovation(z, h, r))  # no consider state: a full update
+    np.testing.assert_allclose(ekf.kf.x, reference.x, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(ekf.kf.P, reference.P, rtol=1e-9, atol=1e-16)
+    np.testing.assert_allclose(ekf.kf.K, reference.K, rtol=1e-12)
+
+
+@pytest.mark.parametrize("consider", [(B,), (0, 1, YAW, B)])
+def test_consider_update_is_the_joseph_form_of_the_masked_gain(consider: tuple[int, ...]) -> None:
+    ekf = _moving_filter()
+    x0, p0 = ekf.kf.x.copy(), ekf.kf.P.copy()
+    h = np.array([[0.0, 0.0, 0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
+    r = np.diag([1e-4, 4e-3])
+    z = np.array([[0.52], [0.18]])
+    # the textbook Schmidt-Kalman update, written independently
+    k = p0 @ h.T @ np.linalg.inv(h @ p0 @ h.T + r)
+    k[list(consider), :] = 0.0
+    i_kh = np.eye(DIM_X) - k @ h
+    p_ref = i_kh @ p0 @ i_kh.T + k @ r @ k.T
+    ekf._apply(z, h, r, ekf._innovation(z, h, r), consider=consider)
+    np.testing.assert_allclose(ekf.kf.x, x0 + k @ (z - h @ x0), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(ekf.kf.P, p_ref, rtol=1e-8, atol=1e-15)
+    for i in consider:  # a consider state keeps its value and its own variance
+        assert ekf.kf.x[i, 0] == x0[i, 0]
+        assert ekf.kf.P[i, i] == p0[i, i]
+
+
+def test_queued_gyro_samples_are_their_mean_fused_before_the_wheels() -> None:
+    queued, direct = _moving_filter(), _moving_filter()
+    t = queued.stamp
+    assert t is not None
+    assert queued.add_gyro(0.21, t + 0.01) is None
+    assert queued.add_gyro(0.23, t + 0.02) is None
+    assert queued.pending_gyro == 2
+    queued.update_wheels(0.5, 0.2, stamp=t + 0.02)
+    assert queued.pending_gyro == 0
+    direct.predict_to(t + 0.02)
+    direct.update_gyro(0.22, sigma=EkfNoise().gyro_noise / math.sqrt(2))
+    direct.update_wheels(0.5, 0.2)
+    np.testing.assert_allclose(queued.x, direct.x, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(queued.P, direct.P, rtol=1e-12, atol=1e-18)
+    assert queued.statistics["gyro.accepted"] == direct.statistics["gyro.accepted"]
+
+
+def test_queued_gyro_does_not_wait_for_wheels_forever() -> None:
+    ekf = PlanarEkf(stamp=0.0)
+    gates = [ekf.add_gyro(0.1, 0.01 * k) for k in range(1, 12)]
+    # samples spanning more than max_step (0.05 s) are fused without the wheels
+    assert gates[:6] == [None] * 6 and gates[6] is Gate.ACCEPTED
+    assert ekf.stamp == pytest.approx(0.06) and ekf.pending_gyro == 5
+    assert ekf.add_gyro(math.nan, 0.12) is Gate.INVALID
+    assert ekf.pending_gyro == 5
+    ekf.discard_gyro()
+    assert ekf.pending_gyro == 0
+    x = ekf.x
+    ekf.update_wheels(0.0, 0.0)  # nothing queued: only the wheels
+    assert ekf.statistics["gyro.accepted"] == 1
+    assert not np.array_equal(x, ekf.x)

@@ -333,7 +333,8 @@ def load_profile(path: str | Path | None = None) -> Profile:
 def profile_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> Profile:
     """Build a Profile from parsed TOML; ConfigError messages start with ``source``."""
     try:
-        _reject_unknown(data, [*SECTIONS, "battery"], "section", "")
+        # [sensors] is parsed and validated by lowerbase.world.sensors, not here
+        _reject_unknown(data, [*SECTIONS, "battery", "sensors"], "section", "")
         sections: dict[str, Any] = {}
         for name, cls in SECTIONS.items():
             table = data.get(name, {})

@@ -62,7 +62,7 @@ class LidarConfig:
     z: float = 0.2                 # scan plane height above the floor
     yaw: float = 0.0
     fov: float = math.radians(275.0)
-    angular_step: float = math.radians(1.0 / 6.0)
+    angular_step: float = math.radians(0.16666667)  # 1/6 deg as default.toml writes it
     range_min: float = 0.05
     range_max: float = 40.0
     rate_hz: float = 25.0

@@ -18,6 +18,7 @@ from lowerbase.world.footprint import (
 )
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.maps import load_map
+from lowerbase.world.obstacles import Box, Obstacles, Person
 
 SEED = "[[-0.400, 0.253], [-0.353, 0.3], [0.353, 0.3], [0.4, 0.253], [0.4, -0.253], " \
        "[0.353, -0.3], [-0.353, -0.3], [-0.4, -0.253]]"
@@ -139,3 +140,44 @@ def test_validate_pose() -> None:
                               "(1.52, 1.00): place it on free floor")
     with pytest.raises(WorldError, match="rotated origin"):
         validate_pose((1.0, 1.0, 0.0), OccupancyGrid(grid.data, 0.05, (0.0, 0.0, 0.1)))
+
+
+def test_contact_with_obstacles() -> None:
+    grid = wall_grid(col=39)
+    crate = Box("crate", (1.5, 1.0), (0.4, 0.4))   # x 1.3..1.7, y 0.8..1.2
+    walker = Person("walker", ((0.6, 0.2), (0.6, 1.8)), speed=0.5, radius=0.2)
+    obstacles = Obstacles([crate, walker])
+    # the robot's front (x = 1.4) is 0.1 m into the crate over its whole 0.4 m width
+    hit = contact((1.0, 1.0, 0.0), grid, obstacles, t=0.0)
+    assert hit is not None and hit.touched == ("crate",)
+    assert hit.area == pytest.approx(0.1 * 0.4)
+    assert hit.point == pytest.approx((1.35, 1.0))
+    # the walker starts 0.8 m below the robot's centre and reaches it at t = 1.6 s
+    away = (0.6, 1.0, 0.0)
+    assert contact(away, grid, obstacles, t=0.0) is None
+    late = contact(away, grid, obstacles, t=1.6)
+    assert late is not None and late.touched == ("walker",)
+    # the person's disc (r 0.2) enters the footprint's y = 0.7 edge at y_c = 0.5
+    assert contact(away, grid, obstacles, t=0.59) is None
+    assert contact(away, grid, obstacles, t=0.61) is not None
+    # wall and obstacle together, in that order, with the areas added
+    # (the front 0.05 m in the wall at x = 1.95, the rear 0.1 m in the box's x 0.9..1.3)
+    wall_only = contact((1.6, 1.0, 0.0), grid)
+    both = contact((1.6, 1.0, 0.0), grid, Obstacles([Box("c", (1.1, 1.0), (0.4, 0.4))]))
+    assert wall_only is not None and wall_only.touched == ("wall",)
+    assert wall_only.area == pytest.approx(2 * (0.3 * 0.003 + 0.653 * 0.047
+                                                - (0.4 ** 2 - 0.353 ** 2) / 2))
+    assert both is not None and both.touched == ("wall", "c")
+    assert both.area == pytest.approx(wall_only.area + 0.1 * 0.4)
+
+
+def test_validate_pose_names_the_obstacle() -> None:
+    obstacles = Obstacles([Box("pallet", (1.0, 1.0), (1.2, 0.8))])
+    with pytest.raises(WorldError, match=r"would touch pallet near \(1.00, 1.00\)"):
+        validate_pose((1.0, 1.0, 0.3), wall_grid(), obstacles)
+    # the same pose is fine without the pallet, or for a robot small enough to fit on it
+    assert validate_pose((1.0, 1.0, 0.3), wall_grid()) == (1.0, 1.0, 0.3)
+    tiny = Footprint(((-0.01, -0.01), (0.01, -0.01), (0.0, 0.01)))
+    with pytest.raises(WorldError, match="would touch pallet"):
+        validate_pose((1.0, 1.0, 0.3), wall_grid(), obstacles, footprint=tiny)
+    assert validate_pose((0.3, 0.3, 0.0), wall_grid(), obstacles, footprint=tiny)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from benchmarks.common import Row
 
-MODULES = ("bench_protocol", "bench_emulator", "bench_bms", "bench_driver")
+MODULES = ("bench_protocol", "bench_emulator", "bench_bms", "bench_driver", "bench_scenarios")
 
 
 def _fmt(v: float) -> str:

@@ -5,7 +5,8 @@
   hard acceleration (truth.accel_slip_threshold); position and heading error of /odom_raw
   (wheel odometry) and /odom (EKF) against the emulator's ground truth, with the driver's
   default configuration (what the node runs with).
-* Cost: DriverCore.on_frame per frame and the EKF per wheel and gyro update [us].
+* Cost: DriverCore.on_frame per frame (and as x real time on the recorded frames), the
+  EKF per wheel and gyro update and per wheel cycle as the driver runs it [us].
 * Latency: a Twist published on /base_cmd_vel -> the MotionCommand on the bus, through a real
   rosmaster and the real node (``lowerbase driver`` in a process of its own, udp_multicast on
   loopback), p50/p99. Without ROS it falls back to DriverCore.set_twist -> send, and says so.
@@ -113,6 +114,14 @@ def bench_cost(quick: bool) -> dict[str, float]:
     for k in range(n):
         ekf.update_gyro(0.1, stamp=0.02 * n + 0.01 * (k + 1))
     gyro = (time.perf_counter() - t0) / n * 1e6
+    t0 = time.perf_counter()
+    start = 0.03 * n
+    for k in range(n):  # what the driver does: 2 gyro samples queued, fused with the wheels
+        t = start + 0.02 * (k + 1)
+        ekf.add_gyro(0.1, t - 0.01)
+        ekf.add_gyro(0.1, t)
+        ekf.update_wheels(0.5, 0.1, stamp=t)
+    cycle = (time.perf_counter() - t0) / n * 1e6
 
     frames: list[tuple[float, int, bytes]] = []
     loop = SimLoop(tap=lambda t, side, fid, data: frames.append((t, fid, data))
@@ -128,8 +137,9 @@ def bench_cost(quick: bool) -> dict[str, float]:
     for stamp, fid, data in frames:
         core.on_frame(fid, data, stamp)
     per_frame = (time.perf_counter() - t0) / len(frames) * 1e6
-    return {"wheel_us": wheel, "gyro_us": gyro, "frame_us": per_frame,
-            "frames": float(len(frames))}
+    sim_s = frames[-1][0] - frames[0][0]
+    return {"wheel_us": wheel, "gyro_us": gyro, "cycle_us": cycle, "frame_us": per_frame,
+            "frames": float(len(frames)), "core_x": sim_s / (per_frame * 1e-6 * len(frames))}
 
 
 # -- latency ------------------------------------------------------------------------------------
@@ -277,8 +287,12 @@ def run(quick: bool = False) -> list[Row]:
             "SimLoop: MCU 200 Hz + driver"),
         Row("driver", "EKF wheel update", cost["wheel_us"], "us", "predict + 2-D update, 50 Hz"),
         Row("driver", "EKF gyro update", cost["gyro_us"], "us", "predict + 1-D update, 100 Hz"),
+        Row("driver", "EKF per wheel cycle", cost["cycle_us"], "us",
+            "2 gyro samples queued (add_gyro) + predict + gyro mean + wheel update, 50 Hz"),
         Row("driver", "DriverCore.on_frame", cost["frame_us"], "us/frame",
             f"{cost['frames']:.0f} recorded frames, decode + odometry + EKF"),
+        Row("driver", "driver core alone, simulated clock", cost["core_x"], "x real time",
+            "the recorded frames (all decoded) through DriverCore.on_frame"),
     ]
     n = 100 if quick else 200
     ros = bench_latency_ros(n)

@@ -8,7 +8,8 @@ layer is a thin adapter, as in ``lowerbase.driver``.
 Layout (one unit a module):
 
 - ``grid``: :class:`OccupancyGrid`, the one representation of a 2D map (ROS conventions).
-- ``maps``: map_server YAML + PGM/PNG reading/writing; the shipped map library by name.
+- ``maps``: map_server YAML + PGM/PNG reading/writing; the shipped map library by name
+  (``maps/``: ``warehouse``, ``corridor_loop``, ``empty_room``, drawn by ``mapgen``).
 - ``places``: named places (storage points ``mark_no``, the charger) in a map's sidecar.
 - ``obstacles``: boxes and moving obstacles (people) the map does not know, with heights.
 - ``footprint``: the robot's footprint polygon and contact tests against map and obstacles.

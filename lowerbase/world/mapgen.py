@@ -4,7 +4,7 @@ Every map is 0.05 m per cell with its origin at (0, 0, 0): coordinates below are
 map frame. Walls are 0.2 m thick; space behind walls that no sensor can see is unknown (-1).
 The robot the maps are drawn for is the seed's 0.8 x 0.6 m AMR, 1.0 x 0.8 m with the 0.1 m
 footprint padding: every aisle is at least 1.5 m wide (the padded robot turns in place within
-a 1.28 m circle).
+a 1.23 m circle).
 
 - ``empty_room``: a 10 x 8 m room, nothing inside; one niche in the north wall so that the room
   has no 180-degree symmetry; the charger on the west wall.

@@ -1,0 +1,77 @@
+"""World sensor benchmarks: the merged /scan and the depth camera on a 1000 x 1000 cell map.
+
+The map is a synthetic warehouse (50 x 50 m at 0.05 m: outer walls, shelf rows with 2.2 m
+aisles and cross aisles); the sensors are the default profile's (two nanoScan3 merged into a
+720-beam /scan, a D435 at 640 x 480). Costs are CPU time per message (``time.process_time``,
+one thread), and the share of one core at the sensor's rate.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from benchmarks.common import Row
+
+
+def warehouse_grid() -> object:
+    from lowerbase.world.grid import OccupancyGrid
+
+    data = np.zeros((1000, 1000), np.int8)
+    data[:4, :] = data[-4:, :] = data[:, :4] = data[:, -4:] = 100
+    for y0 in range(60, 940, 60):          # shelf rows 0.8 m deep every 3 m
+        for x0 in range(60, 940, 220):     # 10 m long, 1 m cross aisles
+            data[y0:y0 + 16, x0:x0 + 200] = 100
+    return OccupancyGrid(data, 0.05)
+
+
+def _cpu_per_call(fn: Callable[[int], object], calls: int, repeat: int = 3) -> float:
+    """Best-of-``repeat`` CPU seconds per call."""
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.process_time()
+        for k in range(calls):
+            fn(k)
+        best = min(best, (time.process_time() - t0) / calls)
+    return best
+
+
+def run(quick: bool = False) -> list[Row]:
+    from lowerbase.world.camera import DepthCamera
+    from lowerbase.world.lidar import LidarRig
+    from lowerbase.world.raycast import Scene, Solid
+    from lowerbase.world.sensors import SensorsConfig
+
+    config = SensorsConfig()
+    box = Solid(0.6, polygon=np.array([[14.0, 3.4], [14.6, 3.4], [14.6, 4.0], [14.0, 4.0]]))
+    person = Solid(1.7, circle=(16.0, 3.9, 0.25))
+    scene = Scene(warehouse_grid(), solids=(box, person))  # type: ignore[arg-type]
+    pose = (11.0, 3.9, 0.05)                                 # in an aisle, facing along it
+    rig = LidarRig(config.lidars, config.scan)
+    n = 20 if quick else 100
+    scan_s = _cpu_per_call(lambda k: rig.scan(scene, pose, k * 0.04), n)
+    beams = sum(lc.beams for lc in config.lidars)
+    rows = [
+        Row("world", f"/scan: {len(config.lidars)} lidars ({beams} beams) merged into "
+                     f"{config.scan.beams}, 1000x1000 map", scan_s * 1e3, "ms CPU/scan"),
+        Row("world", f"/scan CPU at {rig.rate_hz:g} Hz", scan_s * rig.rate_hz * 100,
+            "% of one core", "target < 20 %"),
+    ]
+    if config.camera is not None:
+        camera = DepthCamera(config.camera)
+        frame_s = _cpu_per_call(lambda k: camera.render(scene, pose, k * 0.1), 3 if quick else 10)
+        size = f"{config.camera.width}x{config.camera.height}"
+        rows += [
+            Row("world", f"depth camera {size}: depth, colour, points, cloud_without_planes",
+                frame_s * 1e3, "ms CPU/frame"),
+            Row("world", f"depth camera {size} CPU at 10 Hz", frame_s * 10 * 100,
+                "% of one core", "target: 10 Hz affordable (< 100 %)"),
+        ]
+    return rows
+
+
+if __name__ == "__main__":
+    for row in run():
+        print(row)

@@ -226,26 +226,37 @@ COLUMNS: dict[str, str] = {
 }
 
 
-class Trace:
-    """Samples of a run, column by column (see :data:`COLUMNS`)."""
+_COLUMN_INDEX = {name: i for i, name in enumerate(COLUMNS)}
 
-    def __init__(self) -> None:
-        self._cols: dict[str, list[float]] = {name: [] for name in COLUMNS}
-        self._arrays: dict[str, np.ndarray] = {}
+
+class Trace:
+    """Samples of a run, column by column (see :data:`COLUMNS`).
+
+    Stored in one preallocated float array (rows x columns, grown by doubling); a column is a
+    view of it, with no list-to-array conversion per read."""
+
+    def __init__(self, capacity: int = 1024) -> None:
+        self._data = np.full((max(1, capacity), len(COLUMNS)), math.nan)
+        self._n = 0
 
     def append(self, sample: Mapping[str, float]) -> None:
-        for name, values in self._cols.items():
-            values.append(float(sample.get(name, math.nan)))
-        self._arrays.clear()
+        if self._n == len(self._data):
+            grown = np.full((2 * len(self._data), len(COLUMNS)), math.nan)
+            grown[: self._n] = self._data
+            self._data = grown
+        row = self._data[self._n]
+        for name, value in sample.items():
+            i = _COLUMN_INDEX.get(name)
+            if i is not None:
+                row[i] = value
+        self._n += 1
 
     def __len__(self) -> int:
-        return len(self._cols["t"])
+        return self._n
 
     def __getitem__(self, name: str) -> np.ndarray:
-        array = self._arrays.get(name)
-        if array is None:
-            array = self._arrays[name] = np.asarray(self._cols[name], dtype=float)
-        return array
+        column: np.ndarray = self._data[: self._n, _COLUMN_INDEX[name]]
+        return column
 
     @property
     def end(self) -> float:
@@ -267,7 +278,7 @@ class Trace:
         return bool(len(self)) and bool(np.isfinite(self[name]).any())
 
     def as_dict(self) -> dict[str, list[float]]:
-        return {name: list(values) for name, values in self._cols.items()}
+        return {name: self._data[: self._n, i].tolist() for name, i in _COLUMN_INDEX.items()}
 
 
 # -- expectations ------------------------------------------------------------------------------

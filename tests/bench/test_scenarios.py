@@ -8,11 +8,13 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import can
+import numpy as np
 import pytest
 
 from lowerbase.bench.recording import BusRecorder, replay
 from lowerbase.bench.runner import SimHarness, run_scenario, run_simulated
 from lowerbase.bench.scenario import (
+    COLUMNS,
     PoseNear,
     StatusBitIs,
     Stopped,
@@ -329,3 +331,15 @@ def test_in_process_scenarios_are_refused_over_processes(tmp_path: Path) -> None
         check_over_bus(load_scenario(library()["charging"]))
     check_over_bus(load_scenario(library()["demo"]))
 
+
+
+def test_trace_grows_past_its_capacity_and_keeps_every_sample() -> None:
+    trace = Trace(capacity=4)
+    for k in range(11):
+        trace.append({"t": k * 0.05, "soc": 80 - k, "unknown_column": 1.0})
+    assert len(trace) == 11
+    np.testing.assert_allclose(trace["t"], [k * 0.05 for k in range(11)])
+    assert trace["soc"].tolist() == [80.0 - k for k in range(11)]
+    assert np.isnan(trace["voltage"]).all() and not trace.has("voltage")
+    d = trace.as_dict()
+    assert set(d) == set(COLUMNS) and d["soc"][-1] == 70.0 and len(d["t"]) == 11

@@ -95,6 +95,14 @@ def check_instabilities(p: ImuParams) -> None:
 
 
 _BLOCK = 256  # samples of bias and noise generated at once
+_CHUNK = 16  # samples per inner chunk of the Gauss-Markov recursion (_BLOCK is a multiple)
+
+
+def _ar1_matrix(phi: np.ndarray, n: int) -> np.ndarray:
+    """Per coefficient ``phi[i]`` the n x n matrix L with L[j, m] = phi[i]**(j - m) for
+    j >= m, else 0: ``L @ z`` is the AR(1) recursion ``x[j] = phi x[j-1] + z[j]`` from 0."""
+    lag = np.arange(n)[:, None] - np.arange(n)[None, :]
+    return np.where(lag >= 0, phi[:, None, None] ** np.maximum(lag, 0), 0.0)
 
 
 def _fold(x: np.ndarray, bound: np.ndarray) -> np.ndarray:
@@ -144,7 +152,12 @@ class ImuModel:
             (n_gm, 6))
         self._rw = np.zeros(6)  # the free (unreflected) walk
         self._filter_dt = -1.0
-        self._lower = self._decay = self._drive = np.zeros(0)
+        self._lower: np.ndarray = np.zeros(0)
+        self._decay: np.ndarray = np.zeros(0)
+        self._drive: np.ndarray = np.zeros(0)
+        self._lower_k: np.ndarray = np.zeros(0)
+        self._decay_k: np.ndarray = np.zeros(0)
+        self._limits = (p.gyro_full_scale * DEG, p.accel_full_scale * STANDARD_GRAVITY)
         self._rows: list[list[float]] = []  # pending samples: 6 biases + 6 white noises
 
     def bias_step(self, gyro: Vec3 = (0.0, 0.0, 0.0), accel: Vec3 = (0.0, 0.0, 0.0)) -> None:
@@ -160,20 +173,30 @@ class ImuModel:
     def _block(self, dt: float) -> None:
         """The next _BLOCK samples of bias (flicker + walk) and white noise, all six axes.
 
-        Each Gauss-Markov term is the exact AR(1) recursion, written as one lower-triangular
-        matrix product per block; the reflected walk is the free walk folded into +-bound
-        (reflection at both walls is that fold of the free path)."""
-        n, taus = _BLOCK, np.array(FLICKER_TAUS)
+        Each Gauss-Markov term is the exact AR(1) recursion, evaluated in two levels of
+        lower-triangular matrix products: within chunks of _CHUNK samples from a zero start,
+        then the chunk-end states (the same recursion with phi^_CHUNK), whose decay is added
+        back into each chunk. That is the one-matrix form's arithmetic up to rounding, at a
+        sixteenth of its cost (the one 256 x 256 product per term was 9 % of a control loop).
+        The reflected walk is the free walk folded into +-bound (reflection at both walls is
+        that fold of the free path)."""
+        n, taus, k = _BLOCK, np.array(FLICKER_TAUS), _BLOCK // _CHUNK
         if self._filter_dt != dt:
             phi = np.exp(-dt / taus)
-            lag = np.arange(n)[:, None] - np.arange(n)[None, :]
-            self._lower = np.where(lag >= 0, phi[:, None, None] ** np.maximum(lag, 0), 0.0)
-            self._decay = phi[:, None] ** np.arange(1, n + 1)[None, :]
+            self._lower = _ar1_matrix(phi, _CHUNK)[:, None]  # (terms, 1, chunk, chunk)
+            self._decay = (phi[:, None] ** np.arange(1, _CHUNK + 1)[None, :])[:, None, :, None]
+            phi_chunk = phi**_CHUNK
+            self._lower_k = _ar1_matrix(phi_chunk, k)
+            self._decay_k = phi_chunk[:, None] ** np.arange(1, k + 1)[None, :]
             self._drive = np.sqrt(-np.expm1(-2.0 * dt / taus))[:, None] * self._flicker
             self._filter_dt = dt
         z = self.rng.standard_normal((len(taus), n, 6)) * self._drive[:, None, :]
-        gm = np.matmul(self._lower, z) + self._decay[:, :, None] * self._gm[:, None, :]
-        self._gm = gm[:, -1, :]
+        local = np.matmul(self._lower, z.reshape(len(taus), k, _CHUNK, 6))
+        ends = np.matmul(self._lower_k, local[:, :, -1, :]) + (
+            self._decay_k[:, :, None] * self._gm[:, None, :])  # state at each chunk's end
+        before = np.concatenate([self._gm[:, None, :], ends[:, :-1, :]], axis=1)
+        gm = (local + self._decay * before[:, :, None, :]).reshape(len(taus), n, 6)
+        self._gm = ends[:, -1, :]
         free = self._rw + np.cumsum(self.rng.standard_normal((n, 6)), axis=0) * (
             self._walk * math.sqrt(dt))
         self._rw = free[-1]
@@ -203,23 +226,30 @@ class ImuModel:
 
     def sample(self, omega_body: Vec3, accel_body: Vec3, dt: float) -> tuple[Vec3, Vec3]:
         """One sample: true angular velocity [rad/s] and base acceleration [m/s^2] (without
-        gravity) in the base frame, ``dt`` [s] since the last sample -> (gyro, accel)."""
+        gravity) in the base frame, ``dt`` [s] since the last sample -> (gyro, accel).
+
+        Written out per axis (it runs at 100 Hz in every control loop); the arithmetic is
+        ``out = (scale * true + bias) + white``, then the fault step, then saturation."""
         p = self.params
-        omega = [float(omega_body[0]), float(omega_body[1]), float(omega_body[2])]
-        force = [float(accel_body[0]), float(accel_body[1]), float(accel_body[2]) + p.gravity]
+        o0, o1, o2 = float(omega_body[0]), float(omega_body[1]), float(omega_body[2])
+        f0, f1 = float(accel_body[0]), float(accel_body[1])
+        f2 = float(accel_body[2]) + p.gravity
         if p.noise:
             if not self._rows:
                 self._block(dt if dt > 0.0 else 1.0 / p.rate_hz)
             z = self._rows.pop()
             gs, as_ = 1.0 + p.gyro_scale_error, 1.0 + p.accel_scale_error
-            for i in range(3):
-                self.gyro_bias[i] = self.gyro_turn_on[i] + z[i]
-                self.accel_bias[i] = self.accel_turn_on[i] + z[3 + i]
-                omega[i] = gs * omega[i] + self.gyro_bias[i] + z[6 + i]
-                force[i] = as_ * force[i] + self.accel_bias[i] + z[9 + i]
-        g_max, a_max = p.gyro_full_scale * DEG, p.accel_full_scale * STANDARD_GRAVITY
-        gyro = tuple(min(max(omega[i] + self.gyro_fault[i], -g_max), g_max) for i in range(3))
-        accel = tuple(min(max(force[i] + self.accel_fault[i], -a_max), a_max) for i in range(3))
+            gt, at, gb, ab = self.gyro_turn_on, self.accel_turn_on, self.gyro_bias, self.accel_bias
+            gb[0], gb[1], gb[2] = gt[0] + z[0], gt[1] + z[1], gt[2] + z[2]
+            ab[0], ab[1], ab[2] = at[0] + z[3], at[1] + z[4], at[2] + z[5]
+            o0, o1, o2 = gs * o0 + gb[0] + z[6], gs * o1 + gb[1] + z[7], gs * o2 + gb[2] + z[8]
+            f0, f1, f2 = as_ * f0 + ab[0] + z[9], as_ * f1 + ab[1] + z[10], as_ * f2 + ab[2] + z[11]
+        g_max, a_max = self._limits
+        gf, af = self.gyro_fault, self.accel_fault
+        gyro = (min(max(o0 + gf[0], -g_max), g_max), min(max(o1 + gf[1], -g_max), g_max),
+                min(max(o2 + gf[2], -g_max), g_max))
+        accel = (min(max(f0 + af[0], -a_max), a_max), min(max(f1 + af[1], -a_max), a_max),
+                 min(max(f2 + af[2], -a_max), a_max))
         if not self.frozen:
-            self._last = (gyro, accel)  # type: ignore[assignment]
+            self._last = (gyro, accel)
         return self._last

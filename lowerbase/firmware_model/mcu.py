@@ -31,6 +31,7 @@ from lowerbase.clock import Clock
 from lowerbase.errors import ConfigError, ProtocolError
 from lowerbase.firmware_model import kinematics
 from lowerbase.firmware_model.encoder import EncoderCounter
+from lowerbase.firmware_model.fastloop import LeanLoop
 from lowerbase.firmware_model.faults import Fault, parse_fault
 from lowerbase.firmware_model.imu import ImuModel
 from lowerbase.firmware_model.motor import WheelGeometry, WheelMotor
@@ -97,6 +98,10 @@ Send = Callable[[int, bytes], None]
 class Mcu:
     """The chassis MCU. See the module docstring for the contract."""
 
+    #: take the lean control loop (fastloop.py) whenever no fault is in play; False forces
+    #: the general one (the tests compare the two)
+    lean = True
+
     def __init__(
         self,
         profile: Profile,
@@ -157,11 +162,12 @@ class Mcu:
         self._watchdog = False
         self._watchdog_ramp = False  # watchdog stop down the smoother's decel limits
         self._speed_limited = False
-        self._next_due = {m.name: now + (m.cycle_time or 0.0) for m in self._periodic}
+        # when each periodic message is due next, in catalog order (self._periodic)
+        self._due = [now + (m.cycle_time or 0.0) for m in self._periodic]
         # like a CANopen boot-up message: the first frame after a boot is the Heartbeat with
         # the new BootCounter, so the upper side knows before any counter restarts at zero
-        self._next_due["Heartbeat"] = now
-        self._next_any_due = min(self._next_due.values())
+        self._due[[m.name for m in self._periodic].index("Heartbeat")] = now
+        self._next_any_due = min(self._due)
         # the hardware is the profile's (and never changes); the parameters are beliefs
         hw, true = self.profile.chassis, self.truth.geometry
         self._motors = {
@@ -194,6 +200,7 @@ class Mcu:
         self._imu_bias_applied = 0.0
         self._last_save = now
         self._save_state()
+        self._lean = LeanLoop(self)
         log.info("boot #%d", self.boot_counter)
 
     def _save_state(self) -> None:
@@ -431,6 +438,10 @@ class Mcu:
 
     def step(self) -> None:
         """One control period: safety, motion, sensors, BMS, then the frames that are due."""
+        if self.lean and not (self.faults or self._delayed or self._imu_bias_applied
+                              or self.imu.frozen):
+            self._lean.step()  # the same, bit for bit, without the fault hooks (fastloop.py)
+            return
         now = self.clock.now()
         dt = self.dt
         if self.state == RobotState.BOOT and now - self.boot_time >= BOOT_TIME:
@@ -630,8 +641,8 @@ class Mcu:
     def _emit_due(self, now: float) -> None:
         if now + 1e-9 < self._next_any_due:
             return
-        for msg in self._periodic:
-            due = self._next_due[msg.name]
+        for i, msg in enumerate(self._periodic):
+            due = self._due[i]
             if now + 1e-9 < due:
                 continue
             # keep the period; after a stall, skip the missed slots instead of bursting
@@ -639,7 +650,7 @@ class Mcu:
             if msg.name == "Heartbeat" and self._active("defect", "slow-heartbeat"):
                 period *= 2  # defect hook (conformance)
             missed = max(0, math.floor((now - due) / period)) if period else 0
-            self._next_due[msg.name] = due + (missed + 1) * period
+            self._due[i] = due + (missed + 1) * period
             rows = self._build(msg)
             if msg.name in SHARED_COUNTER and rows and msg.has_counter:
                 counter = self._counters[msg.name]  # one counter for all rows of a cycle
@@ -648,7 +659,7 @@ class Mcu:
                     values["Counter"] = counter
             for values in rows:
                 self._emit(msg.name, values)
-        self._next_any_due = min(self._next_due.values())
+        self._next_any_due = min(self._due)
 
     def _build(self, msg: MessageCodec) -> list[dict[str, Any]]:
         name = msg.name

@@ -65,6 +65,7 @@ class WheelMotor:
         self.stalled = False  # latched until clear_faults()
         self._over_time = 0.0  # [s] how long |current| has exceeded the limit
         self._stall_time = 0.0  # [s] how long the wheel has lagged far behind its setpoint
+        self._key: tuple[MotorParams, WheelGeometry, float] | None = None  # see _constants
 
     @property
     def rim_speed(self) -> float:
@@ -100,29 +101,90 @@ class WheelMotor:
         ``brake`` (or a latched over-current) ramps to zero instead. ``load_force`` [N] is an
         external force at the rim opposing forward motion (e.g. a slope); it only affects the
         current. The mean speed over the step is the returned angle / dt.
+
+        This is the control loop's hottest function: :func:`follow` (twice), the current and
+        the fault timers are written out inline, with the same operations in the same order,
+        and :meth:`_constants` caches what depends only on the parameters and ``dt``.
         """
         if dt <= 0.0:
             return 0.0
         p, g = self.params, self.geometry
+        if (p, g, dt) != self._key:
+            self._constants(dt)
         if brake or self.over_current or abs(target) * g.radius < g.min_speed:
             target = 0.0
-        limit = motor_rpm_to_wheel_rad_s(g.max_rpm, g.ratio)
+        limit = self._limit
         target = min(max(target, -limit), limit)
         omega0 = self.omega
-        alpha = p.max_wheel_accel / g.radius  # [rad/s^2]; 0 = no ramp
+        alpha = self._alpha  # [rad/s^2]; 0 = no ramp
+        tau = p.time_constant
         r0 = target if alpha == 0.0 else self.setpoint
         t_ramp = 0.0 if alpha == 0.0 else min(dt, abs(target - r0) / alpha)
         slope = math.copysign(alpha, target - r0) if t_ramp > 0.0 else 0.0
-        omega, angle = follow(omega0, r0, slope, t_ramp, p.time_constant)
-        self.setpoint = target if t_ramp < dt or alpha == 0.0 else r0 + slope * t_ramp
-        omega, angle2 = follow(omega, self.setpoint, 0.0, dt - t_ramp, p.time_constant)
+        # follow(omega0, r0, slope, t_ramp, tau)
+        t = t_ramp
+        if tau <= 0.0:
+            omega, angle = r0 + slope * t, r0 * t + 0.5 * slope * t * t
+        else:
+            c = omega0 - r0 + slope * tau
+            one_minus_e = -math.expm1(-t / tau) if t else self._ome_zero
+            omega = r0 + slope * t - slope * tau + c * (1.0 - one_minus_e)
+            angle = r0 * t + 0.5 * slope * t * t - slope * tau * t + c * tau * one_minus_e
+        self.setpoint = setpoint = target if t_ramp < dt or alpha == 0.0 else r0 + slope * t_ramp
+        # follow(omega, setpoint, 0.0, dt - t_ramp, tau)
+        t = dt - t_ramp
+        if tau <= 0.0:
+            omega, angle2 = setpoint + 0.0 * t, setpoint * t + 0.5 * 0.0 * t * t
+        else:
+            c = omega - setpoint + 0.0 * tau
+            one_minus_e = self._ome_dt if t == dt else -math.expm1(-t / tau)
+            omega = setpoint + 0.0 * t - 0.0 * tau + c * (1.0 - one_minus_e)
+            angle2 = setpoint * t + 0.5 * 0.0 * t * t - 0.0 * tau * t + c * tau * one_minus_e
         angle += angle2
         if self.blocked:
             omega, angle = 0.0, 0.0
         self.omega = omega
-        self._update_current((omega - omega0) / dt, load_force)
-        self._update_faults(dt)
+        if self.blocked:
+            self._update_current((omega - omega0) / dt, load_force)
+        else:  # _update_current, unblocked
+            wheel_accel = (omega - omega0) / dt
+            radius = g.radius
+            v = omega * radius
+            sign_v = 0.0 if v == 0.0 else math.copysign(1.0, v)
+            force = self._half_mass * wheel_accel * radius  # [N] at the rim
+            force += sign_v * self._rolling + p.viscous_friction * v
+            force += load_force
+            wheel_torque = force * radius
+            eta = p.gear_efficiency
+            if wheel_torque * omega >= 0.0:  # motoring
+                motor_torque = wheel_torque / (g.ratio * eta)
+            else:
+                motor_torque = wheel_torque * eta / g.ratio
+            amps = motor_torque / p.torque_constant
+            self.current = amps + math.copysign(p.idle_current, amps)
+        # _update_faults
+        over = abs(self.current) > p.over_current_limit
+        self._over_time = self._over_time + dt if over else 0.0
+        if over and self._over_time >= p.over_current_time:
+            self.over_current = True
+        lagging = abs(setpoint) * g.radius >= p.stall_speed and abs(omega) < 0.5 * abs(setpoint)
+        self._stall_time = self._stall_time + dt if lagging else 0.0
+        if lagging and self._stall_time >= p.stall_time:
+            self.stalled = True
         return angle
+
+    def _constants(self, dt: float) -> None:
+        """What :meth:`step` needs of the parameters, geometry and ``dt``, computed as the
+        uncached expressions compute it (the same floats)."""
+        p, g = self.params, self.geometry
+        self._key = (p, g, dt)
+        self._limit = motor_rpm_to_wheel_rad_s(g.max_rpm, g.ratio)
+        self._alpha = p.max_wheel_accel / g.radius
+        tau = p.time_constant
+        self._ome_zero = -math.expm1(-0.0 / tau) if tau > 0.0 else 0.0
+        self._ome_dt = -math.expm1(-dt / tau) if tau > 0.0 else 0.0
+        self._half_mass = 0.5 * p.robot_mass
+        self._rolling = p.rolling_resistance * self._half_mass * STANDARD_GRAVITY
 
     def _update_current(self, wheel_accel: float, load_force: float) -> None:
         p, g = self.params, self.geometry

@@ -21,8 +21,11 @@ import math
 from collections.abc import Callable
 from typing import Any
 
+import pytest
+
 from lowerbase.bms.adapter import McuBmsAdapter
-from lowerbase.firmware_model.mcu import Command
+from lowerbase.firmware_model.fastloop import LeanLoop
+from lowerbase.firmware_model.mcu import Command, Mcu
 from lowerbase.firmware_model.profile import Profile, load_profile
 from lowerbase.firmware_model.sim import SimRig
 from lowerbase.protocol.status_codes import StatusBit
@@ -30,23 +33,23 @@ from lowerbase.protocol.status_codes import StatusBit
 #: segment name -> (frames, sha256 of frames + truth) recorded before the speed work
 EXPECTED: dict[str, tuple[int, str]] = {
     "boot_and_drive":
-        (3065, "50bdf411e8c795b0238f8e29fd866bab502a4392ae595bc4f6ecf2d521afea70"),
+        (3544, "586d5b1b871dcd00479a174b8a117827e39f0a1ae3e7007a4d1d91a02fbb9320"),
     "requests":
-        (1146, "3f04a3948299fdb2e6e8b278ae6bd2765fcfd5d2e4295158ce0ebd7482c5bb2a"),
+        (1147, "052c5575df756c26fd86498821078f350658828a8bc4b1a6c62867eab4710c90"),
     "bus_faults":
-        (1036, "a9ee62ca38e826d1713dc22747551d2d3cbe8d5bb7cf97105fe03468d3bc1856"),
+        (1057, "aaf6e9726043141547122baa05995e4f29384ac746a20d29cbb50f586cf97a02"),
     "motion_faults":
-        (1459, "da912a7b9992befa7b9daf82db4f4ff644ae3f5b5e3c9338383608fcff33c8ab"),
+        (1459, "9cede447df5b78e36685b02ffe8f100ba0a7ac05f06efb6e743524dfafcb17c7"),
     "sensor_faults":
-        (3078, "196e9bcfb5e9f95c11c8858fd12c3ed0420d84b16a9e18053e0e8c7c5436f459"),
+        (3105, "d326de852506cd73b108934b18b8ee123ab27151e6dfdbae5478f601822aa145"),
     "estop_and_defects":
-        (2667, "ede811db5a57895f34dfd0e26c5a7f5ed5fdafd9dd166d0cb0be34e7e26f2f29"),
+        (2645, "d9a83700d9c3c1ec348ca07da11084090451547471bceb6ebf9f451af5561ea1"),
     "reboot":
-        (1180, "4f57574f50dea9ee7fd95f407fd807a159336eea4fc85bf19cdc0dc22669794d"),
+        (1180, "7709502a877f816479ec217b2d4c782e8d2b225536111c152f4cd7493a1d5837"),
     "ideal/boot_and_drive":
-        (3030, "2684cadf2c5335189afb1b0c27221074a5c216a996574b6eb21b23a1a8e29f86"),
+        (3504, "bf0da19cfa8367803b4433181209ae790bc2021538378c3d74976262ef61b6f3"),
     "ideal/reboot":
-        (1170, "a4dec6fc630f3f35771396602de6bae0483bcd463d48f1a7dbc5db05f1bbc509"),
+        (1170, "b35fa2c285a9fa272c1a1bc631d8b83186cc12155850fc7fb8de65fdf1089005"),
 }
 
 
@@ -78,6 +81,7 @@ def _segments() -> list[tuple[str, Callable[[TraceRig], None]]]:
         r.drive(-0.4, -0.5, 2.0, smoothed=True)
         r.drive(0.8, 0.0, 1.5, smoothed=True)
         r.drive(2.5, 0.0, 0.3)  # beyond maxLinear: SPEED_LIMITED
+        r.run(1.2)  # the watchdog ends it (the flag stays, the command is gone)
         r.drive(0.0, 0.0, 0.5)
 
     def requests(r: TraceRig) -> None:
@@ -200,6 +204,29 @@ def test_the_frame_trace_is_what_it_was() -> None:
     assert list(got) == list(EXPECTED)
     for name in EXPECTED:
         assert got[name] == EXPECTED[name], name
+
+
+def test_the_general_loop_gives_the_same_trace(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without the lean loop (every step through the fault-aware general path), the same
+    frames, bit for bit."""
+    monkeypatch.setattr(Mcu, "lean", False)
+    assert record() == EXPECTED
+
+
+def test_the_lean_loop_runs_whenever_no_fault_is_in_play(monkeypatch: pytest.MonkeyPatch) -> None:
+    calls = []
+    lean_step = LeanLoop.step
+    monkeypatch.setattr(LeanLoop, "step", lambda self: calls.append(lean_step(self)))
+    rig = TraceRig(profile=load_profile(), keep=False)
+    rig.enable()
+    rig.drive(0.5, 0.1, 1.0)
+    assert len(calls) == round(rig.now / rig.mcu.dt)  # every step
+    rig.mcu.inject("drop:0.5@100")  # not active yet, but a fault in play: the general loop
+    rig.drive(0.5, 0.1, 1.0)
+    assert len(calls) == round((rig.now - 1.0) / rig.mcu.dt)
+    rig.mcu.clear_fault()
+    rig.drive(0.5, 0.1, 1.0)
+    assert len(calls) == round((rig.now - 1.0) / rig.mcu.dt)
 
 
 def test_the_trace_covers_every_kind_of_frame() -> None:

@@ -98,3 +98,34 @@ def test_an_instability_below_the_white_and_walk_floor_is_one_clear_error() -> N
     with pytest.raises(ConfigError, match=r"imu.gyro_bias_instability = 0.5 is below the Allan"):
         ImuParams(gyro_bias_instability=0.5, gyro_random_walk=1e-5)
     ImuParams(gyro_bias_instability=0.0, gyro_random_walk=1e-5)  # 0: no flicker term
+
+
+def test_bias_blocks_are_the_gauss_markov_recursion_sample_by_sample() -> None:
+    """The chunked matrix form of the flicker terms equals x[j] = phi x[j-1] + drive z[j],
+    run one sample at a time from the same state and the same normal draws, over three
+    blocks (so the carry between blocks is covered too)."""
+    from lowerbase.firmware_model.imu import FLICKER_TAUS, _fold
+
+    imu = ImuModel(ImuParams(), np.random.default_rng(11))
+    dt = 1.0 / imu.params.rate_hz
+    taus = np.array(FLICKER_TAUS)
+    phi = np.exp(-dt / taus)[:, None]
+    drive = np.sqrt(-np.expm1(-2.0 * dt / taus))[:, None] * imu._flicker
+    x, rw = imu._gm.copy(), imu._rw.copy()
+    for _ in range(3):
+        mirror = np.random.default_rng()
+        mirror.bit_generator.state = imu.rng.bit_generator.state
+        imu._block(dt)
+        rows = np.array(imu._rows[::-1])
+        z = mirror.standard_normal((len(taus), len(rows), 6)) * drive[:, None, :]
+        walk = rw + np.cumsum(mirror.standard_normal((len(rows), 6)), axis=0) * (
+            imu._walk * math.sqrt(dt))
+        rw = walk[-1]
+        expected = np.empty((len(rows), 6))
+        for j in range(len(rows)):
+            x = phi * x + z[:, j, :]
+            expected[j] = x.sum(axis=0)
+        expected += _fold(walk, imu._bound)
+        scale = np.abs(expected).max(axis=0)
+        assert np.all(np.abs(rows[:, :6] - expected) <= 1e-12 * scale)
+        assert np.allclose(imu._gm, x, rtol=1e-12, atol=0.0)

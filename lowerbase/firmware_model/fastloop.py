@@ -1,0 +1,275 @@
+"""The control loop's lean path: one control period of :class:`~.mcu.Mcu` when no fault, no
+defect hook and no delayed frame is in play (the common case, and all of a long soak).
+
+It does exactly what the general ``Mcu.step`` does, with the same floating-point operations in
+the same order (so the frame trace is bit-identical; tests/firmware_model/test_frame_trace.py
+runs the standard drive both ways against one pinned hash), but without what the general path
+spends its time on (docs/emulator.md, "Where the time goes"): the dicts of per-side targets
+and angles, a method call per concern and per wheel, fault look-ups on every check, a scan of
+all periodic messages with name-keyed dicts and a generic frame builder, and a Counter
+increment per frame. Constants of the hardware and of the believed chassis are derived once
+(again when ``Mcu.chassis`` is replaced).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from lowerbase.firmware_model.encoder import wrap_int32 as wrap
+from lowerbase.protocol.status_codes import StatusBit
+
+if TYPE_CHECKING:  # pragma: no cover
+    from lowerbase.firmware_model.mcu import Mcu
+    from lowerbase.firmware_model.profile import ChassisParams
+
+_B = {b.name: int(b) for b in StatusBit}
+ESTOP_COMMAND = _B["ESTOP_COMMAND"]
+WATCHDOG_STOP = _B["WATCHDOG_STOP"]
+COMMAND_IN_STANDBY = _B["COMMAND_IN_STANDBY"]
+SPEED_LIMITED = _B["SPEED_LIMITED"]
+IMU_FAULT = _B["IMU_FAULT"]
+BMS_LINK_LOST = _B["BMS_LINK_LOST"]
+ESTOP_BITS = _B["ESTOP_BUTTON"] | ESTOP_COMMAND
+BMS_PROTECTION = _B["BMS_PROTECTION"]
+#: per side: over-current, stalled, motor fault, encoder fault
+SIDE_BITS = tuple(
+    tuple(_B[f"{side}_{what}"] for what in ("OVER_CURRENT", "MOTOR_STALLED", "MOTOR_FAULT",
+                                             "ENCODER_FAULT"))
+    for side in ("LEFT", "RIGHT"))
+
+Rows = list[dict[str, Any]]
+
+
+class LeanLoop:
+    """One Mcu's lean control period (built by ``Mcu.power_on``; see the module docstring)."""
+
+    def __init__(self, mcu: Mcu) -> None:
+        from lowerbase.firmware_model import mcu as m  # the constants; no import cycle at load
+
+        self.mcu = mcu
+        self.m = m
+        self.ml, self.mr = mcu._motors["left"], mcu._motors["right"]
+        self.el, self.er = mcu._encoders["left"], mcu._encoders["right"]
+        self.ppr_l = self.el.pulses_per_wheel_rad()  # hardware: fixed for the boot
+        self.ppr_r = self.er.pulses_per_wheel_rad()
+        self.imu_cycle = mcu._cycle("ImuGyro")
+        self.stall_speed = mcu.profile.motor.stall_speed
+        self.idle2 = mcu.profile.motor.idle_current * 2
+        self._chassis: ChassisParams | None = None
+        self.bpp_l = self.bpp_r = 0.0
+        self.builders: list[Callable[[], Rows]] = [
+            self._builder(msg.name) for msg in mcu._periodic]
+        self.tx = [(msg, msg.name, msg.frame_id, msg.has_counter, msg.cycle_time or 0.0,
+                    msg.name in m.SHARED_COUNTER) for msg in mcu._periodic]
+
+    # -- the believed chassis ------------------------------------------------------------------
+
+    def _derive(self, c: ChassisParams) -> None:
+        """Mcu._belief_per_pulse for both sides, for chassis ``c``."""
+        self._chassis = c
+        self.bpp_l = c.wheel_perimeter / (c.ratio_left * c.pulse_per_circle)
+        self.bpp_r = c.wheel_perimeter / (c.ratio_right * c.pulse_per_circle)
+
+    # -- one control period ----------------------------------------------------------------------
+
+    def step(self) -> None:
+        mcu, m = self.mcu, self.m
+        now = mcu.clock.now()
+        dt = mcu.dt
+        if mcu.state == m.RobotState.BOOT and now - mcu.boot_time >= m.BOOT_TIME:
+            mcu.state = m.RobotState.STANDBY
+        ml, mr, el, er = self.ml, self.mr, self.el, self.er
+        ml.blocked = mr.blocked = False  # what _apply_faults does without faults
+        el.dropout = er.dropout = False
+        c = mcu.chassis
+        if c is not self._chassis:
+            self._derive(c)
+        target_v, target_w, brake = mcu._target(now)
+        # kinematics.wheel_speeds_from_twist and Mcu._wheel_target, inline
+        half = 0.5 * target_w * c.wheel_distant
+        v_l, v_r = target_v - half, target_v + half
+        if abs(v_l) < c.min_speed:
+            t_l = 0.0
+        else:
+            t_l = v_l * 2.0 * math.pi / c.wheel_perimeter * c.ratio_left / ml.geometry.ratio
+        if abs(v_r) < c.min_speed:
+            t_r = 0.0
+        else:
+            t_r = v_r * 2.0 * math.pi / c.wheel_perimeter * c.ratio_right / mr.geometry.ratio
+        before_l, before_r = ml.omega, mr.omega
+        a_l = ml.step(t_l, dt, brake=brake)
+        a_r = mr.step(t_r, dt, brake=brake)
+        rim_accel = ((ml.omega - before_l) / dt * ml.geometry.radius,
+                     (mr.omega - before_r) / dt * mr.geometry.radius)
+        truth = mcu.truth
+        slip = mcu.slip.step(now - mcu.boot_time, truth.v * dt, rim_accel)
+        truth.step(a_l / dt, a_r / dt, dt, slip)
+        moved_l = el.add(a_l)
+        moved_r = er.add(a_r)
+        ds = 0.0
+        ds += 0.5 * moved_l * self.bpp_l
+        ds += 0.5 * moved_r * self.bpp_r
+        stuck = mcu._enc_stuck  # Mcu._check_encoder, both sides
+        if abs(ml.setpoint) * ml.geometry.radius > self.stall_speed and moved_l == 0:
+            stuck["left"] += dt
+        else:
+            stuck["left"] = 0.0
+        if abs(mr.setpoint) * mr.geometry.radius > self.stall_speed and moved_r == 0:
+            stuck["right"] += dt
+        else:
+            stuck["right"] = 0.0
+        mcu.odometer += abs(ds)
+        if now >= mcu._imu_due:
+            mcu._sample_imu()
+            mcu._imu_due += self.imu_cycle
+        if mcu.bms is not None:
+            self._bms(now, dt, c)
+        self._status(now)
+        if mcu.odometer != mcu._saved_odometer and now - mcu._last_save >= m.ODOMETER_SAVE_PERIOD:
+            mcu._save_state()
+        if now + 1e-9 >= mcu._next_any_due:
+            self._emit_due(now)
+
+    def _bms(self, now: float, dt: float, c: ChassisParams) -> None:
+        """Mcu._update_bms with Mcu.load_current inline (no bms-silence fault)."""
+        mcu, m = self.mcu, self.m
+        total = self.idle2
+        ml, mr = self.ml, self.mr
+        total += abs(ml.current) * (abs(ml.motor_rpm) / max(c.max_rpm, 1.0))
+        total += abs(mr.current) * (abs(mr.motor_rpm) / max(c.max_rpm, 1.0))
+        mcu._bms_charge += total * dt
+        mcu._bms_elapsed += dt
+        if mcu._bms_elapsed >= m.BMS_STEP - 1e-9:
+            mcu.bms.step(mcu._bms_elapsed, mcu._bms_charge / mcu._bms_elapsed)
+            mcu._bms_charge = mcu._bms_elapsed = 0.0
+        if now < mcu._bms_next_poll:
+            return
+        mcu._bms_next_poll += m.BMS_POLL_PERIOD
+        snapshot = mcu.bms.poll()
+        if snapshot is not None:
+            mcu.bms_snapshot = snapshot
+            mcu._bms_bits = int(mcu.bms.status_bits(snapshot))
+            mcu._bms_last_answer = now
+
+    def _status(self, now: float) -> None:
+        """Mcu._update_status without faults: no button e-stop, no bus fault."""
+        mcu, m = self.mcu, self.m
+        s = mcu.status & m.CARRIED
+        if mcu.estop_command:
+            s |= ESTOP_COMMAND
+        if mcu._watchdog:
+            s |= WATCHDOG_STOP
+        if now - mcu._standby_cmd_time < m.STANDBY_HINT_TIME:
+            s |= COMMAND_IN_STANDBY
+        if mcu._speed_limited and mcu._last_cmd is not None:
+            s |= SPEED_LIMITED
+        for motor, side, (over, stalled, fault, enc) in (
+            (self.ml, "left", SIDE_BITS[0]), (self.mr, "right", SIDE_BITS[1])
+        ):
+            if motor.over_current:
+                s |= over
+            if motor.stalled:
+                s |= stalled
+            if motor.over_current or motor.stalled:
+                s |= fault
+                mcu.motion_fault |= fault
+            if mcu._enc_stuck[side] >= m.ENCODER_FAULT_TIME:
+                s |= enc
+        s |= mcu.motion_fault
+        if mcu._imu_same >= m.IMU_FROZEN_SAMPLES:
+            s |= IMU_FAULT
+        if mcu.bms is not None:
+            lost = now - mcu._bms_last_answer > m.BMS_LINK_TIMEOUT
+            s |= (BMS_LINK_LOST if lost else 0) | mcu._bms_bits
+        mcu.status = s
+        state = mcu.state
+        rs = m.RobotState
+        if state == rs.ACTIVE or state == rs.EMERGENCY_STOP or state == rs.FAULT:
+            if s & ESTOP_BITS:
+                mcu.state = rs.EMERGENCY_STOP
+            elif mcu.motion_fault or s & BMS_PROTECTION:
+                mcu.state = rs.FAULT
+            elif state != rs.ACTIVE:
+                mcu.state = rs.STANDBY
+
+    # -- frames out ------------------------------------------------------------------------------
+
+    def _emit_due(self, now: float) -> None:
+        """Mcu._emit_due + Mcu._emit without faults: straight out, one stats update."""
+        mcu = self.mcu
+        due = mcu._due
+        counters = mcu._counters
+        send = mcu._send
+        sent = 0
+        edge = now + 1e-9
+        for i, (msg, name, frame_id, has_counter, period, shared) in enumerate(self.tx):
+            d = due[i]
+            if edge < d:
+                continue
+            missed = max(0, math.floor((now - d) / period)) if period else 0
+            due[i] = d + (missed + 1) * period
+            rows = self.builders[i]()
+            if shared and rows and has_counter:
+                counter = counters[name]
+                counters[name] = (counter + 1) & 0xF
+                for values in rows:
+                    values["Counter"] = counter
+            for values in rows:
+                if has_counter and "Counter" not in values:
+                    values["Counter"] = counters[name]
+                    counters[name] = (counters[name] + 1) & 0xF
+                send(frame_id, msg.encode(values))
+                sent += 1
+        mcu._next_any_due = min(due)
+        if sent:
+            mcu.stats["tx_frames"] += sent
+
+    def _builder(self, name: str) -> Callable[[], Rows]:
+        """The rows of periodic message ``name``: specialised for the 10 and 20 ms frames,
+        Mcu._build for the others."""
+        mcu, m = self.mcu, self.m
+        rng = m._RANGES
+
+        def clip(value: float, lo: float, hi: float) -> float:
+            return lo if value < lo else hi if value > hi else value
+
+        if name == "WheelFeedback":
+            lv, hv = rng[name, "LeftVelocity"]
+            lc, hc = rng[name, "LeftCurrent"]
+            rlv, rhv = rng[name, "RightVelocity"]
+            rlc, rhc = rng[name, "RightCurrent"]
+
+            def wheel_feedback() -> Rows:
+                ml, mr, el, er = self.ml, self.mr, self.el, self.er
+                return [
+                    {"LeftCount": wrap(el.total),
+                     "LeftVelocity": clip(ml.omega * self.ppr_l * self.bpp_l, lv, hv),
+                     "LeftCurrent": clip(ml.current, lc, hc), "Wheel": 0,
+                     "LeftDriverStatus": ml.status_bits | el.status_bits},
+                    {"RightCount": wrap(er.total),
+                     "RightVelocity": clip(mr.omega * self.ppr_r * self.bpp_r, rlv, rhv),
+                     "RightCurrent": clip(mr.current, rlc, rhc), "Wheel": 1,
+                     "RightDriverStatus": mr.status_bits | er.status_bits}]
+            return wheel_feedback
+        if name == "MotionState":
+            ll, hl = rng[name, "Linear"]
+            la, ha = rng[name, "Angular"]
+
+            def motion_state() -> Rows:
+                v_l = self.ml.omega * self.ppr_l * self.bpp_l
+                v_r = self.mr.omega * self.ppr_r * self.bpp_r
+                v, w = 0.5 * (v_l + v_r), (v_r - v_l) / mcu.chassis.wheel_distant
+                return [{"Linear": clip(v, ll, hl), "Angular": clip(w, la, ha)}]
+            return motion_state
+        if name in ("ImuGyro", "ImuAccel"):
+            which = 0 if name == "ImuGyro" else 1
+            (lx, hx), (ly, hy), (lz, hz) = (rng[name, axis] for axis in "XYZ")
+
+            def imu() -> Rows:
+                x, y, z = mcu.imu_sample[which]
+                return [{"X": clip(x, lx, hx), "Y": clip(y, ly, hy), "Z": clip(z, lz, hz)}]
+            return imu
+        msg = mcu.codec.message(name)
+        return lambda: mcu._build(msg)

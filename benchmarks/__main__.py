@@ -11,8 +11,8 @@ from pathlib import Path
 
 from benchmarks.common import Row
 
-MODULES = ("bench_protocol", "bench_emulator", "bench_bms", "bench_driver", "bench_scenarios",
-           "bench_world")
+MODULES = ("bench_protocol", "bench_emulator", "bench_fleet", "bench_bms", "bench_driver",
+           "bench_scenarios", "bench_world")
 
 
 def _fmt(v: float) -> str:

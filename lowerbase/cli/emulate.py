@@ -40,6 +40,9 @@ def add_subparser(subparsers: Any) -> None:
                    help="parameter file, written atomically on every parameter write")
     p.add_argument("--fault", action="append", default=[], metavar="SPEC",
                    help="inject a fault (repeatable); see below")
+    p.add_argument("--fleet", type=_chassis_count, metavar="N",
+                   help="run N lower computers in this process on one clock, chassis k on its "
+                   "own bus: udp_multicast port PORT+k (default 43113+k), same group")
     p.add_argument("--duration", type=positive_seconds, metavar="S", help="stop after S seconds")
     timing = p.add_mutually_exclusive_group()
     timing.add_argument("--realtime", dest="simulated", action="store_false",
@@ -86,6 +89,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--simulated needs --duration (it runs as fast as the CPU allows)")
     profile = load_profile(args.profile)
     faults = [parse_fault(spec) for spec in args.fault]
+    if args.fleet is not None:
+        return _run_fleet(args, profile, faults)
     if args.slcan:
         config: dict[str, Any] = {"interface": "slcan_device", "channel": args.slcan}
     else:
@@ -153,6 +158,63 @@ def run(args: argparse.Namespace) -> int:
             bms.close()
         with contextlib.suppress(can.CanError):
             bus.shutdown()
+    return 0
+
+
+def _chassis_count(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number of chassis >= 1, not {text!r}")
+    return n
+
+
+#: single-chassis options a fleet does not take (each chassis has its own pack, no files)
+_NOT_WITH_FLEET = ("serial", "slcan", "params", "bms_tcp", "bms_rtu", "bms_external",
+                   "print_frames", "truth")
+
+
+def _run_fleet(args: argparse.Namespace, profile: Any, faults: list[Any]) -> int:
+    """``--fleet N``: N chassis stepped together by runner.run_fleet, each on its own bus."""
+    from lowerbase.clock import RealClock, SimClock
+    from lowerbase.errors import ConfigError
+    from lowerbase.firmware_model.runner import close_fleet, fleet_bus_configs, open_fleet
+    from lowerbase.firmware_model.runner import run_fleet as run_all
+    from lowerbase.transport import config_from_args, describe
+
+    given = [name for name in _NOT_WITH_FLEET if getattr(args, name)]
+    if given:
+        raise ConfigError(f"--fleet runs each chassis with its own pack on its own bus; drop "
+                          f"--{given[0].replace('_', '-').replace('print-frames', 'print')}")
+    if not 0 <= args.soc <= 100:
+        raise ConfigError("--soc must be within 0..100 %")
+    config = config_from_args(args)
+    configs = fleet_bus_configs(config, args.fleet)  # refuses what cannot host a fleet
+    stop = threading.Event()
+    clock = SimClock() if args.simulated else RealClock(stop)
+    fleet = open_fleet(profile, clock, config, args.fleet, bms=not args.no_bms, soc=args.soc,
+                       charger=args.charger, faults=faults)
+    try:
+        first, last = configs[0], configs[-1]
+        where = (f"ports {first['port']}..{last['port']} (chassis k on port {first['port']}+k)"
+                 if "port" in first else f"channels {first['channel']}..{last['channel']}")
+        print(f"lowerbase emulate: fleet of {args.fleet} lower computers on "
+              f"{describe({k: v for k, v in config.items() if k != 'port'})}, {where} "
+              f"({'simulated' if args.simulated else 'real'} time); Ctrl-C stops", flush=True)
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+        with contextlib.suppress(KeyboardInterrupt):
+            run_all(fleet, clock, duration=args.duration, stop=stop)
+        totals: dict[str, int] = {}
+        for chassis in fleet:
+            for key, value in chassis.mcu.stats.items():
+                totals[key] = totals.get(key, 0) + value
+        stats = ", ".join(f"{k} {v}" for k, v in sorted(totals.items()))
+        print(f"lowerbase emulate: fleet stopped after {clock.now() - fleet[0].mcu.boot_time:.1f}"
+              f" s; all {args.fleet} together: {stats}", file=sys.stderr)
+    finally:
+        close_fleet(fleet)
     return 0
 
 

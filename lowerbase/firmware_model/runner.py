@@ -4,6 +4,10 @@ Real time: frames are handled as they arrive and the control loop keeps its peri
 deadline advances by exactly one period per step, so periodic frames keep their cycle).
 Simulated time: each step drains what the bus holds, then the clock jumps one period.
 
+:func:`run_fleet` steps N chassis on one clock in one process, each on its own bus (a
+udp_multicast port each, :func:`fleet_bus_configs`): one ``epoll`` wait per control period for
+all of them, then one step each.
+
 Given a :class:`~lowerbase.transport.peers.PeerMonitor` (fed with what the MCU sends through
 ``bus_sender(..., on_sent=...)``), the runner warns once, and counts ``two_lower_computers`` in
 the MCU's stats, when another lower computer's Heartbeats share the bus.
@@ -11,14 +15,20 @@ the MCU's stats, when another lower computer's Heartbeats share the bus.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
+import selectors
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import can
 
 from lowerbase.clock import Clock, SimClock
+from lowerbase.errors import ConfigError
 from lowerbase.firmware_model.mcu import Mcu
+from lowerbase.firmware_model.profile import Profile
 from lowerbase.transport import is_catalog_frame
 from lowerbase.transport.peers import PeerMonitor
 
@@ -33,9 +43,14 @@ def bus_sender(
 
     ``on_sent`` sees every frame that went out (e.g. a PeerMonitor's ``on_sent``)."""
 
+    send_frame = getattr(bus, "send_frame", None)  # udp_multicast: no can.Message per frame
+
     def send(frame_id: int, data: bytes) -> None:
         try:
-            bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False))
+            if send_frame is not None:
+                send_frame(frame_id, data)
+            else:
+                bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False))
         except can.CanError as exc:
             if mcu_stats is not None:
                 mcu_stats("tx_errors")
@@ -96,3 +111,161 @@ def run(
                 deadline = clock.now()
         if on_step is not None:
             on_step(mcu)
+
+
+@dataclass
+class Chassis:
+    """One lower computer of a fleet: its MCU, its own bus, its PeerMonitor."""
+
+    mcu: Mcu
+    bus: can.BusABC
+    peers: PeerMonitor | None = None
+
+
+def fleet_bus_configs(config: dict[str, Any], n: int) -> list[dict[str, Any]]:
+    """The bus of each of ``n`` chassis: udp_multicast ``port + k`` for chassis k (same
+    group), python-can's ``virtual`` channel ``CHANNEL/k``; other interfaces have one bus
+    per channel the user names, so a fleet cannot share them."""
+    if n < 1:
+        raise ConfigError(f"a fleet needs at least one chassis, not {n}")
+    interface = config.get("interface")
+    if interface == "udp_multicast":
+        port = int(config.get("port", 43113))
+        if port + n - 1 > 65535:
+            raise ConfigError(f"--fleet {n} needs ports {port}..{port + n - 1}; choose a lower "
+                              "port (--bus-kwargs port=P)")
+        return [{**config, "port": port + k} for k in range(n)]
+    if interface == "virtual":
+        return [{**config, "channel": f"{config.get('channel')}/{k}"} for k in range(n)]
+    raise ConfigError(f"a fleet runs on udp_multicast (chassis k on port PORT+k) or virtual, "
+                      f"not {interface}")
+
+
+def fleet_profile(profile: Profile, k: int) -> Profile:
+    """Chassis k's profile: the same robot with its own IMU noise and slip seeds (seed + k)."""
+    if k == 0:
+        return profile
+    top = 2**63
+    return profile.replace(imu=dataclasses.replace(profile.imu, seed=(profile.imu.seed + k) % top),
+                           truth=dataclasses.replace(profile.truth,
+                                                     seed=(profile.truth.seed + k) % top))
+
+
+def run_fleet(
+    fleet: Sequence[Chassis],
+    clock: Clock,
+    *,
+    duration: float | None = None,
+    stop: threading.Event | None = None,
+    on_step: Callable[[], None] | None = None,
+) -> None:
+    """Run every chassis until ``duration`` [s] has passed or ``stop`` is set.
+
+    Each control period: the frames waiting on any chassis' bus go to that chassis (one
+    ``epoll`` wait tells which buses have any; buses without a file descriptor are polled),
+    then every MCU steps once and ``on_step()`` is called. In real time the wait lasts until
+    the period's deadline, as :func:`run` does for one chassis."""
+    if not fleet:
+        return
+    periods = {c.mcu.dt for c in fleet}
+    if len(periods) != 1:
+        raise ConfigError("a fleet runs on one control period; the profiles' rates.control_hz "
+                          f"differ: {sorted(1 / p for p in periods)}")
+    dt = fleet[0].mcu.dt
+    stop = stop or threading.Event()
+    selector = selectors.DefaultSelector()
+    polled: list[Chassis] = []
+    for chassis in fleet:
+        try:
+            fd = chassis.bus.fileno()
+        except (NotImplementedError, AttributeError):
+            fd = -1
+        if fd >= 0:
+            selector.register(fd, selectors.EVENT_READ, chassis)
+        else:
+            polled.append(chassis)
+
+    def drain(chassis: Chassis) -> None:
+        while (msg := chassis.bus.recv(0.0)) is not None:
+            _receive(chassis.mcu, msg, chassis.peers)
+
+    def receive(timeout: float) -> None:
+        for key, _ in selector.select(timeout):
+            drain(key.data)
+        for chassis in polled:
+            drain(chassis)
+
+    sim = clock if isinstance(clock, SimClock) else None
+    wait = min(dt / 4, 0.001) if polled else None  # buses without an fd: poll them
+    start = deadline = clock.now()
+    try:
+        while not stop.is_set():
+            if duration is not None and clock.now() - start >= duration - 1e-9:
+                break
+            deadline += dt
+            if sim is not None:
+                receive(0.0)
+            else:
+                while (remaining := deadline - clock.now()) > 0:
+                    receive(remaining if wait is None else min(remaining, wait))
+                receive(0.0)
+            for chassis in fleet:
+                chassis.mcu.step()
+            if sim is not None:
+                sim.advance(dt)
+            elif clock.now() - deadline > 1.0:  # overloaded: do not burst-catch-up
+                deadline = clock.now()
+            if on_step is not None:
+                on_step()
+    finally:
+        selector.close()
+
+
+def open_fleet(
+    profile: Profile, clock: Clock, config: dict[str, Any], n: int, *, bms: bool = True,
+    soc: float = 80.0, charger: bool = False, faults: Sequence[Any] = (),
+) -> list[Chassis]:
+    """``n`` chassis, each with its own pack and BMS (unless ``bms`` is False), its own bus
+    (:func:`fleet_bus_configs`) and its own seeds (:func:`fleet_profile`)."""
+    from lowerbase.bms.adapter import McuBmsAdapter
+    from lowerbase.protocol.codec import default_codec
+    from lowerbase.transport import open_bus
+
+    codec = default_codec()
+    fleet: list[Chassis] = []
+
+    def make(k: int, bus: can.BusABC) -> Chassis:
+        p = fleet_profile(profile, k)
+        peers = PeerMonitor(codec)
+        chassis = Chassis(None, bus, peers)  # type: ignore[arg-type]  # the MCU just below
+        send = bus_sender(bus, lambda key: chassis.mcu.stats.update([key]),
+                          on_sent=lambda fid, data: peers.on_sent(fid, data, clock.now()))
+        pack = McuBmsAdapter.from_profile(p, soc=soc, charger=charger) if bms else None
+        chassis.mcu = Mcu(p, clock, send, bms=pack, faults=faults, codec=codec)
+        return chassis
+
+    try:
+        for k, cfg in enumerate(fleet_bus_configs(config, n)):
+            bus = open_bus(cfg)
+            try:
+                fleet.append(make(k, bus))
+            except BaseException:
+                bus.shutdown()
+                raise
+    except BaseException:
+        close_fleet(fleet)
+        raise
+    return fleet
+
+
+def close_fleet(fleet: Sequence[Chassis]) -> None:
+    """Shut every chassis down (odometer persisted, BMS closed) and close its bus."""
+    for chassis in fleet:
+        if chassis.mcu is not None:
+            chassis.mcu.shutdown()
+            if chassis.mcu.bms is not None:
+                chassis.mcu.bms.close()
+        try:
+            chassis.bus.shutdown()
+        except can.CanError as exc:  # closing must not stop the others from closing
+            log.debug("closing a fleet bus: %s", exc)

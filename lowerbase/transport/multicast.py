@@ -1,24 +1,50 @@
-"""python-can's udp_multicast, hardened: only datagrams sent to the group are frames.
+"""python-can's udp_multicast, hardened and lean: only the group's datagrams are frames.
 
 python-can binds its socket to ``0.0.0.0:PORT``, so a plain unicast datagram that any host
-sends to that port is taken as a frame. :class:`GroupOnlyMulticastBus` binds the socket to
-the group address itself (the kernel then delivers only datagrams whose destination is the
-group). With hop limit 0 (lowerbase's default, "this host only") it also joins the group and
-sends on the loopback interface only and sets ``IP_MULTICAST_ALL`` off, so multicast that
-arrives from the network is not delivered either. ``open_bus`` uses it for every
-``udp_multicast`` configuration; the wire format is python-can's, so its tools interoperate.
+sends to that port is taken as a frame. :class:`GroupOnlyMulticastBus` binds its receive
+socket to the group address itself (the kernel then delivers only datagrams whose destination
+is the group). With hop limit 0 (lowerbase's default, "this host only") it also joins the group
+and sends on the loopback interface only and sets ``IP_MULTICAST_ALL`` off, so multicast that
+arrives from the network is not delivered either.
+
+With hop limit 0 it sends from a socket of its own (``127.0.0.1``, an ephemeral port), and a
+kernel socket filter on the receive socket drops the datagrams that came from it: like a CAN
+controller (and SocketCAN's default), a bus does not receive its own frames, and they cost
+nothing on the way back. ``can_filters`` are applied in the kernel too (a foreign ID never
+wakes the process; see :func:`lowerbase.transport.udp_wire.socket_filter`) and again, exactly,
+in user space. Sending and receiving skip python-can's per-frame dict (:mod:`udp_wire`) and
+``send_frame(frame_id, data)`` sends a classic frame without building a ``can.Message``; the
+bytes on the wire are python-can's, so its tools interoperate. ``open_bus`` uses this class for
+every ``udp_multicast`` configuration.
 """
 
 from __future__ import annotations
 
+import ctypes
+import logging
+import select
 import socket
 import struct
+import time
 from typing import Any
 
 import can
+from can import CanProtocol
 from can.interfaces.udp_multicast.bus import GeneralPurposeUdpMulticastBus, UdpMulticastBus
+from can.interfaces.udp_multicast.utils import is_msgpack_installed
+from can.typechecking import CanFilters
+
+from lowerbase.transport import udp_wire
+
+log = logging.getLogger(__name__)
 
 _IP_MULTICAST_ALL = getattr(socket, "IP_MULTICAST_ALL", 49)  # Linux
+_SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
+_SO_ATTACH_FILTER = getattr(socket, "SO_ATTACH_FILTER", 26)
+_TIMESPEC = struct.Struct("@ll")
+#: receive buffer asked for (the kernel caps it at net.core.rmem_max): a process that is
+#: descheduled for a while keeps what arrived meanwhile
+RECEIVE_BUFFER = 1 << 21
 
 
 class _GroupSocket(GeneralPurposeUdpMulticastBus):
@@ -34,25 +60,156 @@ class _GroupSocket(GeneralPurposeUdpMulticastBus):
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             if hasattr(socket, "SO_REUSEPORT"):
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
             sock.bind((self.group, self.port))  # the group's datagrams only, never unicast
             sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
                             socket.inet_aton(self.group) + iface)
             if local:
                 sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, iface)
                 sock.setsockopt(socket.IPPROTO_IP, _IP_MULTICAST_ALL, 0)
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+                self.timestamp_nanosecond = True
+            except OSError:
+                self.timestamp_nanosecond = False
         except OSError as error:
             sock.close()
             raise can.CanInitializationError(
                 f"could not bind {self.group}:{self.port}: {error}") from error
-        self.timestamp_nanosecond = False
         return sock
+
+
+def _sender(port: int) -> socket.socket:
+    """A socket that sends to the group on loopback only, from a port of its own."""
+    for _ in range(8):
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            tx.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, struct.pack("@I", 0))
+            tx.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+            tx.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+            tx.bind(("127.0.0.1", 0))
+        except OSError as error:
+            tx.close()
+            raise can.CanInitializationError(f"could not open a sending socket: {error}") \
+                from error
+        if tx.getsockname()[1] != port:  # the group's port is every plain sender's source
+            return tx
+        tx.close()
+    raise can.CanInitializationError("no free loopback port to send from")
 
 
 class GroupOnlyMulticastBus(UdpMulticastBus):
     """``udp_multicast`` that accepts only what arrives on its group (see the module)."""
 
     def __init__(self, channel: str = UdpMulticastBus.DEFAULT_GROUP_IPv4, port: int = 43113,
-                 hop_limit: int = 0, **kwargs: Any) -> None:
-        super().__init__(channel, port, hop_limit, **kwargs)
-        self._multicast.shutdown()
-        self._multicast = _GroupSocket(channel, port, hop_limit)
+                 hop_limit: int = 0, receive_own_messages: bool = False, fd: bool = True,
+                 **kwargs: Any) -> None:
+        # UdpMulticastBus.__init__ without its socket (bound to 0.0.0.0:PORT, which a fleet's
+        # port range can collide with)
+        is_msgpack_installed()
+        if receive_own_messages:
+            raise can.CanInterfaceNotImplementedError(
+                "receiving own messages is not yet implemented")
+        self._kernel_masks: list[tuple[int, int]] | None = None
+        self._rx: socket.socket | None = None
+        self._multicast = group = _GroupSocket(channel, port, hop_limit)
+        self._can_protocol = CanProtocol.CAN_FD if fd else CanProtocol.CAN_20
+        self._own_port: int | None = None
+        self._tx = group._socket
+        if group.ip_version == 4 and hop_limit == 0:
+            try:
+                self._tx = _sender(port)
+            except BaseException:
+                group.shutdown()
+                raise
+            self._own_port = int(self._tx.getsockname()[1])
+        self._dest = (group.group, port)
+        self._tx_timeout: float | None = None
+        self._anc = socket.CMSG_SPACE(_TIMESPEC.size) if group.timestamp_nanosecond else 0
+        self._poll = select.poll()  # not select(): a fleet has more sockets than FD_SETSIZE
+        self._poll.register(group._socket, select.POLLIN)
+        self.rx_malformed = 0  #: datagrams on the group that are not frames (dropped)
+        self._rx = group._socket
+        can.BusABC.__init__(self, channel, **kwargs)  # can_filters: attached to the socket
+
+    # -- receive ------------------------------------------------------------------------------
+    def _apply_filters(self, filters: CanFilters | None) -> None:
+        self._kernel_masks = None if not filters else [
+            (int(f["can_id"]), int(f["can_mask"])) for f in filters]
+        if self._rx is not None:
+            self._attach_filter()
+
+    def _attach_filter(self) -> None:
+        assert self._rx is not None
+        if self._own_port is None and self._kernel_masks is None:
+            return
+        try:
+            prog = udp_wire.socket_filter(self._own_port, self._kernel_masks)
+        except ValueError:  # too many filters for one program: the IDs in user space only
+            prog = udp_wire.socket_filter(self._own_port, None)
+        raw = b"".join(struct.pack("HBBI", *insn) for insn in prog)
+        buf = ctypes.create_string_buffer(raw, len(raw))
+        fprog = struct.pack("HL", len(prog), ctypes.addressof(buf))
+        try:
+            self._rx.setsockopt(socket.SOL_SOCKET, _SO_ATTACH_FILTER, fprog)
+        except OSError as error:  # no socket filters here: everything is filtered in Python
+            log.debug("socket filter not attached: %s", error)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        assert self._rx is not None
+        flags = 0
+        if timeout is not None and timeout <= 0:
+            flags = socket.MSG_DONTWAIT
+        elif not self._poll.poll(None if timeout is None else timeout * 1000.0):
+            return None, False
+        try:
+            datagram, ancillary, _, _ = self._rx.recvmsg(self._multicast.max_buffer,
+                                                         self._anc, flags)
+        except BlockingIOError:
+            return None, False
+        except OSError as exc:
+            raise can.CanOperationError(f"failed to receive from the socket: {exc}") from exc
+        stamp = None
+        for level, kind, value in ancillary:
+            if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS:
+                sec, nsec = _TIMESPEC.unpack_from(value)
+                stamp = sec + nsec * 1e-9
+        try:
+            msg = udp_wire.unpack(datagram, time.time() if stamp is None else stamp)
+        except Exception as exc:  # anything on the group that is not a frame
+            self.rx_malformed += 1
+            log.debug("dropped a datagram that is not a frame (%d bytes): %s", len(datagram),
+                      exc)
+            return None, False
+        if self._can_protocol is not CanProtocol.CAN_FD and msg.is_fd:
+            return None, False
+        return msg, False  # python-can applies the filters exactly (the kernel's are a superset)
+
+    # -- send ---------------------------------------------------------------------------------
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if self._can_protocol is not CanProtocol.CAN_FD and msg.is_fd:
+            raise can.CanOperationError("cannot send FD message over bus with CAN FD disabled")
+        if timeout != self._tx_timeout:
+            self._tx_timeout = timeout
+            self._tx.settimeout(timeout)
+        self._sendto(udp_wire.pack(msg))
+
+    def send_frame(self, frame_id: int, data: bytes) -> None:
+        """Send a classic data frame with an 11-bit ID: what ``send(can.Message(
+        arbitration_id=frame_id, data=data, is_extended_id=False))`` sends, faster."""
+        self._sendto(udp_wire.pack_classic(frame_id, data))
+
+    def _sendto(self, datagram: bytes) -> None:
+        try:
+            sent = self._tx.sendto(datagram, self._dest)
+        except TimeoutError:
+            raise can.CanTimeoutError() from None
+        except OSError as error:
+            raise can.CanOperationError(f"failed to send via socket: {error}") from error
+        if sent < len(datagram):
+            raise can.CanTimeoutError()
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        if self._tx is not self._rx:
+            self._tx.close()

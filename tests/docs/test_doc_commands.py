@@ -73,6 +73,8 @@ CHECKS: dict[str, Check] = {
     "lowerbase emulate": Check("start", "Ctrl-C stops"),
     "lowerbase driver": Check("skip", why=ROS),
     "lowerbase driver --replay run.blf": Check("skip", why=ROS),
+    "lowerbase emulate --fleet 100": Check("start", "Ctrl-C stops"),
+    "lowerbase driver --bus-kwargs port=43115": Check("skip", why=ROS),
     "lowerbase emulate --fault stall:left@10+2": Check("start", "Ctrl-C stops"),
     "lowerbase emulate --serial pty:/tmp/chassis-tty": Check(
         "start", "chassis-tty", (("/tmp/chassis-tty", "{dir}/chassis-tty"),),

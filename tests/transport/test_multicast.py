@@ -6,6 +6,7 @@ import socket
 from typing import Any
 
 import can
+from can.interfaces.udp_multicast.bus import UdpMulticastBus
 from can.interfaces.udp_multicast.utils import pack_message
 
 from lowerbase.transport import open_bus
@@ -43,5 +44,136 @@ def test_hop_limit_zero_binds_the_group_on_loopback(udp_bus_config: dict[str, An
         assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
         assert socket.inet_ntoa(sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF,
                                                 4)) == "127.0.0.1"
+    finally:
+        bus.shutdown()
+
+
+def _raw_queue(bus: can.BusABC) -> list[bytes]:
+    """The datagrams waiting in the bus's receive socket (what the kernel let through)."""
+    sock = bus._rx  # type: ignore[attr-defined]
+    out = []
+    while True:
+        try:
+            out.append(sock.recv(4096, socket.MSG_DONTWAIT))
+        except BlockingIOError:
+            return out
+
+
+def _settle(bus: can.BusABC, marker: int) -> list[can.Message]:
+    """Frames ``bus`` receives up to and including the ID ``marker`` (sent last)."""
+    got = []
+    while (msg := bus.recv(2.0)) is not None:
+        got.append(msg)
+        if msg.arbitration_id == marker:
+            return got
+    raise AssertionError(f"marker {marker:#x} never arrived")
+
+
+def test_a_bus_does_not_hear_itself_and_its_peers_hear_it(udp_bus_config: dict[str, Any]) -> None:
+    a, b = open_bus(udp_bus_config), open_bus(udp_bus_config)
+    try:
+        a.send(_frame(0x10))
+        a.send_frame(0x11, b"\x05")  # type: ignore[attr-defined]
+        got = _settle(b, 0x11)
+        assert [(m.arbitration_id, bytes(m.data)) for m in got] == [(0x10, b"\x01\x02"),
+                                                                   (0x11, b"\x05")]
+        assert not got[0].is_extended_id and got[0].timestamp > 0  # a kernel receive time
+        b.send(_frame(0x12))
+        assert [m.arbitration_id for m in _settle(a, 0x12)] == [0x12]  # not its own 0x10, 0x11
+    finally:
+        a.shutdown()
+        b.shutdown()
+
+
+def test_python_cans_own_udp_multicast_bus_interoperates(udp_bus_config: dict[str, Any]) -> None:
+    """The lean path's datagrams are python-can's: its own bus decodes them, and ours its."""
+    ours = open_bus(udp_bus_config)
+    theirs = UdpMulticastBus(channel=udp_bus_config["channel"], port=udp_bus_config["port"],
+                             hop_limit=0)
+    try:
+        ours.send_frame(0x123, bytes(range(8)))  # type: ignore[attr-defined]
+        ours.send(can.Message(arbitration_id=0x1ABCDEF, data=b"\x09", is_extended_id=True))
+        got = [theirs.recv(2.0) for _ in range(2)]
+        assert got[0] is not None and got[1] is not None
+        assert (got[0].arbitration_id, bytes(got[0].data), got[0].is_extended_id) == \
+            (0x123, bytes(range(8)), False)
+        assert (got[1].arbitration_id, bytes(got[1].data), got[1].is_extended_id) == \
+            (0x1ABCDEF, b"\x09", True)
+        # a plain python-can bus sends on the default interface; lowerbase (hop limit 0)
+        # listens on loopback only, so the peer has to send there too
+        theirs._multicast._socket.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF,
+                                             socket.inet_aton("127.0.0.1"))
+        theirs.send(can.Message(arbitration_id=0x321, data=b"\x07\x08", is_extended_id=False))
+        msg = ours.recv(2.0)
+        assert msg is not None and (msg.arbitration_id, bytes(msg.data)) == (0x321, b"\x07\x08")
+    finally:
+        theirs.shutdown()
+        ours.shutdown()
+
+
+def test_can_filters_drop_foreign_ids_in_the_kernel(udp_bus_config: dict[str, Any]) -> None:
+    wanted: list[can.typechecking.CanFilter] = [
+        {"can_id": 0x10, "can_mask": 0x7FF, "extended": False},
+        {"can_id": 0x200, "can_mask": 0x700}]
+    listener = open_bus(udp_bus_config, can_filters=wanted)
+    sender = open_bus(udp_bus_config)
+    try:
+        for frame_id in (0x11, 0x10, 0x300, 0x2AB, 0x7FF):
+            sender.send_frame(frame_id, b"\x01")  # type: ignore[attr-defined]
+        sender.send(can.Message(arbitration_id=0x10, data=b"", is_extended_id=True))
+        sender.send_frame(0x201, b"\x02")  # type: ignore[attr-defined]
+        ids = [m.arbitration_id for m in _settle(listener, 0x201)]
+        assert ids == [0x10, 0x2AB, 0x201]  # the extended 0x10 passes the kernel, not Python
+        sender.send_frame(0x300, b"")  # type: ignore[attr-defined]
+        sender.send_frame(0x10, b"")  # type: ignore[attr-defined]
+        assert _settle(listener, 0x10)[-1].arbitration_id == 0x10
+        listener.set_filters(None)  # everything again
+        sender.send_frame(0x300, b"")  # type: ignore[attr-defined]
+        sender.send_frame(0x301, b"")  # type: ignore[attr-defined]
+        assert [m.arbitration_id for m in _settle(listener, 0x301)] == [0x300, 0x301]
+        listener.set_filters(wanted)
+        sender.send_frame(0x300, b"")  # type: ignore[attr-defined]
+        sender.send_frame(0x10, b"")  # type: ignore[attr-defined]
+        sender.send_frame(0x211, b"")  # type: ignore[attr-defined]
+        assert _settle(listener, 0x211)  # then the queue holds what the kernel kept:
+        sender.send_frame(0x300, b"")  # type: ignore[attr-defined]
+        sender.send_frame(0x10, b"")  # type: ignore[attr-defined]
+        assert _settle(listener, 0x10)
+        assert _raw_queue(listener) == []
+    finally:
+        sender.shutdown()
+        listener.shutdown()
+
+
+def test_the_kernel_queue_holds_only_wanted_frames(udp_bus_config: dict[str, Any]) -> None:
+    listener = open_bus(udp_bus_config, can_filters=[{"can_id": 0x10, "can_mask": 0x7FF}])
+    sender = open_bus(udp_bus_config)
+    try:
+        for frame_id in (0x300, 0x301, 0x10, 0x302):
+            sender.send_frame(frame_id, b"\x01")  # type: ignore[attr-defined]
+        assert listener.recv(2.0) is not None  # the 0x10 arrived; whatever else is queued:
+        queued = _raw_queue(listener)
+        sender.send_frame(0x10, b"\x02")  # type: ignore[attr-defined]
+        assert listener.recv(2.0) is not None
+        assert queued == []  # 0x302 came after 0x10 and never reached the socket
+    finally:
+        sender.shutdown()
+        listener.shutdown()
+
+
+def test_datagrams_on_the_group_that_are_not_frames_are_counted(
+        udp_bus_config: dict[str, Any]) -> None:
+    bus = open_bus(udp_bus_config)
+    group, port = udp_bus_config["channel"], udp_bus_config["port"]
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as other:
+            other.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+            other.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF,
+                             socket.inet_aton("127.0.0.1"))
+            other.sendto(b"not msgpack \xc1", (group, port))
+            other.sendto(pack_message(_frame(0x20)), (group, port))
+        msg = bus.recv(2.0)
+        assert msg is not None and msg.arbitration_id == 0x20
+        assert bus.rx_malformed == 1  # type: ignore[attr-defined]
     finally:
         bus.shutdown()

@@ -1,0 +1,72 @@
+"""A fleet of emulated chassis in one process: how the cost grows with N, chassis per core.
+
+Each chassis is what ``lowerbase emulate --fleet N`` runs: an MCU with its own pack and BMS,
+driving (enabled after boot, a MotionCommand every 20 ms), every frame sent on its own
+udp_multicast bus (hop limit 0, port PORT+k), all stepped by ``runner.run_fleet`` on one
+simulated clock. Wall time per simulated second gives the real-time capacity: chassis per core
+= N / (wall seconds per simulated second).
+"""
+
+from __future__ import annotations
+
+import time
+
+from benchmarks.common import Row
+from lowerbase.clock import SimClock
+from lowerbase.firmware_model.mcu import Command
+from lowerbase.firmware_model.profile import load_profile
+from lowerbase.firmware_model.runner import close_fleet, open_fleet, run_fleet
+from lowerbase.transport import free_loopback_port
+
+GROUP = "239.74.163.95"
+ENABLE_STEP = 70  #: after the 0.3 s boot
+
+
+def fleet_cost(n: int, seconds: float) -> tuple[float, float, int, int]:
+    """(wall and CPU seconds per simulated second, frames sent, frames the bus refused) for
+    ``n`` chassis over ``seconds`` of simulated time (after a 0.5 s warm-up: boot, enable).
+    CPU is this process's user + system time: on a shared machine it counts only the work."""
+    clock = SimClock()
+    config = {"interface": "udp_multicast", "channel": GROUP, "port": free_loopback_port(),
+              "hop_limit": 0}
+    fleet = open_fleet(load_profile(), clock, config, n)
+    step = 0
+
+    def drive() -> None:
+        nonlocal step
+        step += 1
+        if step == ENABLE_STEP:
+            for chassis in fleet:
+                chassis.mcu.control(Command.ENABLE_CAN_CONTROL)
+        if step % 4 == 0:
+            for chassis in fleet:
+                chassis.mcu.command(0.6, 0.2)
+
+    try:
+        run_fleet(fleet, clock, duration=0.5, on_step=drive)  # boot, enable, first frames
+        before = sum(c.mcu.stats["tx_frames"] for c in fleet)
+        t0, c0 = time.perf_counter(), time.process_time()
+        run_fleet(fleet, clock, duration=seconds, on_step=drive)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        sent = sum(c.mcu.stats["tx_frames"] for c in fleet) - before
+        refused = sum(c.mcu.stats["tx_errors"] for c in fleet)
+    finally:
+        close_fleet(fleet)
+    return wall / seconds, cpu / seconds, sent - refused, refused
+
+
+def run(quick: bool = False) -> list[Row]:
+    rows = []
+    seconds = {1: 20.0, 10: 10.0, 100: 3.0, 300: 2.0} if quick else \
+        {1: 60.0, 10: 30.0, 100: 10.0, 300: 10.0}
+    for n, sim in seconds.items():
+        wall, cpu, sent, refused = fleet_cost(n, sim)
+        rows.append(Row("fleet", f"{n} chassis: wall per simulated second", wall * 1e3, "ms",
+                        f"{wall * 1e3 / n:.2f} ms per chassis ({n / wall:.0f} per core); CPU "
+                        f"{cpu * 1e3:.0f} ms ({n / cpu:.0f} per core); {sent / sim / n:.0f} "
+                        f"frames/s each sent, {refused} refused"))
+    per_core = rows[-1].value
+    rows.append(Row("fleet", "chassis per core in real time (300-chassis fleet)",
+                    300 / (per_core / 1e3), "chassis",
+                    "target >= 300; run_fleet, every frame on its chassis' udp_multicast bus"))
+    return rows

@@ -1,0 +1,181 @@
+"""The fleet runner: N chassis on one simulated clock, each on its own bus with its own state."""
+
+from __future__ import annotations
+
+import select
+import subprocess
+import sys
+from typing import Any
+
+import can
+import pytest
+
+from lowerbase.clock import SimClock
+from lowerbase.errors import ConfigError
+from lowerbase.firmware_model.mcu import Mcu
+from lowerbase.firmware_model.profile import load_profile
+from lowerbase.firmware_model.runner import (
+    bus_sender,
+    close_fleet,
+    fleet_bus_configs,
+    fleet_profile,
+    open_fleet,
+    run,
+    run_fleet,
+)
+from lowerbase.protocol.codec import default_codec
+from lowerbase.transport import open_bus
+
+CODEC = default_codec()
+
+
+class Upper:
+    """Plays the upper computer of one chassis: enable after boot, then drive."""
+
+    def __init__(self, bus: can.BusABC, linear: float, angular: float) -> None:
+        self.bus, self.linear, self.angular = bus, linear, angular
+        self.steps = self.counter = self.sent = 0
+
+    def send(self, name: str, **values: Any) -> None:
+        msg = CODEC.message(name)
+        if msg.has_counter:
+            values["Counter"] = self.counter
+            self.counter = (self.counter + 1) & 0xF
+        self.bus.send(can.Message(arbitration_id=msg.frame_id, data=msg.encode(values),
+                                  is_extended_id=False))
+        self.sent += 1
+
+    def __call__(self, *_: Any) -> None:
+        self.steps += 1
+        if self.steps == 80:
+            self.send("ControlCommand", Command="EnableCanControl")
+        elif self.steps > 80 and self.steps % 4 == 0:
+            self.send("MotionCommand", Linear=self.linear, Angular=self.angular, Mode="Raw")
+
+
+def test_bus_of_each_chassis() -> None:
+    udp = {"interface": "udp_multicast", "channel": "239.74.163.2", "port": 43113,
+           "hop_limit": 0}
+    assert [c["port"] for c in fleet_bus_configs(udp, 3)] == [43113, 43114, 43115]
+    assert all(c["channel"] == "239.74.163.2" for c in fleet_bus_configs(udp, 3))
+    virtual = fleet_bus_configs({"interface": "virtual", "channel": "f"}, 2)
+    assert [c["channel"] for c in virtual] == ["f/0", "f/1"]
+    with pytest.raises(ConfigError, match="udp_multicast"):
+        fleet_bus_configs({"interface": "socketcan", "channel": "vcan0"}, 2)
+    with pytest.raises(ConfigError, match="lower port"):
+        fleet_bus_configs({**udp, "port": 65000}, 600)
+    with pytest.raises(ConfigError, match="at least one"):
+        fleet_bus_configs(udp, 0)
+
+
+def test_each_chassis_has_its_own_seeds() -> None:
+    p = load_profile()
+    seeds = {(fleet_profile(p, k).imu.seed, fleet_profile(p, k).truth.seed) for k in range(5)}
+    assert len(seeds) == 5 and fleet_profile(p, 0) == p
+    assert fleet_profile(p, 3).chassis == p.chassis  # the same robot otherwise
+
+
+def test_a_fleet_chassis_runs_exactly_as_one_chassis_alone() -> None:
+    """Chassis 0 of a fleet of 3 (virtual buses, one driven) ends bit for bit where the same
+    chassis run alone by ``run`` ends; the others, not driven, stay where they started."""
+    p = load_profile()
+    clock = SimClock()
+    fleet = open_fleet(p, clock, {"interface": "virtual", "channel": "test_fleet_a"}, 3,
+                       bms=False)
+    uppers = [can.Bus(interface="virtual", channel=f"test_fleet_a/{k}") for k in range(3)]
+    drive = Upper(uppers[0], 0.5, 0.3)
+    try:
+        run_fleet(fleet, clock, duration=3.0, on_step=drive)
+        truths = [c.mcu.truth for c in fleet]
+        heard = [c.mcu.stats["rx_frames"] for c in fleet]
+    finally:
+        close_fleet(fleet)
+        for bus in uppers:
+            bus.shutdown()
+    assert clock.now() == pytest.approx(3.0)
+
+    alone_clock = SimClock()
+    bus = open_bus(interface="virtual", channel="test_fleet_alone")
+    upper = can.Bus(interface="virtual", channel="test_fleet_alone")
+    try:
+        mcu = Mcu(p, alone_clock, bus_sender(bus))
+        run(mcu, bus, alone_clock, duration=3.0, on_step=Upper(upper, 0.5, 0.3))
+    finally:
+        bus.shutdown()
+        upper.shutdown()
+    assert (truths[0].x, truths[0].y, truths[0].yaw) == (mcu.truth.x, mcu.truth.y, mcu.truth.yaw)
+    assert truths[0].x > 0.5
+    # all it was sent but the command sent after the last step
+    assert heard[0] == drive.sent - 1 == 130 and heard[1] == heard[2] == 0
+    for other in truths[1:]:
+        assert (other.x, other.y, other.yaw) == (0.0, 0.0, 0.0)
+
+
+def _wait_readable(bus: can.BusABC) -> None:
+    """Until a frame sent to ``bus`` has arrived (bounded: the kernel delivers it at once)."""
+    ready, _, _ = select.select([bus.fileno()], [], [], 5.0)
+    assert ready, "a frame sent on loopback did not arrive"
+
+
+def test_each_chassis_is_on_its_own_udp_multicast_bus(udp_bus_config: dict[str, Any]) -> None:
+    clock = SimClock()
+    fleet = open_fleet(load_profile(), clock, udp_bus_config, 3)
+    uppers = [open_bus(cfg) for cfg in fleet_bus_configs(udp_bus_config, 3)]
+    drive = Upper(uppers[1], 0.4, 0.0)
+
+    def on_step() -> None:
+        before = drive.counter
+        drive()
+        if drive.counter != before or drive.steps == 80:  # sent something: let it arrive
+            _wait_readable(fleet[1].bus)
+
+    try:
+        run_fleet(fleet, clock, duration=2.0, on_step=on_step)
+        got: list[list[can.Message]] = []
+        for bus in uppers:
+            frames = []
+            while (msg := bus.recv(0.2)) is not None:
+                frames.append(msg)
+            got.append(frames)
+        sent = [c.mcu.stats["tx_frames"] for c in fleet]
+        moved = [c.mcu.truth.x for c in fleet]
+    finally:
+        close_fleet(fleet)
+        for bus in uppers:
+            bus.shutdown()
+    # every upper side heard exactly its own chassis' frames, all of them
+    assert [len(frames) for frames in got] == sent
+    assert moved[1] > 0.3 and moved[0] == moved[2] == 0.0
+    motion = CODEC.message("MotionState")
+
+    def linear(frames: list[can.Message]) -> float:
+        last = [m for m in frames if m.arbitration_id == motion.frame_id][-1]
+        return float(motion.decode(bytes(last.data))["Linear"])
+
+    assert linear(got[1]) == pytest.approx(0.4, abs=0.02)
+    assert linear(got[0]) == linear(got[2]) == 0.0
+    gyro = CODEC.message("ImuGyro").frame_id
+    imu = [[bytes(m.data) for m in frames if m.arbitration_id == gyro] for frames in got]
+    assert imu[0] != imu[2]  # their own IMU noise (seed + k)
+
+
+def test_emulate_fleet_command(udp_bus_config: dict[str, Any]) -> None:
+    from tests.conftest import bus_cli_args
+
+    port = udp_bus_config["port"]
+    done = subprocess.run(
+        [sys.executable, "-m", "lowerbase", "emulate", "--fleet", "3", "--simulated",
+         "--duration", "1", *bus_cli_args(udp_bus_config)],
+        capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "fleet of 3 lower computers" in done.stdout
+    assert f"ports {port}..{port + 2} (chassis k on port {port}+k)" in done.stdout
+    assert "all 3 together: tx_frames" in done.stderr and "Traceback" not in done.stderr
+    refused = subprocess.run(
+        [sys.executable, "-m", "lowerbase", "emulate", "--fleet", "2", "--truth", "t.csv",
+         "--duration", "1", *bus_cli_args(udp_bus_config)],
+        capture_output=True, text=True, timeout=60)
+    assert refused.returncode != 0
+    assert refused.stderr.strip().splitlines() == [
+        "lowerbase emulate: error: --fleet runs each chassis with its own pack on its own bus; "
+        "drop --truth"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from lowerbase.protocol import busload
 from lowerbase.protocol.codec import Codec, MessageCodec, default_codec
 from lowerbase.protocol.framing import OVERHEAD, Framer
 
@@ -65,6 +66,29 @@ def _message_section(m: MessageCodec) -> list[str]:
     return lines
 
 
+def _capacity(codec: Codec) -> list[str]:
+    """The bus's capacity in eight-byte frames, with and without bit stuffing."""
+    rate = _bitrate(codec)
+    plain, worst = busload.unstuffed_bits(8), busload.worst_case_bits(8)
+    mean = busload.mean_frame_bits(8)
+    return [
+        "",
+        "## Bus capacity",
+        "",
+        "A classic data frame with an 11-bit ID and n data bytes is 44 + 8n bits (SOF, ID, RTR, "
+        "IDE, r0, DLC, CRC 15, CRC delimiter, ACK slot and delimiter, EOF 7) plus 3 bits of "
+        "interframe space. Bit stuffing inserts one bit after every five equal bits from SOF "
+        "to the end of the CRC (34 + 8n bits), at most floor((34 + 8n - 1) / 4). For n = 8 at "
+        f"{rate // 1000} kbit/s (`lowerbase/protocol/busload.py`):",
+        "",
+        "| stuffing | bits per frame | frames/s |",
+        "|---|---|---|",
+        f"| none | {plain} | {rate / plain:,.1f} |",
+        f"| typical (mean over uniformly random IDs and data) | {mean:.2f} | {rate / mean:,.1f} |",
+        f"| worst case (+{worst - plain}) | {worst} | {rate / worst:,.1f} |",
+    ]
+
+
 def render(codec: Codec | None = None) -> str:
     codec = codec or default_codec()
     name, values = EXAMPLE
@@ -97,6 +121,7 @@ def render(codec: Codec | None = None) -> str:
         cycle = f"{m.cycle_time * 1000:g} ms" if m.cycle_time else "event"
         out.append(f"| 0x{m.frame_id:03X} | {m.name} | {m.length} | {cycle} | "
                    f"{', '.join(m.senders)} |")
+    out += _capacity(codec)
     out += [
         "",
         "## Serial framing",

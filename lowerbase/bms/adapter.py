@@ -86,6 +86,8 @@ class McuBmsAdapter:
         self.critical_soc = critical_soc
         self.temp_warning_c = temp_warning_c
         self.server: BmsServer | None = None
+        self._frames_of: BmsSnapshot | None = None  # the snapshot _frames were built from
+        self._frames: dict[str, FrameSignals] = {}
 
     @classmethod
     def from_battery_table(
@@ -165,11 +167,15 @@ class McuBmsAdapter:
         return bits
 
     def frame(self, name: str, snapshot: BmsSnapshot) -> FrameSignals:
-        """Signals of Bms* frame ``name`` (Counter 0: the sender sets it)."""
-        for frame_name, signals in snapshot_to_frames(snapshot):
-            if frame_name == name:
-                return signals
-        raise KeyError(f"{name} is not a Bms frame")
+        """Signals of Bms* frame ``name`` (Counter 0: the sender sets it). The five frames of
+        one snapshot are built once (the MCU asks for them one by one)."""
+        if self._frames_of is not snapshot:
+            self._frames = dict(snapshot_to_frames(snapshot))
+            self._frames_of = snapshot
+        try:
+            return dict(self._frames[name])
+        except KeyError:
+            raise KeyError(f"{name} is not a Bms frame") from None
 
     def close(self) -> None:
         if self.server is not None:

@@ -61,7 +61,8 @@ class LeanLoop:
         self.bpp_l = self.bpp_r = 0.0
         self.builders: list[Callable[[], Rows]] = [
             self._builder(msg.name) for msg in mcu._periodic]
-        self.tx = [(msg, msg.name, msg.frame_id, msg.has_counter, msg.cycle_time or 0.0,
+        # the compiled encoder itself (what MessageCodec.encode calls when strict)
+        self.tx = [(msg._encode, msg.name, msg.frame_id, msg.has_counter, msg.cycle_time or 0.0,
                     msg.name in m.SHARED_COUNTER) for msg in mcu._periodic]
 
     # -- the believed chassis ------------------------------------------------------------------
@@ -137,8 +138,9 @@ class LeanLoop:
         mcu, m = self.mcu, self.m
         total = self.idle2
         ml, mr = self.ml, self.mr
-        total += abs(ml.current) * (abs(ml.motor_rpm) / max(c.max_rpm, 1.0))
-        total += abs(mr.current) * (abs(mr.motor_rpm) / max(c.max_rpm, 1.0))
+        top, two_pi = max(c.max_rpm, 1.0), 2.0 * math.pi  # WheelMotor.motor_rpm inline
+        total += abs(ml.current) * (abs(ml.omega * ml.geometry.ratio * 60.0 / two_pi) / top)
+        total += abs(mr.current) * (abs(mr.omega * mr.geometry.ratio * 60.0 / two_pi) / top)
         mcu._bms_charge += total * dt
         mcu._bms_elapsed += dt
         if mcu._bms_elapsed >= m.BMS_STEP - 1e-9:
@@ -204,7 +206,7 @@ class LeanLoop:
         send = mcu._send
         sent = 0
         edge = now + 1e-9
-        for i, (msg, name, frame_id, has_counter, period, shared) in enumerate(self.tx):
+        for i, (encode, name, frame_id, has_counter, period, shared) in enumerate(self.tx):
             d = due[i]
             if edge < d:
                 continue
@@ -220,7 +222,7 @@ class LeanLoop:
                 if has_counter and "Counter" not in values:
                     values["Counter"] = counters[name]
                     counters[name] = (counters[name] + 1) & 0xF
-                send(frame_id, msg.encode(values))
+                send(frame_id, encode(values))
                 sent += 1
         mcu._next_any_due = min(due)
         if sent:
@@ -269,7 +271,9 @@ class LeanLoop:
 
             def imu() -> Rows:
                 x, y, z = mcu.imu_sample[which]
-                return [{"X": clip(x, lx, hx), "Y": clip(y, ly, hy), "Z": clip(z, lz, hz)}]
+                return [{"X": lx if x < lx else hx if x > hx else x,
+                         "Y": ly if y < ly else hy if y > hy else y,
+                         "Z": lz if z < lz else hz if z > hz else z}]
             return imu
         msg = mcu.codec.message(name)
         return lambda: mcu._build(msg)

@@ -1,19 +1,19 @@
 """Worlds, scans and drives for the localization tests (deterministic: seeds only).
 
-The ray caster here is a small independent one (marching along each beam in steps of a
-quarter cell), kept until the tests move to ``lowerbase.world.lidar``.
+Scans come from ``lowerbase.world.lidar`` (exact ray casting, seeded range noise).
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from lowerbase.world.grid import OccupancyGrid
+from lowerbase.world.lidar import LaserScan, Lidar, LidarConfig
 from lowerbase.world.localization.poses import Pose2D, compose, inverse, wrap_scalar
+from lowerbase.world.raycast import Scene
 
 RES = 0.05
 
@@ -43,34 +43,20 @@ def corridor() -> OccupancyGrid:
     return grid_from_boxes(60.0, 2.0, [])
 
 
-@dataclass(frozen=True)
-class SimScan:
-    """The LaserScan fields the localizer reads."""
-
-    ranges: np.ndarray
-    angle_min: float
-    angle_increment: float
-    range_min: float
-    range_max: float
-
-
 def cast(grid: OccupancyGrid, pose: Pose2D, beams: int = 360, range_max: float = 10.0,
-         sigma: float = 0.01, rng: np.random.Generator | None = None) -> SimScan:
-    """A full-circle scan from ``pose``: first occupied cell along each beam, + noise."""
-    step = grid.resolution / 4
-    angles = -math.pi + np.arange(beams) * (2 * math.pi / beams)
-    t = np.arange(step, range_max, step)
-    a = angles[:, None] + pose[2]
-    x, y = pose[0] + t * np.cos(a), pose[1] + t * np.sin(a)
-    col, row = grid.world_to_cell(x, y)
-    inside = grid.inside(col, row)
-    hit = np.where(inside, grid.data[np.clip(row, 0, grid.height - 1),
-                                     np.clip(col, 0, grid.width - 1)] >= 50, False)
-    first = np.where(hit.any(axis=1), hit.argmax(axis=1), -1)
-    ranges = np.where(first >= 0, t[np.maximum(first, 0)], np.inf)
-    if rng is not None and sigma > 0:
-        ranges = ranges + sigma * rng.standard_normal(beams)
-    return SimScan(ranges.astype(np.float32), -math.pi, 2 * math.pi / beams, 0.05, range_max)
+         sigma: float = 0.01, rng: np.random.Generator | None = None) -> LaserScan:
+    """A full-circle scan from ``pose`` by lowerbase.world.lidar (one lidar at the base
+    origin), range noise ``sigma`` seeded from ``rng`` (none without it)."""
+    config = LidarConfig(fov=2 * math.pi, angular_step=2 * math.pi / beams, range_max=range_max,
+                         range_sigma=sigma if rng is not None else 0.0,
+                         seed=int(rng.integers(2 ** 31)) if rng is not None else 0)
+    scene = _SCENES.get(id(grid))
+    if scene is None or scene.grid is not grid:
+        scene = _SCENES[id(grid)] = Scene(grid)
+    return Lidar(config).scan(scene, pose, 0.0)
+
+
+_SCENES: dict[int, Scene] = {}
 
 
 def path_poses(waypoints: list[Pose2D], speed: float = 0.5, dt: float = 0.1) -> list[Pose2D]:

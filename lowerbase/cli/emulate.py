@@ -14,6 +14,9 @@ from lowerbase.cli.args import positive_seconds
 
 log = logging.getLogger("lowerbase.emulate")
 
+#: where --truth-udp sends without a value (lowerbase.world.truth_stream's default)
+_TRUTH_UDP_DEFAULT = "127.0.0.1:43213"
+
 
 def add_subparser(subparsers: Any) -> None:
     from lowerbase.firmware_model.faults import DEFECTS
@@ -68,6 +71,10 @@ def add_subparser(subparsers: Any) -> None:
                    help="print every frame sent, decoded")
     p.add_argument("--truth", metavar="FILE",
                    help="write the ground truth (t,x,y,yaw,v,w) as CSV every 20 ms")
+    p.add_argument("--truth-udp", nargs="?", const=_TRUTH_UDP_DEFAULT, metavar="[HOST:]PORT",
+                   help="stream the ground truth (t,x,y,yaw,v,w,contact) at 50 Hz as UDP "
+                   "datagrams to HOST:PORT, for lowerbase world (default "
+                   f"{_TRUTH_UDP_DEFAULT}; HOST defaults to 127.0.0.1)")
     p.set_defaults(func=run, simulated=False)
 
 
@@ -87,6 +94,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.simulated and args.duration is None:
         raise ConfigError("--simulated needs --duration (it runs as fast as the CPU allows)")
+    if args.truth_udp is not None:  # a bad address is refused before anything starts
+        from lowerbase.world.truth_stream import parse_address
+
+        parse_address(args.truth_udp)
     profile = load_profile(args.profile)
     faults = [parse_fault(spec) for spec in args.fault]
     if args.fleet is not None:
@@ -139,16 +150,12 @@ def run(args: argparse.Namespace) -> int:
             stop.set()
 
         signal.signal(signal.SIGTERM, _stop)
-        truth = None
-        if args.truth:
-            from lowerbase.bench.recording import TruthLog
-
-            truth = TruthLog(args.truth)
+        hooks = _truth_hooks(args)
         with contextlib.suppress(KeyboardInterrupt):
-            run_mcu(mcu, bus, clock, duration=args.duration, stop=stop, on_step=truth,
-                    peers=peers)
-        if truth is not None:
-            truth.close()
+            run_mcu(mcu, bus, clock, duration=args.duration, stop=stop,
+                    on_step=_chain(hooks), peers=peers)
+        for hook in hooks:
+            hook.close()
         mcu.shutdown()
         stats = ", ".join(f"{k} {v}" for k, v in sorted(mcu.stats.items()))
         print(f"lowerbase emulate: stopped after {clock.now() - mcu.boot_time:.1f} s; {stats}",
@@ -159,6 +166,33 @@ def run(args: argparse.Namespace) -> int:
         with contextlib.suppress(can.CanError):
             bus.shutdown()
     return 0
+
+
+def _truth_hooks(args: argparse.Namespace) -> list[Any]:
+    """The runner hooks that publish the ground truth: --truth (CSV), --truth-udp."""
+    hooks: list[Any] = []
+    if args.truth:
+        from lowerbase.bench.recording import TruthLog
+
+        hooks.append(TruthLog(args.truth))
+    if args.truth_udp is not None:
+        from lowerbase.world.truth_stream import TruthSender, parse_address
+
+        host, port = parse_address(args.truth_udp)
+        hooks.append(TruthSender(host, port))
+        print(f"lowerbase emulate: ground truth to udp {host}:{port} at 50 Hz", flush=True)
+    return hooks
+
+
+def _chain(hooks: list[Any]) -> Any:
+    if len(hooks) <= 1:
+        return hooks[0] if hooks else None
+
+    def each(mcu: Any) -> None:
+        for hook in hooks:
+            hook(mcu)
+
+    return each
 
 
 def _chassis_count(text: str) -> int:
@@ -173,7 +207,7 @@ def _chassis_count(text: str) -> int:
 
 #: single-chassis options a fleet does not take (each chassis has its own pack, no files)
 _NOT_WITH_FLEET = ("serial", "slcan", "params", "bms_tcp", "bms_rtu", "bms_external",
-                   "print_frames", "truth")
+                   "print_frames", "truth", "truth_udp")
 
 
 def _run_fleet(args: argparse.Namespace, profile: Any, faults: list[Any]) -> int:

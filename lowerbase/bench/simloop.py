@@ -4,6 +4,9 @@ No bus, no ROS, no threads: each control period the MCU steps, its frames reach 
 core with their send time, the driver ticks, and its frames reach the MCU. What the driver
 would publish (/odom_raw, /odom, /battery, ...) is read off ``loop.driver``; the ground truth
 off ``loop.mcu.truth``. Scenarios, the demo and the odometry benchmark run on this.
+
+``surroundings`` (a :class:`~lowerbase.firmware_model.truth.Surroundings`, e.g. the world's
+footprint contact) is what the robot can bump into; None (the default): open floor.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from lowerbase.driver.core import DriverConfig, DriverCore
 from lowerbase.firmware_model.faults import Fault
 from lowerbase.firmware_model.mcu import Mcu
 from lowerbase.firmware_model.profile import Profile, load_profile
+from lowerbase.firmware_model.truth import Surroundings
 
 FrameTap = Callable[[float, str, int, bytes], None]
 
@@ -31,6 +35,7 @@ class SimLoop:
         params_path: str | None = None,
         soc: float = 80.0,
         tap: FrameTap | None = None,
+        surroundings: Surroundings | None = None,
     ) -> None:
         self.profile = profile or load_profile()
         self.clock = SimClock()
@@ -44,6 +49,16 @@ class SimLoop:
         self.mcu = Mcu(self.profile, self.clock, self._from_mcu, params_path=params_path,
                        bms=bms, faults=faults)
         self.driver = DriverCore(self._from_driver, self.clock, driver_config)
+        self.mcu.truth.surroundings = surroundings
+
+    @property
+    def surroundings(self) -> Surroundings | None:
+        """What the robot can collide with (asked by the ground-truth integrator each step)."""
+        return self.mcu.truth.surroundings
+
+    @surroundings.setter
+    def surroundings(self, value: Surroundings | None) -> None:
+        self.mcu.truth.surroundings = value
 
     def _from_mcu(self, frame_id: int, data: bytes) -> None:
         now = self.clock.now()

@@ -106,7 +106,7 @@ class LeanLoop:
                      (mr.omega - before_r) / dt * mr.geometry.radius)
         truth = mcu.truth
         slip = mcu.slip.step(now - mcu.boot_time, truth.v * dt, rim_accel)
-        truth.step(a_l / dt, a_r / dt, dt, slip)
+        truth.step(a_l / dt, a_r / dt, dt, slip, now + dt)
         moved_l = el.add(a_l)
         moved_r = er.add(a_r)
         ds = 0.0

@@ -459,7 +459,7 @@ class Mcu:
             accel[side] = (motor.omega - before) / dt * motor.geometry.radius  # real rim
         rim_accel = (accel["left"], accel["right"])
         slip = self.slip.step(now - self.boot_time, self.truth.v * dt, rim_accel)
-        self.truth.step(angles["left"] / dt, angles["right"] / dt, dt, slip)
+        self.truth.step(angles["left"] / dt, angles["right"] / dt, dt, slip, now + dt)
         ds = 0.0
         for side, enc in self._encoders.items():
             before = enc.total

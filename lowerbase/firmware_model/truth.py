@@ -5,19 +5,35 @@ The true wheel radii and track differ from the parameters by the profile's [trut
 fraction ``s`` (0 = rolling, 1 = spinning in place). Slip is episodic (physical-data.md 5.1):
 :class:`SlipModel` produces it as events, never as white noise. Build the truth from the
 profile as loaded: later parameter writes change what the firmware believes, not the robot.
+
+What the robot can bump into is not the firmware model's business: whoever builds the loop may
+install :class:`Surroundings` (``GroundTruth.surroundings``), which the integrator asks before
+every move. A refused move leaves the robot where it was with ground speed 0 (the wheels turn
+on, slipping against the obstacle, as a real robot pushing a wall); ``GroundTruth.blocked``
+says so. Without surroundings nothing is asked and nothing changes.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 
 from lowerbase.firmware_model.profile import ChassisParams, TruthParams
 
 Vec3 = tuple[float, float, float]
+TruePose = tuple[float, float, float]
+
+
+class Surroundings(Protocol):
+    """What the robot can collide with, seen from the ground-truth integrator."""
+
+    def allowed(self, pose_from: TruePose, pose_to: TruePose, t: float) -> bool:
+        """May the robot move from ``pose_from`` to ``pose_to`` (x, y, yaw in the truth frame
+        [m, rad]) during the step ending at simulated time ``t`` [s]?"""
+        ...
 
 
 @dataclass(frozen=True)
@@ -65,19 +81,30 @@ class GroundTruth:
         self.w = 0.0  # [rad/s] true yaw rate over the last step
         self.accel_x = 0.0  # [m/s^2] dv/dt over the last step
         self.distance = 0.0  # [m] sum of |ds| of the base centre
+        self.surroundings: Surroundings | None = None  #: asked before each move (see module)
+        self.blocked = False  #: the last step's move was refused by the surroundings
+        self.blocked_steps = 0  #: steps refused so far
 
     def step(
-        self, omega_left: float, omega_right: float, dt: float, slip: tuple[float, float] = (0, 0)
+        self, omega_left: float, omega_right: float, dt: float, slip: tuple[float, float] = (0, 0),
+        t: float = math.nan,
     ) -> None:
         """Advance ``dt`` [s] with the TRUE mean wheel angular velocities [rad/s] over the step
-        (angle turned / dt, for exact distances) and slip fractions (left, right)."""
+        (angle turned / dt, for exact distances) and slip fractions (left, right); ``t`` [s] is
+        the simulated time at the end of the step (what :class:`Surroundings` is asked at)."""
         if dt <= 0.0:
             return
         g = self.geometry
         v_left = (1.0 - slip[0]) * omega_left * g.radius_left
         v_right = (1.0 - slip[1]) * omega_right * g.radius_right
         v, w = 0.5 * (v_left + v_right), (v_right - v_left) / g.track
-        self.x, self.y, self.yaw = integrate_pose(self.x, self.y, self.yaw, v, w, dt)
+        pose = integrate_pose(self.x, self.y, self.yaw, v, w, dt)
+        if self.surroundings is not None:
+            self.blocked = not self.surroundings.allowed((self.x, self.y, self.yaw), pose, t)
+            if self.blocked:  # pushing against something: the wheels slip, the base stays
+                self.blocked_steps += 1
+                pose, v, w = (self.x, self.y, self.yaw), 0.0, 0.0
+        self.x, self.y, self.yaw = pose
         self.accel_x = (v - self.v) / dt
         self.v, self.w = v, w
         self.distance += abs(v) * dt

@@ -1,0 +1,153 @@
+"""The one seam between the world and the emulated robot, both ways.
+
+- The world READS the robot's ground truth only through :class:`TruthSource`: ``sample()``
+  gives a :class:`~lowerbase.world.truth_stream.TruthSample` (time, true pose and twist in the
+  emulator's frame, contact). :class:`LoopTruth` is the in-process implementation over a
+  :class:`~lowerbase.bench.simloop.SimLoop`; ``truth_stream.TruthReceiver`` carries the same
+  samples across processes.
+- The robot FEELS the world only through the firmware model's
+  :class:`~lowerbase.firmware_model.truth.Surroundings`: :class:`WorldSurroundings` answers
+  whether a move of the footprint is free of walls, the map's edge and obstacles, and keeps
+  what was touched (:attr:`WorldSurroundings.contact`, :attr:`WorldSurroundings.events`).
+
+The emulator's frame starts wherever the emulator put its truth (usually the origin); the
+world places it on the map with a fixed transform ``map_from_truth`` (the robot's start pose),
+so nothing is written into the emulator.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from lowerbase.world.footprint import DEFAULT_FOOTPRINT, Contact, Footprint, contact
+from lowerbase.world.grid import OccupancyGrid
+from lowerbase.world.localization.poses import Pose2D, compose
+from lowerbase.world.obstacles import Box, Obstacles, Person
+from lowerbase.world.truth_stream import TruthSample
+
+if TYPE_CHECKING:
+    from lowerbase.bench.simloop import SimLoop
+
+__all__ = ["ContactEvent", "LoopTruth", "TruthSample", "TruthSource", "WorldSurroundings"]
+
+
+class TruthSource(Protocol):
+    """Where the world gets the robot's ground truth (the emulator's frame, see module)."""
+
+    def sample(self) -> TruthSample | None:
+        """The newest sample, or None while none is known."""
+        ...
+
+
+class LoopTruth:
+    """:class:`TruthSource` over a SimLoop in this process (``loop.mcu.truth``, read only)."""
+
+    def __init__(self, loop: SimLoop) -> None:
+        self.loop = loop
+
+    def sample(self) -> TruthSample:
+        tr = self.loop.mcu.truth
+        return TruthSample(self.loop.now, tr.x, tr.y, tr.yaw, tr.v, tr.w, tr.blocked,
+                           boot=self.loop.mcu.boot_counter)
+
+
+@dataclass
+class ContactEvent:
+    """One stretch of contact: from ``start`` to ``end`` [s] (None while it lasts), what was
+    touched, where first (map frame [m]), and whether the robot was stopped by it."""
+
+    start: float
+    touched: tuple[str, ...]
+    point: tuple[float, float]
+    end: float | None = None
+
+
+class WorldSurroundings:
+    """The firmware model's Surroundings for a map with obstacles (footprint contact).
+
+    A move is allowed when the footprint at the new pose touches nothing, or when it was
+    already touching (a person walked into the robot) and the move reduces the overlap. A
+    cheap clearance test (distance transform of the walls, bounding circles of the obstacles)
+    skips the polygon test wherever contact is impossible."""
+
+    def __init__(self, grid: OccupancyGrid, obstacles: Obstacles | None = None,
+                 footprint: Footprint = DEFAULT_FOOTPRINT,
+                 map_from_truth: Pose2D = (0.0, 0.0, 0.0)) -> None:
+        self.grid = grid
+        self.obstacles = obstacles if obstacles is not None else Obstacles()
+        self.footprint = footprint
+        self.map_from_truth = map_from_truth
+        self.contact: Contact | None = None  #: what the footprint touches (or was refused at)
+        self.events: list[ContactEvent] = []
+        self.checks = 0  #: full polygon tests made (the rest were cleared cheaply)
+        occupied = grid.occupied()
+        self._clearance = (distance_transform_edt(~occupied) * grid.resolution
+                           if occupied.any() else np.full(occupied.shape, math.inf))
+        # the footprint's circle plus a cell diagonal (the EDT is measured between cell centres)
+        self._radius = footprint.radius
+        self._wall_margin = self._radius + grid.resolution * math.sqrt(2.0) + 1e-6
+
+    def to_map(self, pose: Pose2D) -> Pose2D:
+        return compose(self.map_from_truth, pose)
+
+    def _may_touch(self, pose: Pose2D, t: float) -> bool:
+        x, y, _ = pose
+        g = self.grid
+        ox, oy, _ = g.origin
+        w, h = g.size_m
+        r = self._radius
+        if not (ox + r < x < ox + w - r and oy + r < y < oy + h - r):
+            return True
+        col = min(math.floor((x - ox) / g.resolution), g.width - 1)
+        row = min(math.floor((y - oy) / g.resolution), g.height - 1)
+        if self._clearance[row, col] <= self._wall_margin:
+            return True
+        for o in self.obstacles.items:
+            if isinstance(o, Box):
+                (cx, cy), reach = o.center, 0.5 * math.hypot(*o.size)
+            elif isinstance(o, Person):
+                (cx, cy), reach = o.position_at(t), o.radius
+            else:  # pragma: no cover - Obstacles holds only these
+                return True
+            if math.hypot(x - cx, y - cy) <= r + reach + 1e-6:
+                return True
+        return False
+
+    def touching(self, pose: Pose2D, t: float) -> Contact | None:
+        """What the footprint at ``pose`` (MAP frame) touches at time ``t``."""
+        if not self._may_touch(pose, t):
+            return None
+        self.checks += 1
+        return contact(pose, self.grid, self.obstacles, t, self.footprint)
+
+    def allowed(self, pose_from: Pose2D, pose_to: Pose2D, t: float) -> bool:
+        """Surroundings.allowed (poses in the emulator's truth frame)."""
+        t = 0.0 if math.isnan(t) else t
+        to = self.to_map(pose_to)
+        hit = self.touching(to, t)
+        ok = True
+        if hit is not None:
+            moved = pose_to != pose_from
+            before = self.touching(self.to_map(pose_from), t) if moved else hit
+            ok = moved and before is not None and hit.area < before.area - 1e-12
+        self._record(hit, t)
+        return ok
+
+    def _record(self, hit: Contact | None, t: float) -> None:
+        self.contact = hit
+        last = self.events[-1] if self.events else None
+        open_event = last if last is not None and last.end is None else None
+        if hit is None:
+            if open_event is not None:
+                open_event.end = t
+            return
+        if open_event is not None and open_event.touched == hit.touched:
+            return
+        if open_event is not None:
+            open_event.end = t
+        self.events.append(ContactEvent(t, hit.touched, hit.point))

@@ -29,6 +29,8 @@ PACKAGES=(
     ros-std-msgs
     ros-geometry-msgs
     ros-actionlib-msgs
+    # lowerbase_legged_msgs' SetLaserMap carries a sensor_msgs/PointCloud2
+    ros-sensor-msgs
     # Modbus RTU/TCP command-line client used by the BMS tests
     mbpoll
 )

@@ -22,6 +22,7 @@ SUBCOMMANDS = (
     "emulate",
     "bms",
     "driver",
+    "world",
     "scenario",
     "conformance",
     "dbc",

@@ -122,7 +122,8 @@ def _family(host: str) -> socket.AddressFamily:
 class TruthSender:
     """MCU runner ``on_step`` hook: the ground truth as one datagram every ``period`` [s].
 
-    ``contact(mcu)`` says whether the footprint touches something (None: never). Send errors
+    ``contact(mcu)`` says whether the footprint touches something (default: the truth's
+    ``blocked``, set when installed Surroundings refused the last move). Send errors
     (nobody listening gives ECONNREFUSED on some systems) are counted in ``errors``.
     """
 
@@ -146,7 +147,8 @@ class TruthSender:
             return
         self._next = now + self.period - 1e-9
         tr = mcu.truth
-        touching = bool(self.contact(mcu)) if self.contact is not None else False
+        touching = bool(self.contact(mcu) if self.contact is not None
+                        else getattr(tr, "blocked", False))
         sample = TruthSample(now - self._t0, tr.x, tr.y, tr.yaw, tr.v, tr.w, touching,
                              self.sent, int(getattr(mcu, "boot_counter", 0)))
         self.send(sample)
@@ -195,6 +197,12 @@ class TruthReceiver:
 
     def fileno(self) -> int:
         return self._sock.fileno()
+
+    def sample(self) -> TruthSample | None:
+        """:class:`lowerbase.world.truth.TruthSource`: the newest sample after reading what
+        has arrived (None before the first)."""
+        self.drain()
+        return self.latest
 
     def pose(self) -> tuple[float, float, float] | None:
         """The newest true pose (x, y, yaw), or None before the first sample."""

@@ -1,0 +1,359 @@
+"""The world as a ROS1 node (``lowerbase world``): sensors and localization of the chassis.
+
+A thin rospy layer, as ``lowerbase.driver.node``: :class:`WorldSetup` (ROS-free, checked before
+rospy starts) holds the map, places, obstacles, sensors and the robot's start pose;
+:class:`WorldNode` reads the emulator's ground truth (a :class:`~lowerbase.world.truth.TruthSource`,
+in a process of its own: :class:`~lowerbase.world.truth_stream.TruthReceiver`), casts the
+lidars and renders the camera at the truth's pose, runs the
+:class:`~lowerbase.world.localization.Localizer` on /scan and the driver's /odom, and serves the
+vendor's interface (docs/world.md, "ROS interface").
+
+Threads: the main loop (sensors, localization, TF) and rospy's callback threads (/odom,
+/initialpose, services) share one lock. Stamps are rospy's wall time; obstacles move on the
+emulator's time (the truth sample's ``t``). Bad input (a NaN pose, a malformed map) is a failed
+service response or a logged drop, never an exception out of a callback.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from lowerbase.clock import RealClock
+from lowerbase.errors import LowerbaseError, WorldError
+from lowerbase.world.camera import DepthCamera
+from lowerbase.world.footprint import validate_pose
+from lowerbase.world.grid import OccupancyGrid
+from lowerbase.world.lidar import LidarRig
+from lowerbase.world.localization import Localizer
+from lowerbase.world.localization.poses import compose
+from lowerbase.world.obstacles import Obstacles
+from lowerbase.world.raycast import Scene, Solid
+from lowerbase.world.sensors import SensorsConfig
+
+log = logging.getLogger(__name__)
+
+NODE_NAME = "world"
+Pose = tuple[float, float, float]
+#: the truth is stale (emulator stopped) after this long without a sample [s]
+TRUTH_TIMEOUT = 1.0
+
+
+@dataclass
+class WorldSetup:
+    """Everything the node needs, checked without ROS (see ``lowerbase.cli.world``)."""
+
+    grid: OccupancyGrid
+    sensors: SensorsConfig
+    start: Pose  #: the emulator's origin on the map (where its robot starts)
+    obstacles: Obstacles = field(default_factory=Obstacles)
+    ground_truth: bool = False
+    camera: bool = True
+    map_frame: str = "map"
+    odom_frame: str = "odom"
+    base_frame: str = "base_link"
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        self.start = validate_pose(self.start, self.grid, self.obstacles, 0.0,
+                                   what="the robot's start pose")
+
+
+def import_ros() -> tuple[Any, Any]:
+    """(rospy, lowerbase.world.ros_msgs); RosUnavailableError in one line if missing."""
+    from lowerbase.driver.node import ROS_HINT
+    from lowerbase.errors import RosUnavailableError
+
+    try:
+        import rospy
+
+        from lowerbase.world import ros_msgs
+    except ImportError as exc:
+        raise RosUnavailableError(f"ROS is not installed ({exc}): {ROS_HINT}") from None
+    return rospy, ros_msgs
+
+
+class WorldNode:
+    """Publishers, subscribers, services and the sensor loop around one WorldSetup."""
+
+    def __init__(self, setup: WorldSetup, truth: Any) -> None:
+        self.rospy, self.io = import_ros()
+        self.setup = setup
+        self.truth = truth
+        self.lock = threading.RLock()
+        self.stop = threading.Event()
+        self.scene = Scene(setup.grid)
+        self.lidars = LidarRig(setup.sensors.lidars, setup.sensors.scan)
+        cam = setup.sensors.camera
+        self.camera = DepthCamera(cam) if (cam is not None and setup.camera) else None
+        self.served_map = setup.grid  #: what /map and get_map serve (set_map replaces it)
+        self.localizer = Localizer(setup.grid, clock=RealClock(self.stop), seed=setup.seed,
+                                   initial_pose=setup.start, truth=self._true_map_pose,
+                                   ground_truth=setup.ground_truth)
+        self.odom: Pose | None = None
+        self.stats: dict[str, int] = {"scans": 0, "frames": 0, "bad_odom": 0,
+                                      "bad_initialpose": 0, "amcl_poses": 0}
+        self._pubs: dict[str, Any] = {}
+        self._subs: list[Any] = []
+        self._services: list[Any] = []
+        self._tf: Any = None
+        self._static: Any = None
+        self._truth_state = "waiting"
+
+    # -- the truth -----------------------------------------------------------------------------
+    def _true_map_pose(self) -> Pose:
+        sample = self.truth.sample()
+        if sample is None:
+            return (math.nan, math.nan, math.nan)
+        return compose(self.setup.start, sample.pose)
+
+    # -- set-up --------------------------------------------------------------------------------
+    def advertise(self) -> None:
+        rospy, io = self.rospy, self.io
+        import tf2_ros
+        from geometry_msgs.msg import PoseWithCovarianceStamped
+        from nav_msgs.msg import Odometry
+        from nav_msgs.srv import GetMap, SetMap
+        from std_srvs.srv import SetBool  # type: ignore[import-untyped]
+
+        pub = rospy.Publisher
+        self._pubs = {"scan": pub("/scan", io.LaserScan, queue_size=5),
+                      "amcl_pose": pub("/amcl_pose", io.PoseWithCovarianceStamped,
+                                       queue_size=5, latch=True),
+                      "pose2d": pub("movebase_pose2d", io.Pose2D, queue_size=5),
+                      "map": pub("/map", io.GridMsg, queue_size=1, latch=True)}
+        if self.camera is not None:
+            name = self.camera.config.name
+            self._pubs.update({
+                "color": pub(f"/{name}/color/image_raw", io.Image, queue_size=2),
+                "depth": pub(f"/{name}/depth/image_raw", io.Image, queue_size=2),
+                "points": pub(f"/{name}/depth/points", io.PointCloud2, queue_size=2),
+                "no_planes": pub(f"/{name}/depth/cloud_without_planes", io.PointCloud2,
+                                 queue_size=2)})
+        self._tf = tf2_ros.TransformBroadcaster()
+        self._static = tf2_ros.StaticTransformBroadcaster()
+        self._static.sendTransform(self.static_transforms(rospy.Time.now()))
+        self._publish_map()
+        self._subs = [rospy.Subscriber("/odom", Odometry, self._on_odom, queue_size=10),
+                      rospy.Subscriber("/initialpose", PoseWithCovarianceStamped,
+                                       self._on_initialpose, queue_size=2)]
+        self._services = [rospy.Service("/start_localization", SetBool, self._start),
+                          rospy.Service("set_map", SetMap, self._set_map),
+                          rospy.Service("aic_map_server/get_map", GetMap, self._get_map)]
+
+    def static_transforms(self, stamp: Any) -> list[Any]:
+        """base_link -> each lidar frame, -> camera link -> its optical frames (REP-103/105)."""
+        io, base = self.io, self.setup.base_frame
+        out = [io.transform(stamp, base, lc.frame_id, (lc.x, lc.y, lc.z),
+                            io.yaw_quaternion(lc.yaw)) for lc in self.setup.sensors.lidars]
+        cam = self.setup.sensors.camera
+        if cam is not None and self.camera is not None:
+            out.append(io.transform(stamp, base, cam.frame_id, (cam.x, cam.y, cam.z),
+                                    io.rpy_quaternion(0.0, cam.pitch, cam.yaw)))
+            for optical in sorted({cam.optical_frame_id, self.color_frame}):
+                out.append(io.transform(stamp, cam.frame_id, optical, (0.0, 0.0, 0.0),
+                                        io.OPTICAL))
+        return out
+
+    @property
+    def color_frame(self) -> str:
+        cam = self.setup.sensors.camera
+        return f"{cam.name}_color_optical_frame" if cam is not None else ""
+
+    def _publish_map(self) -> None:
+        self._pubs["map"].publish(self.io.grid_msg(self.served_map, self.rospy.Time.now(),
+                                                   self.setup.map_frame))
+
+    # -- ROS -> world --------------------------------------------------------------------------
+    def _on_odom(self, msg: Any) -> None:
+        try:
+            pose = self.io.pose_of(msg.pose.pose, "/odom")
+        except WorldError as exc:
+            self._count_bad("bad_odom", exc)
+            return
+        with self.lock:
+            self.odom = pose
+
+    def _on_initialpose(self, msg: Any) -> None:
+        try:
+            if msg.header.frame_id.lstrip("/") not in ("", self.setup.map_frame):
+                raise WorldError(f"/initialpose must be in the {self.setup.map_frame!r} frame, "
+                                 f"got {msg.header.frame_id!r}")
+            pose = self.io.pose_of(msg.pose.pose, "/initialpose")
+            with self.lock:
+                self.localizer.initial_pose(pose, self.io.covariance_of(msg))
+        except LowerbaseError as exc:
+            self._count_bad("bad_initialpose", exc)
+            return
+        log.info("localization re-initialised at (%.3f, %.3f, %.3f)", *pose)
+
+    def _count_bad(self, key: str, exc: Exception) -> None:
+        self.stats[key] += 1
+        if self.stats[key] in (1, 10, 100) or self.stats[key] % 1000 == 0:
+            log.warning("%s (dropped; %d so far)", exc, self.stats[key])
+
+    def _start(self, req: Any) -> Any:
+        from std_srvs.srv import SetBoolResponse
+
+        with self.lock:
+            ok, message = self.localizer.start(bool(req.data))
+        return SetBoolResponse(success=ok, message=message)
+
+    def _set_map(self, req: Any) -> Any:
+        """nav_msgs/SetMap: the served map and the localizer's, all or nothing. Its response
+        has no message field: the reason of a failure goes to the log (and /rosout)."""
+        from nav_msgs.srv import SetMapResponse
+
+        try:
+            grid = self.io.grid_of(req.map)
+            pose = self.io.pose_of(req.initial_pose.pose.pose, "set_map initial_pose")
+            with self.lock:
+                self.localizer.set_map(grid, pose, self.io.covariance_of(req.initial_pose))
+                self.served_map = grid
+                self._publish_map()
+        except LowerbaseError as exc:
+            log.warning("set_map refused, nothing changed: %s", exc)
+            return SetMapResponse(success=False)
+        log.info("set_map: new map %d x %d cells, robot at (%.3f, %.3f, %.3f)", grid.width,
+                 grid.height, *pose)
+        return SetMapResponse(success=True)
+
+    def _get_map(self, req: Any) -> Any:
+        from nav_msgs.srv import GetMapResponse
+
+        with self.lock:
+            grid = self.served_map
+        return GetMapResponse(map=self.io.grid_msg(grid, self.rospy.Time.now(),
+                                                   self.setup.map_frame))
+
+    # -- world -> ROS --------------------------------------------------------------------------
+    def _pose_now(self) -> tuple[Pose, float] | None:
+        """The true map pose and the emulator's time, or None without a fresh truth."""
+        sample = self.truth.sample()
+        fresh = sample is not None and getattr(self.truth, "age", lambda: 0.0)() < TRUTH_TIMEOUT
+        state = "ok" if fresh else ("stale" if sample is not None else "waiting")
+        if state != self._truth_state:
+            self._truth_state = state
+            print({"ok": "lowerbase world: ground truth received, sensors on",
+                   "stale": "lowerbase world: the ground truth stopped (emulator gone?); "
+                            "sensors paused"}.get(state, ""), flush=True)
+        if not fresh or sample is None:
+            return None
+        return compose(self.setup.start, sample.pose), sample.t
+
+    def scene_at(self, t: float) -> Scene:
+        prisms = self.setup.obstacles.prisms_at(t)
+        return self.scene.with_solids(Solid(p.height, p.polygon, p.circle) for p in prisms)
+
+    def scan_once(self) -> None:
+        now = self._pose_now()
+        if now is None:
+            return
+        pose, t = now
+        stamp = self.rospy.Time.now()
+        scan = self.lidars.scan(self.scene_at(t), pose, t)
+        self._pubs["scan"].publish(self.io.laser_scan(scan, stamp))
+        self.stats["scans"] += 1
+        with self.lock:
+            odom = self.odom
+            if odom is None:
+                return
+            # LaserScan is frozen; ScanLike's attributes are only read
+            est = self.localizer.update(odom, scan)  # type: ignore[arg-type]
+            if est is not None:
+                self._pubs["amcl_pose"].publish(self.io.pose_with_covariance(
+                    stamp, self.setup.map_frame, est.pose, est.covariance))
+                self.stats["amcl_poses"] += 1
+            m2o = self.localizer.map_to_odom
+            running = self.localizer.running
+        if m2o is not None:
+            s = self.setup
+            self._tf.sendTransform(self.io.transform_2d(stamp, s.map_frame, s.odom_frame, m2o))
+            if running:
+                self._pubs["pose2d"].publish(self.io.pose_2d(compose(m2o, odom)))
+
+    def frame_once(self) -> None:
+        now = self._pose_now()
+        if now is None or self.camera is None:
+            return
+        pose, t = now
+        stamp = self.rospy.Time.now()
+        f = self.camera.render(self.scene_at(t), pose, t)
+        io, cfg = self.io, self.camera.config
+        self._pubs["color"].publish(io.image(f.color, "rgb8", self.color_frame, stamp))
+        self._pubs["depth"].publish(io.image(f.depth, "16UC1", cfg.optical_frame_id, stamp))
+        self._pubs["points"].publish(io.cloud_xyz32(f.points, cfg.optical_frame_id, stamp))
+        self._pubs["no_planes"].publish(io.cloud_xyz32(f.points_without_planes,
+                                                       cfg.optical_frame_id, stamp))
+        self.stats["frames"] += 1
+
+    def spin(self) -> None:
+        """Scans at the lidars' rate, frames at the camera's, until rospy shuts down."""
+        rospy = self.rospy
+        rospy.on_shutdown(self.stop.set)
+        due = {"scan": time.monotonic(), "frame": time.monotonic()}
+        periods = {"scan": 1.0 / self.lidars.rate_hz}
+        if self.camera is not None:
+            periods["frame"] = 1.0 / self.camera.config.rate_hz
+        work = {"scan": self.scan_once, "frame": self.frame_once}
+        while not self.stop.is_set() and not rospy.is_shutdown():
+            key = min(periods, key=lambda k: due[k])
+            self.stop.wait(max(due[key] - time.monotonic(), 0.0))
+            if self.stop.is_set():
+                break
+            work[key]()
+            due[key] += periods[key]
+            if time.monotonic() - due[key] > 1.0:  # overloaded: do not burst to catch up
+                due[key] = time.monotonic()
+
+    def shutdown(self) -> None:
+        self.stop.set()
+        for sub in self._subs:
+            sub.unregister()
+        for service in self._services:
+            service.shutdown()
+
+
+def run(setup: WorldSetup, truth: Any, ros_args: Sequence[str], truth_where: str) -> int:
+    """Start rospy on the master in ROS_MASTER_URI, build the node and spin."""
+    import os
+    import sys
+
+    from lowerbase.driver.node import _ToRosout
+    from lowerbase.driver.settings import loopback_address
+    from lowerbase.errors import TransportError
+
+    rospy, _ = import_ros()
+    import rosgraph
+
+    if not rosgraph.is_master_online():
+        raise TransportError(f"no ROS master at {rosgraph.get_master_uri()} (start roscore, or "
+                             "set ROS_MASTER_URI)")
+    address = loopback_address(os.environ, rosgraph.get_master_uri(), [*sys.argv, *ros_args])
+    if address is not None:
+        os.environ["ROS_IP"] = address
+    rospy.init_node(NODE_NAME, argv=[NODE_NAME, *ros_args], anonymous=False)
+    pkg_logger = logging.getLogger("lowerbase")
+    pkg_logger.addHandler(_ToRosout())
+    pkg_logger.propagate = False
+    node = WorldNode(setup, truth)
+    try:
+        node.advertise()
+        print(f"lowerbase world: {rospy.get_name()} on ROS master {rosgraph.get_master_uri()}"
+              f"{' (loopback only)' if address else ''}; ground truth from {truth_where}",
+              flush=True)
+        node.spin()
+    finally:
+        node.shutdown()
+        pkg_logger.removeHandler(pkg_logger.handlers[-1])
+        pkg_logger.propagate = True
+        stats = ", ".join(f"{k} {v}" for k, v in sorted(node.stats.items()))
+        print(f"lowerbase world: stopped; {stats}", file=sys.stderr, flush=True)
+        if not rospy.is_shutdown():
+            rospy.signal_shutdown("world stopped")
+    return 0

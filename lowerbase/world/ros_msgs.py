@@ -1,0 +1,184 @@
+"""Conversions between the world's ROS-free values and ROS1 messages (imports rospy's messages).
+
+Only :mod:`lowerbase.world.node` imports this, after checking that ROS is there. Messages out:
+LaserScan, Image (16UC1, rgb8), PointCloud2 (x, y, z float32, as
+``sensor_msgs.point_cloud2.create_cloud_xyz32`` lays it out, packed with numpy),
+OccupancyGrid, PoseWithCovarianceStamped, Pose2D, TransformStamped. Messages in (/odom,
+/initialpose, set_map) are checked here: a non-finite number, a quaternion that is not a
+rotation or a grid whose data does not fit its size is one :class:`WorldError` line.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import Pose2D, PoseWithCovarianceStamped, TransformStamped
+from nav_msgs.msg import OccupancyGrid as GridMsg
+from sensor_msgs.msg import Image, LaserScan, PointCloud2, PointField
+from std_msgs.msg import Header
+
+from lowerbase.errors import MapError, WorldError
+from lowerbase.world.grid import OccupancyGrid
+from lowerbase.world.lidar import LaserScan as Scan
+
+Pose = tuple[float, float, float]
+
+__all__ = ["GridMsg", "Image", "LaserScan", "PointCloud2", "Pose2D",
+           "PoseWithCovarianceStamped", "TransformStamped"]
+
+
+def header(stamp: Any, frame_id: str) -> Header:
+    return Header(stamp=stamp, frame_id=frame_id)
+
+
+def yaw_quaternion(yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation by ``yaw`` about z."""
+    return 0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)
+
+
+def rpy_quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of R = Rz(yaw) Ry(pitch) Rx(roll) (ROS's fixed-axis rpy)."""
+    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
+
+
+#: camera_link (x forward, y left, z up) -> optical frame (z forward, x right, y down)
+OPTICAL = (-0.5, 0.5, -0.5, 0.5)
+
+
+def yaw_of(q: Any, what: str) -> float:
+    """The heading of a quaternion message; WorldError unless it is a finite rotation."""
+    values = (q.x, q.y, q.z, q.w)
+    if not all(math.isfinite(v) for v in values):
+        raise WorldError(f"{what}: the orientation has a non-finite component {values}")
+    norm = math.sqrt(sum(v * v for v in values))
+    if not 0.9 < norm < 1.1:
+        raise WorldError(f"{what}: the orientation is not a unit quaternion (norm {norm:.3g})")
+    x, y, z, w = (v / norm for v in values)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def pose_of(pose: Any, what: str) -> Pose:
+    """(x, y, yaw) of a geometry_msgs/Pose; WorldError if it is not finite."""
+    x, y = pose.position.x, pose.position.y
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise WorldError(f"{what}: the position ({x}, {y}) is not finite")
+    return float(x), float(y), yaw_of(pose.orientation, what)
+
+
+def transform(stamp: Any, parent: str, child: str, xyz: Sequence[float],
+              quat: Sequence[float]) -> TransformStamped:
+    msg = TransformStamped()
+    msg.header = header(stamp, parent)
+    msg.child_frame_id = child
+    t, r = msg.transform.translation, msg.transform.rotation
+    t.x, t.y, t.z = (float(v) for v in xyz)
+    r.x, r.y, r.z, r.w = (float(v) for v in quat)
+    return msg
+
+
+def transform_2d(stamp: Any, parent: str, child: str, pose: Pose) -> TransformStamped:
+    return transform(stamp, parent, child, (pose[0], pose[1], 0.0), yaw_quaternion(pose[2]))
+
+
+def laser_scan(scan: Scan, stamp: Any) -> LaserScan:
+    return LaserScan(
+        header=header(stamp, scan.frame_id), angle_min=scan.angle_min,
+        angle_max=scan.angle_max, angle_increment=scan.angle_increment,
+        time_increment=scan.time_increment, scan_time=scan.scan_time,
+        range_min=scan.range_min, range_max=scan.range_max,
+        ranges=scan.ranges.astype(np.float32).tolist(), intensities=[])
+
+
+def image(array: np.ndarray, encoding: str, frame_id: str, stamp: Any) -> Image:
+    """rgb8 (h, w, 3) uint8 or 16UC1 (h, w) uint16, little-endian rows."""
+    if encoding == "16UC1":
+        data = np.ascontiguousarray(array, dtype="<u2")
+    elif encoding == "rgb8":
+        data = np.ascontiguousarray(array, dtype=np.uint8)
+    else:
+        raise ValueError(f"unsupported encoding {encoding!r}")
+    h, w = int(data.shape[0]), int(data.shape[1])
+    return Image(header=header(stamp, frame_id), height=h, width=w, encoding=encoding,
+                 is_bigendian=0, step=data.nbytes // h if h else 0, data=data.tobytes())
+
+
+_XYZ = [PointField(name="x", offset=0, datatype=PointField.FLOAT32, count=1),
+        PointField(name="y", offset=4, datatype=PointField.FLOAT32, count=1),
+        PointField(name="z", offset=8, datatype=PointField.FLOAT32, count=1)]
+
+
+def cloud_xyz32(points: np.ndarray, frame_id: str, stamp: Any) -> PointCloud2:
+    """What ``point_cloud2.create_cloud_xyz32`` builds (an unordered cloud, height 1), packed
+    in one numpy call instead of a struct.pack per point."""
+    data = np.ascontiguousarray(points, dtype="<f4").reshape(-1, 3)
+    n = int(data.shape[0])
+    return PointCloud2(header=header(stamp, frame_id), height=1, width=n, fields=list(_XYZ),
+                       is_bigendian=False, point_step=12, row_step=12 * n,
+                       data=data.tobytes(), is_dense=False)
+
+
+def grid_msg(grid: OccupancyGrid, stamp: Any, frame_id: str = "map") -> GridMsg:
+    msg = GridMsg()
+    msg.header = header(stamp, frame_id)
+    info = msg.info
+    info.map_load_time = stamp
+    info.resolution = grid.resolution
+    info.width, info.height = grid.width, grid.height
+    ox, oy, oyaw = grid.origin
+    info.origin.position.x, info.origin.position.y = ox, oy
+    q = info.origin.orientation
+    q.x, q.y, q.z, q.w = yaw_quaternion(oyaw)
+    msg.data = grid.data.ravel().tolist()
+    return msg
+
+
+def grid_of(msg: GridMsg) -> OccupancyGrid:
+    """The OccupancyGrid a nav_msgs/OccupancyGrid describes; WorldError/MapError if it is
+    not one (data of the wrong length, values out of -1..100, a bad resolution or origin)."""
+    info = msg.info
+    w, h = int(info.width), int(info.height)
+    if w <= 0 or h <= 0:
+        raise MapError(f"map: width and height must be > 0, got {w} x {h}")
+    data = msg.data
+    if isinstance(data, (bytes, bytearray)):
+        arr = np.frombuffer(bytes(data), dtype=np.int8)
+    else:
+        arr = np.asarray(data, dtype=np.int64)
+    if arr.size != w * h:
+        raise MapError(f"map: {arr.size} cells of data for {w} x {h} = {w * h} cells")
+    if arr.size and (arr.min() < -1 or arr.max() > 100):
+        raise MapError("map: cell values must be -1 (unknown) or 0..100")
+    origin = pose_of(info.origin, "map origin")
+    if abs(origin[2]) > 1e-9:
+        raise MapError("map: the origin must not be rotated (yaw 0), as map_server's maps")
+    return OccupancyGrid(arr.astype(np.int8).reshape(h, w), float(info.resolution),
+                         (origin[0], origin[1], 0.0))
+
+
+def pose_with_covariance(stamp: Any, frame_id: str, pose: Pose,
+                         covariance: Sequence[float]) -> PoseWithCovarianceStamped:
+    msg = PoseWithCovarianceStamped()
+    msg.header = header(stamp, frame_id)
+    p = msg.pose.pose
+    p.position.x, p.position.y = pose[0], pose[1]
+    q = p.orientation
+    q.x, q.y, q.z, q.w = yaw_quaternion(pose[2])
+    msg.pose.covariance = [float(v) for v in covariance]
+    return msg
+
+
+def pose_2d(pose: Pose) -> Pose2D:
+    return Pose2D(x=pose[0], y=pose[1], theta=math.atan2(math.sin(pose[2]), math.cos(pose[2])))
+
+
+def covariance_of(msg: PoseWithCovarianceStamped) -> list[float] | None:
+    """The 36 covariance values, or None when all are zero (rviz's "use the default")."""
+    cov = [float(v) for v in msg.pose.covariance]
+    return None if not any(cov) else cov

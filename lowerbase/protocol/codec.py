@@ -84,6 +84,10 @@ class SignalSpec:
     is_multiplexer: bool = False
     #: multiplexer values whose frames carry this signal; empty = every frame
     multiplexer_ids: tuple[int, ...] = ()
+    #: "little_endian" (Intel), or "big_endian" (Motorola): ``start`` is then the LSB of the
+    #: signal in the byte-reversed payload, ``dbc_start`` the DBC's own (MSB) start bit
+    byte_order: str = "little_endian"
+    dbc_start: int = -1
 
     @property
     def mask(self) -> int:
@@ -153,15 +157,23 @@ class MessageCodec:
         self.comment: str = msg.comment or ""
         specs = []
         by_name = {sig.name: sig for sig in msg.signals}
+        orders = {sig.byte_order for sig in msg.signals}
+        if len(orders) > 1:
+            raise TypeError(f"{msg.name}: mixed byte orders in one message are not supported")
+        #: a big-endian (Motorola) message is compiled as the little-endian message of its
+        #: byte-reversed payload: in ``int.from_bytes(data, "big")`` every Motorola signal is
+        #: one contiguous bit field, which is the little-endian reading of ``data[::-1]``
+        self.big_endian: bool = orders == {"big_endian"}
         for sig in (by_name[n] for n in _tree_order(msg.signal_tree)):
-            if sig.byte_order != "little_endian":
-                raise TypeError(f"{msg.name}.{sig.name}: the catalog is little-endian only")
+            start = sig.start
+            if self.big_endian:  # the MSB's position in the reversed payload, minus the width
+                start = (msg.length - 1 - sig.start // 8) * 8 + sig.start % 8 - sig.length + 1
             kind = _conversion_kind(sig.conversion)
             lo, hi = _raw_limits(sig, kind)
             specs.append(
                 SignalSpec(
                     name=sig.name,
-                    start=sig.start,
+                    start=start,
                     length=sig.length,
                     is_signed=sig.is_signed,
                     is_float=sig.conversion.is_float,
@@ -177,6 +189,8 @@ class MessageCodec:
                     kind=kind,
                     is_multiplexer=bool(sig.is_multiplexer),
                     multiplexer_ids=tuple(sig.multiplexer_ids or ()),
+                    byte_order=sig.byte_order,
+                    dbc_start=sig.start,
                 )
             )
         self.signals: tuple[SignalSpec, ...] = tuple(specs)
@@ -532,7 +546,8 @@ class MessageCodec:
                 body.append("    _unknown_mux(codec, mux)")
         head = [
             "    try:",
-            f"        {', '.join(f[0] for f in fields)}, = _unpack(data)",
+            f"        {', '.join(f[0] for f in fields)}, = _unpack("
+            + ("bytes(data)[::-1])" if self.big_endian else "data)"),
             "    except _StructError:",
             f"        raise FrameLengthError('{self.name}: payload of %d bytes, the catalog "
             f"says {self.length}' % len(data)) from None",
@@ -613,7 +628,8 @@ class MessageCodec:
                              (f"({term} >> {-shift})" if shift < 0 else term))
             expr = " | ".join(terms) if terms else "0"
             args.append(f"({expr}) & {(1 << width) - 1:#x}")
-        lines.append(f"    return _S{tag}.pack({', '.join(args)})")
+        reverse = "[::-1]" if self.big_endian else ""
+        lines.append(f"    return _S{tag}.pack({', '.join(args)}){reverse}")
         return lines
 
     def _compile_encode(self) -> Callable[[Mapping[str, Any]], bytes]:

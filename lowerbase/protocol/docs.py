@@ -39,15 +39,16 @@ def _multiplexing(m: MessageCodec) -> list[str]:
     ]
 
 
-def _message_section(m: MessageCodec) -> list[str]:
+def _message_section(m: MessageCodec, serial: bool = True) -> list[str]:
+    """One message's section; ``serial``: mention its size in the serial framing."""
     cycle = f"{m.cycle_time * 1000:g} ms" if m.cycle_time else "event"
+    framing = f"; {m.length + OVERHEAD} bytes in the serial framing" if serial else ""
     lines = [
         f"### {m.name} (0x{m.frame_id:03X})",
         "",
         f"{m.comment}",
         "",
-        f"DLC {m.length}, {cycle}, sent by {', '.join(m.senders)}; "
-        f"{m.length + OVERHEAD} bytes in the serial framing.",
+        f"DLC {m.length}, {cycle}, sent by {', '.join(m.senders)}{framing}.",
         "",
         *_multiplexing(m),
         "| signal | bits | type | scale | offset | range | unit | values | comment |",
@@ -56,6 +57,8 @@ def _message_section(m: MessageCodec) -> list[str]:
     for s in m.signals:
         kind = "float32" if s.is_float else ("int" if s.is_signed else "uint") + str(s.length)
         bits = f"{s.start}..{s.start + s.length - 1}"
+        if s.byte_order == "big_endian":  # Motorola: the DBC start bit is the MSB
+            bits = f"msb {s.dbc_start}, Motorola"
         values = ", ".join(f"{k}={v}" for k, v in s.choices.items())
         mark = " (M)" if s.is_multiplexer else "".join(f" (m{k})" for k in s.multiplexer_ids)
         lines.append(

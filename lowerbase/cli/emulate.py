@@ -11,6 +11,7 @@ import threading
 from typing import Any
 
 from lowerbase.cli.args import positive_seconds
+from lowerbase.cli.world import add_world_arguments
 
 log = logging.getLogger("lowerbase.emulate")
 
@@ -75,6 +76,10 @@ def add_subparser(subparsers: Any) -> None:
                    help="stream the ground truth (t,x,y,yaw,v,w,contact) at 50 Hz as UDP "
                    "datagrams to HOST:PORT, for lowerbase world (default "
                    f"{_TRUTH_UDP_DEFAULT}; HOST defaults to 127.0.0.1)")
+    world = p.add_argument_group(
+        "world (contact)", "with --map the robot stops at walls and obstacles; give lowerbase "
+        "world the same --map/--obstacles/--place")
+    add_world_arguments(world, None)
     p.set_defaults(func=run, simulated=False)
 
 
@@ -98,6 +103,8 @@ def run(args: argparse.Namespace) -> int:
         from lowerbase.world.truth_stream import parse_address
 
         parse_address(args.truth_udp)
+    if args.map is None and (args.obstacles or args.initial_pose or args.place):
+        raise ConfigError("--obstacles, --initial-pose and --place go with --map NAME|FILE")
     profile = load_profile(args.profile)
     faults = [parse_fault(spec) for spec in args.fault]
     if args.fleet is not None:
@@ -150,6 +157,8 @@ def run(args: argparse.Namespace) -> int:
             stop.set()
 
         signal.signal(signal.SIGTERM, _stop)
+        if args.map is not None:
+            _install_world(mcu, args)
         hooks = _truth_hooks(args)
         with contextlib.suppress(KeyboardInterrupt):
             run_mcu(mcu, bus, clock, duration=args.duration, stop=stop,
@@ -166,6 +175,31 @@ def run(args: argparse.Namespace) -> int:
         with contextlib.suppress(can.CanError):
             bus.shutdown()
     return 0
+
+
+class _SinceBoot:
+    """Surroundings asked in time since the first boot (the truth stream's and the world's
+    obstacle clock), whatever clock the MCU runs on."""
+
+    def __init__(self, inner: Any, t0: float) -> None:
+        self.inner, self.t0 = inner, t0
+
+    def allowed(self, pose_from: Any, pose_to: Any, t: float) -> bool:
+        return bool(self.inner.allowed(pose_from, pose_to, t - self.t0))
+
+
+def _install_world(mcu: Any, args: argparse.Namespace) -> None:
+    """--map: the world's contact checker in the emulator's ground truth (the seam
+    firmware_model.truth.Surroundings; the firmware model never imports lowerbase.world)."""
+    from lowerbase.cli.world import world_parts
+    from lowerbase.world.truth import WorldSurroundings
+
+    parts = world_parts(args)
+    mcu.truth.surroundings = _SinceBoot(
+        WorldSurroundings(parts.grid, parts.obstacles, map_from_truth=parts.start),
+        mcu.boot_time)
+    print(f"lowerbase emulate: on map {args.map} at {parts.where}: the robot stops at walls "
+          f"and obstacles", flush=True)
 
 
 def _truth_hooks(args: argparse.Namespace) -> list[Any]:
@@ -207,7 +241,7 @@ def _chassis_count(text: str) -> int:
 
 #: single-chassis options a fleet does not take (each chassis has its own pack, no files)
 _NOT_WITH_FLEET = ("serial", "slcan", "params", "bms_tcp", "bms_rtu", "bms_external",
-                   "print_frames", "truth", "truth_udp")
+                   "print_frames", "truth", "truth_udp", "map")
 
 
 def _run_fleet(args: argparse.Namespace, profile: Any, faults: list[Any]) -> int:

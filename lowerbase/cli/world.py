@@ -16,7 +16,7 @@ from typing import Any
 DEFAULT_PLACE = "start"
 
 
-def add_world_arguments(p: argparse.ArgumentParser, map_default: str | None) -> None:
+def add_world_arguments(p: Any, map_default: str | None) -> None:
     """--map, --obstacles, --initial-pose | --place (also used by ``lowerbase emulate``)."""
     p.add_argument("--map", default=map_default, metavar="NAME|FILE",
                    help="a shipped map (warehouse, corridor_loop, empty_room) or a map_server "

@@ -149,3 +149,41 @@ def test_emulate_refuses_a_bad_truth_address(capsys: pytest.CaptureFixture[str])
     assert err.count("\n") == 1
     assert main(["emulate", "--fleet", "2", "--truth-udp"]) == 1
     assert "drop --truth-udp" in capsys.readouterr().err
+
+
+def test_emulate_map_installs_the_worlds_contact_and_the_stream_reports_it() -> None:
+    """`lowerbase emulate --map empty_room --initial-pose 8,4,0`: driving east, the footprint's
+    front (x + 0.4 m) stops at the east wall's inner face, x = 9.8 m on the map."""
+    from lowerbase.cli import build_parser
+    from lowerbase.cli.emulate import _install_world
+
+    args = build_parser().parse_args(["emulate", "--map", "empty_room", "--initial-pose",
+                                      "8,4,0"])
+    rig = SimRig(keep=False)
+    _install_world(rig.mcu, args)
+    got: list[TruthSample] = []
+    with TruthReceiver("127.0.0.1", 0, on_sample=got.append) as rx:
+        sender = TruthSender("127.0.0.1", rx.address[1])
+        rig.enable()
+        every = round(0.02 / rig.mcu.dt)
+        for k in range(round(8.0 / rig.mcu.dt)):
+            if k % every == 0:
+                rig.send("MotionCommand", Linear=0.5, Angular=0.0, Mode="Raw")
+            rig.step()
+            sender(rig.mcu)
+            rx.drain()
+        while rx.wait(0.2):
+            pass
+        sender.close()
+    front = 8.0 + rig.mcu.truth.x + 0.4
+    assert 9.8 - 0.5 * 0.02 <= front <= 9.8 + 1e-9  # within one 20 ms step at 0.5 m/s
+    assert rig.mcu.truth.blocked and got[-1].contact and got[-1].v == 0.0
+    assert not got[0].contact
+
+
+def test_emulate_world_options_need_a_map(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["emulate", "--place", "charger"]) == 1
+    assert "go with --map" in capsys.readouterr().err
+    assert main(["emulate", "--map", "empty_room", "--initial-pose", "0.1,0.1,0"]) == 1
+    err = capsys.readouterr().err
+    assert "the robot's start pose" in err and "would touch" in err and err.count("\n") == 1

@@ -135,15 +135,15 @@ def test_every_definition_is_covered() -> None:
 @pytest.mark.parametrize("name", sorted(SEED_FIELDS))
 def test_message_fields_are_the_seeds(legged_msgs: ModuleType, name: str) -> None:
     cls = getattr(legged_msgs, name)
-    assert list(zip(cls.__slots__, cls._slot_types)) == SEED_FIELDS[name]
+    assert list(zip(cls.__slots__, cls._slot_types, strict=True)) == SEED_FIELDS[name]
 
 
 @pytest.mark.parametrize("name", sorted(SEED_SRV_FIELDS))
 def test_service_fields_are_the_seeds(legged_srvs: ModuleType, name: str) -> None:
     cls = getattr(legged_srvs, name)
     request, response = SEED_SRV_FIELDS[name]
-    assert list(zip(cls._request_class.__slots__, cls._request_class._slot_types)) == request
-    assert list(zip(cls._response_class.__slots__, cls._response_class._slot_types)) == response
+    for cls_, fields in ((cls._request_class, request), (cls._response_class, response)):
+        assert list(zip(cls_.__slots__, cls_._slot_types, strict=True)) == fields
 
 
 def test_state_and_joy_constants(legged_msgs: ModuleType) -> None:

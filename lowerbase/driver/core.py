@@ -11,10 +11,13 @@ Reboots are decided from consistent evidence: the Heartbeat's Uptime runs with t
 clock; a Heartbeat whose Uptime is well *behind* that timeline (it went backwards, or is
 smaller than a silence that just ended) makes a reboot suspected, and the next Heartbeat
 confirms it if it continues the *new* timeline. Only then are the parameters read again and
-CAN control re-enabled (``auto_enable``). A changed BootCounter with the Uptime still counting
-(a garbled or forged frame) is counted and ignored. Control is enabled at first contact and
-after a confirmed reboot only, retried until SystemStatus shows ControlMode Can; a chassis
-put in standby (or e-stopped) on purpose is never re-enabled. ``state`` is ``ready`` only
+CAN control re-enabled (``auto_enable``). Odometry never integrates across an outage: a lost
+link holds /odom_raw and /odom (velocities 0), and wheel counts after a lost link, a suspected
+reboot, a long gap or a Counter discontinuity are a new baseline, not motion. A changed
+BootCounter with the Uptime still counting (a garbled or forged frame) is counted and ignored.
+Control is enabled at first contact and after a confirmed reboot only, retried until
+SystemStatus shows ControlMode Can; a chassis put in standby (or e-stopped) on purpose is
+never re-enabled. ``state`` is ``ready`` only
 while the chassis takes commands (ControlMode Can); configured but in standby is ``standby``.
 
 MotionCommand runs on a fixed grid of 1/command_rate (the DBC's 20 ms cycle): a tick sends
@@ -72,12 +75,17 @@ class DriverConfig:
     request_retry: float = 0.5  #: [s] parameter/version requests repeated this often
     auto_enable: bool = True  #: enable CAN control once configured (and after a reboot)
     malformed_log_period: float = 5.0  #: [s] malformed frames are logged at most this often
+    #: wheel samples further apart than this many WheelFeedback cycles are a gap: the counts
+    #: after it are a new baseline, not motion (a missed reboot, a stalled reader). Below it,
+    #: the 4-bit rolling Counter must agree with the time elapsed (frames lost, not a reboot)
+    wheel_gap_cycles: float = 12.0
     odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
     ekf_noise: EkfNoise = field(default_factory=EkfNoise)
     gyro_sigma: float | None = None  #: [rad/s] per-sample gyro noise for the EKF (None: ekf's)
 
     def __post_init__(self) -> None:
-        for name in ("command_rate", "command_timeout", "link_timeout", "request_retry"):
+        for name in ("command_rate", "command_timeout", "link_timeout", "request_retry",
+                     "wheel_gap_cycles"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise LowerbaseError(f"driver {name} must be > 0, got {value!r}")
@@ -145,6 +153,10 @@ class DriverCore:
         self.odometer = 0.0
         self.leds: dict[tuple[int, int], dict[str, int]] = {}
         self._wheels: dict[int, tuple[int, int]] = {}
+        self._wheel_period = self.codec.message("WheelFeedback").cycle_time or 0.02
+        self._last_wheel: tuple[float, int] | None = None  # (time, rolling Counter)
+        #: the next wheel sample is a new baseline, not motion (link lost, reboot suspected)
+        self._odom_gap = False
         self._last_heartbeat = -math.inf
         self._last_request = -math.inf
         self._twist: tuple[float, float, bool] | None = None
@@ -232,6 +244,7 @@ class DriverCore:
         self.stats["bus_down"] += 1
         self._control_can = None  # learn the chassis' state afresh when frames return
         if self.state != LinkState.LOST:
+            self._hold_odometry(self._watchdog_time())
             self.state = LinkState.LOST
             self.stats["link_lost"] += 1
             log.warning("lower computer link lost: %s", why)
@@ -295,6 +308,7 @@ class DriverCore:
             return
         self._reboot_suspect = (uptime, now, boot)
         self.stats["heartbeat_off_timeline"] += 1
+        self._hold_odometry(0.0)  # counters may restart: the next sample is a baseline
 
     def _configure(self, why: str) -> None:
         self.state = LinkState.CONFIGURING
@@ -324,6 +338,35 @@ class DriverCore:
         elif self.state == LinkState.READY:
             self._apply_parameters()
         self._notify("parameters")
+
+    def _wheel_gap(self, counter: int, now: float) -> str | None:
+        """Why this wheel sample must not be integrated against the last one (None: it may)."""
+        if self._odom_gap or self.state == LinkState.LOST:
+            return "link lost or reboot suspected"
+        if self._last_wheel is None:
+            return None
+        dt = now - self._last_wheel[0]
+        cycles = dt / self._wheel_period
+        if cycles > self.config.wheel_gap_cycles:
+            return f"no wheel sample for {dt:.2f} s"
+        if abs((counter - self._last_wheel[1]) % 16 - cycles) > 2.0:
+            return "WheelFeedback Counter discontinuity"
+        return None
+
+    def _watchdog_time(self) -> float:
+        """[s] how long the base may go on moving unseen: its watchdog, then braking."""
+        v = abs(self.ekf.twist[0])
+        decel = max(self.parameters.get("linearDecelLimit", 1.0), 0.1)
+        return self.parameters.get("commandTimeout", 0.5) + v / (2.0 * decel)
+
+    def _hold_odometry(self, unknown_time: float) -> None:
+        """Stop integrating: hold both poses, zero the velocities, re-baseline the next
+        sample. The base may move ``unknown_time`` [s] unseen: the EKF's pose variance says so."""
+        self._odom_gap = True
+        if self.odometry is not None:
+            self.odometry.hold()
+        v, w = self.ekf.twist
+        self.ekf.hold(abs(v) * unknown_time, abs(w) * unknown_time)
 
     def _configured(self) -> None:
         self._apply_parameters()
@@ -372,6 +415,18 @@ class DriverCore:
             return  # wait for both wheels of the same cycle
         self._wheels = {}
         odo = self.odometry
+        gap = self._wheel_gap(left[0], now)
+        self._last_wheel = (now, left[0])
+        if gap is not None:
+            # counts after a gap may come from restarted counters: a new baseline, no motion
+            self.stats["odometry_rebaselined"] += 1
+            log.info("wheel odometry re-baselined: %s", gap)
+            if not self._odom_gap:  # else held already, when the gap began
+                self._hold_odometry(0.0)
+            odo.hold()
+            odo.update(left[1], right[1], now)
+            self._odom_gap = self.state == LinkState.LOST
+            return
         if not odo.update(left[1], right[1], now):
             return
         # The EKF weighs the wheels with its own model of their errors (EkfNoise.wheel_*):
@@ -385,7 +440,8 @@ class DriverCore:
         accel = self.imu[1] if self.imu is not None else (0.0, 0.0, 0.0)
         self.imu = (gyro, accel)
         self.imu_stamp = now
-        if self.odometry is not None and not self.status_code & _IMU_FAULT:
+        if self.odometry is not None and not self.status_code & _IMU_FAULT and \
+                not self._odom_gap:
             # the gyro is the EKF's yaw-rate reference; once the lower computer flags the
             # IMU as faulty (frozen output) the EKF runs on the wheels alone. The samples
             # are queued and fused as one with the next wheel update (one EKF step per cycle)
@@ -453,6 +509,7 @@ class DriverCore:
         now = self.clock.now()
         silent = now - self._last_heartbeat > self.config.link_timeout
         if silent and self.state not in (LinkState.WAITING, LinkState.LOST):
+            self._hold_odometry(self._watchdog_time())
             self.state = LinkState.LOST
             self._control_can = None  # learn the chassis' state afresh when frames return
             self.stats["link_lost"] += 1

@@ -369,6 +369,31 @@ class PlanarEkf:
             self.predict(stamp - self.stamp)
             self.stamp = float(stamp)  # no accumulated rounding
 
+    def hold(self, unknown_distance: float = 0.0, unknown_turn: float = 0.0) -> None:
+        """The measurements stopped (link lost, or samples after a gap): hold the pose.
+
+        Nothing is predicted through the gap: v and w become 0 with their initial uncertainty
+        (the base's motion is unknown, not the last one), queued gyro samples are dropped and
+        the next stamped measurement restarts the timeline without a predict. The pose may
+        have moved by up to ``unknown_distance`` [m] and ``unknown_turn`` [rad] meanwhile (a
+        base that was driving when the link went): their squares add to the pose variances.
+        """
+        if not (math.isfinite(unknown_distance) and math.isfinite(unknown_turn)):
+            raise ValueError("unknown motion must be finite")
+        kf, n = self.kf, self.noise
+        self.discard_gyro()
+        kf.x[V, 0] = kf.x[W, 0] = 0.0
+        p = kf.P
+        p[V : W + 1, :] = 0.0
+        p[:, V : W + 1] = 0.0
+        p[V, V], p[W, W] = n.initial_linear**2, n.initial_angular**2
+        p[X, X] += unknown_distance**2
+        p[Y, Y] += unknown_distance**2
+        p[YAW, YAW] += unknown_turn**2
+        kf.x_prior, kf.P_prior = kf.x.copy(), kf.P.copy()
+        self._still_since = None
+        self.stamp = None
+
     # -- updates -----------------------------------------------------------------------------
 
     def update_wheels(

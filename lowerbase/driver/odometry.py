@@ -271,6 +271,14 @@ class WheelOdometry:
         self._acc_linear = 0.0
         self._acc_angular = 0.0
 
+    def hold(self) -> None:
+        """The samples stopped or cannot be trusted (link lost, a gap, a reboot): keep the
+        pose, zero the velocities, and take the next sample as a new baseline (its counts are
+        not integrated against the old ones)."""
+        self.reset_baseline()
+        self._linear = self._angular = 0.0
+        self._twist_var = (0.0, 0.0)
+
     @property
     def has_baseline(self) -> bool:
         """True once a first sample has been taken."""

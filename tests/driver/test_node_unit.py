@@ -102,4 +102,41 @@ def test_loopback_address(environ: dict[str, str], uri: str, args: list[str],
                           expected: str | None) -> None:
     from lowerbase.driver.settings import loopback_address
 
-    assert loopback_address(environ, uri, args) == expected
+    hosts = {"robot-master": ["192.168.1.7"]}
+    assert loopback_address(environ, uri, args, resolve=hosts.__getitem__) == expected
+
+
+@pytest.mark.parametrize(("addresses", "expected"), [
+    (["127.0.0.1"], "127.0.0.1"),  # roscore on a machine "vm" listed as 127.0.0.1 in /etc/hosts
+    (["127.0.1.1"], "127.0.0.1"),  # Debian's own-hostname line
+    (["::1"], "::1"),
+    (["::1", "127.0.0.1"], "127.0.0.1"),
+    (["127.0.0.1", "10.0.0.5"], None),  # also a real interface: reachable from outside
+    (["fe80::1%eth0"], None),
+    ([], None),  # does not resolve: rospy's default
+])
+def test_a_master_hostname_resolving_to_loopback_only_keeps_the_node_on_loopback(
+        addresses: list[str], expected: str | None) -> None:
+    from lowerbase.driver.settings import loopback_address
+
+    asked: list[str] = []
+
+    def resolve(host: str) -> list[str]:
+        asked.append(host)
+        return addresses
+
+    assert loopback_address({}, "http://vm:11397/", [], resolve=resolve) == expected
+    assert asked == ["vm"]
+
+
+def test_the_real_resolver_on_this_hosts_own_name() -> None:
+    import socket
+
+    from lowerbase.driver.settings import loopback_address, resolve_host
+
+    own = socket.gethostname()
+    addresses = resolve_host(own)
+    if not addresses or not all(a.startswith("127.") or a == "::1" for a in addresses):
+        pytest.skip(f"{own} does not resolve to loopback only here ({addresses})")
+    assert loopback_address({}, f"http://{own}:11397/") in ("127.0.0.1", "::1")
+    assert resolve_host("name.invalid") == []  # RFC 2606: never resolves

@@ -1,0 +1,264 @@
+"""The world around the emulated chassis on the simulated clock, ROS-free: :class:`WorldSim`.
+
+A :class:`WorldSim` wraps a :class:`~lowerbase.bench.simloop.SimLoop` (emulator + driver) with
+a map, its named places, obstacles, the lidar rig (the merged /scan at its rate), the depth
+camera (at its rate; off unless asked, it is the costly part), the localizer (amcl, fed with
+the driver's /odom pose and the merged scan, or the ground truth) and contact (the footprint
+against walls and obstacles, installed in the emulator through the ``Surroundings`` seam).
+
+Scans are cast lazily, since ray casting is the costly part: at every scan tick (the rig's
+rate) the true pose is recorded; the scan itself is cast when the localizer will use it (after
+amcl's ``update_min_d`` / ``update_min_a`` of /odom motion, or after a control through
+:meth:`WorldSim.initial_pose` / :meth:`WorldSim.start_localization`) or when
+:attr:`WorldSim.scan` is read: either way it is the scan of that tick, exactly.
+
+It reads the robot's truth only through :class:`~lowerbase.world.truth.LoopTruth`; the
+emulator's frame is placed on the map at the start pose (``map_from_truth``). What a ROS node
+would publish is read off it: :attr:`WorldSim.scan`, :attr:`WorldSim.frame`,
+:attr:`WorldSim.estimate` (/amcl_pose), :meth:`WorldSim.amcl_pose` (movebase_pose2d),
+:attr:`WorldSim.map_to_odom`, :attr:`WorldSim.contact`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from lowerbase.bench.simloop import SimLoop
+from lowerbase.errors import WorldError
+from lowerbase.firmware_model.profile import Profile
+from lowerbase.world.camera import CameraFrame, DepthCamera
+from lowerbase.world.footprint import DEFAULT_FOOTPRINT, Contact, Footprint, check_pose, \
+    validate_pose
+from lowerbase.world.grid import OccupancyGrid
+from lowerbase.world.lidar import LaserScan, LidarRig
+from lowerbase.world.localization import AmclParams, Localizer, PoseEstimate
+from lowerbase.world.localization.poses import Pose2D, compose, inverse, wrap_scalar
+from lowerbase.world.maps import DEFAULT_MAP, load_map
+from lowerbase.world.obstacles import Obstacles
+from lowerbase.world.places import Places, load_places
+from lowerbase.world.raycast import Scene, Solid
+from lowerbase.world.sensors import SensorsConfig, sensors_from_profile_file
+from lowerbase.world.truth import ContactEvent, LoopTruth, WorldSurroundings
+
+LOCALIZATION_MODES = ("filter", "truth", "off")
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """What a WorldSim is made of (all checked before anything is built).
+
+    ``start`` is a pose (x, y, yaw) [m, rad] on the map or a place name of the map's sidecar;
+    ``initial_error`` (dx, dy, dyaw) in the robot's frame is how wrong the localizer's initial
+    pose is (a user's imprecise /initialpose); ``initial_cov`` its 3x3 covariance (None:
+    amcl's default)."""
+
+    map: str | Path | OccupancyGrid = DEFAULT_MAP
+    start: Sequence[float] | str = "start"
+    obstacles: Obstacles = field(default_factory=Obstacles)
+    sensors: SensorsConfig | None = None  #: None: the profile's [sensors]
+    localization: str = "filter"  #: filter (amcl), truth (ground truth), off
+    initial_error: Sequence[float] = (0.0, 0.0, 0.0)
+    initial_cov: Sequence[float] | None = None
+    amcl: AmclParams | None = None
+    camera: bool = False
+    footprint: Footprint = DEFAULT_FOOTPRINT
+    seed: int = 0
+
+
+def resolve_start(map_ref: str | Path | OccupancyGrid, grid: OccupancyGrid,
+                  start: Sequence[float] | str) -> Pose2D:
+    """The start as a finite pose: a place name looked up in the map's sidecar."""
+    if isinstance(start, str):
+        if isinstance(map_ref, OccupancyGrid):
+            raise WorldError(f"start {start!r} is a place name, but this map has no places: "
+                             "give the start as [x, y, yaw]")
+        places: Places = load_places(map_ref, grid)
+        return places.pose(start)
+    return check_pose(start)
+
+
+class WorldSim:
+    """Emulator + driver + world on one simulated clock (see the module docstring)."""
+
+    def __init__(self, config: WorldConfig | None = None, *, loop: SimLoop | None = None,
+                 profile: Profile | None = None) -> None:
+        cfg = config or WorldConfig()
+        if cfg.localization not in LOCALIZATION_MODES:
+            raise WorldError(f"localization = {cfg.localization!r} is not known; one of: "
+                             f"{', '.join(LOCALIZATION_MODES)}")
+        # -- everything checked first: nothing is built or installed on bad input --
+        grid = cfg.map if isinstance(cfg.map, OccupancyGrid) else load_map(cfg.map)
+        t0 = loop.now if loop is not None else 0.0
+        start = validate_pose(resolve_start(cfg.map, grid, cfg.start), grid, cfg.obstacles,
+                              t0, cfg.footprint, what="the robot's start pose")
+        error = check_pose(cfg.initial_error)
+        sensors = cfg.sensors if cfg.sensors is not None else \
+            sensors_from_profile_file(footprint=cfg.footprint)
+        sensors.check_mounts(cfg.footprint)
+        rig = LidarRig(sensors.lidars, sensors.scan)
+        camera = DepthCamera(sensors.camera) if cfg.camera and sensors.camera else None
+        if cfg.camera and sensors.camera is None:
+            raise WorldError("the camera is asked for but the profile's [sensors.camera] is "
+                             "disabled")
+        self.loop = loop if loop is not None else SimLoop(profile, bms="own")
+        tr = self.loop.mcu.truth
+        self.map_from_truth: Pose2D = compose(start, inverse((tr.x, tr.y, tr.yaw)))
+        localizer = Localizer(
+            grid, cfg.amcl, clock=self.loop.clock, seed=cfg.seed,
+            initial_pose=compose(start, error), initial_cov=cfg.initial_cov,
+            truth=self.true_pose, ground_truth=cfg.localization == "truth",
+            running=cfg.localization != "off")
+        # -- built: install the contact seam --
+        self.config = cfg
+        self.grid = grid
+        self.start = start
+        self.obstacles = cfg.obstacles
+        self.sensors = sensors
+        self.rig = rig
+        self.camera = camera
+        self.localizer = localizer
+        self.truth = LoopTruth(self.loop)
+        self.surroundings = WorldSurroundings(grid, cfg.obstacles, cfg.footprint,
+                                              self.map_from_truth)
+        self.loop.surroundings = self.surroundings
+        self.scene = Scene(grid)
+        self._tick: tuple[float, Pose2D] | None = None  #: the last scan tick: (t, true pose)
+        self._scan: LaserScan | None = None
+        self._fed: Pose2D | None = None  #: /odom when the localizer last got a scan
+        self.frame: CameraFrame | None = None  #: the latest camera frame
+        self.estimate: PoseEstimate | None = None  #: the latest /amcl_pose
+        self.scans = self.frames = 0
+        self._scan_period = 1.0 / rig.rate_hz
+        self._frame_period = 1.0 / camera.config.rate_hz if camera is not None else math.inf
+        self._next_scan = self.loop.now
+        self._next_frame = self.loop.now if camera is not None else math.inf
+
+    # -- what the world knows ------------------------------------------------------------------
+    @property
+    def now(self) -> float:
+        return self.loop.now
+
+    def true_pose(self) -> Pose2D:
+        """The robot's true pose on the map (the emulator's truth placed at the start)."""
+        s = self.truth.sample()
+        return compose(self.map_from_truth, (s.x, s.y, s.yaw))
+
+    def odom_pose(self) -> Pose2D | None:
+        """The driver's /odom pose, None until the driver has odometry."""
+        if self.loop.driver.odometry is None:
+            return None
+        x, y, yaw = self.loop.driver.ekf.pose
+        return float(x), float(y), float(yaw)
+
+    @property
+    def map_to_odom(self) -> Pose2D | None:
+        return self.localizer.map_to_odom
+
+    def amcl_pose(self) -> Pose2D | None:
+        """movebase_pose2d: the current /odom pose through the last map -> odom, or None."""
+        odom = self.odom_pose()
+        return self.localizer.pose_from_odom(odom) if odom is not None else None
+
+    def localization_error(self) -> tuple[float, float] | None:
+        """(position [m], |heading| [rad]) of :meth:`amcl_pose` against the truth, or None."""
+        est = self.amcl_pose()
+        if est is None:
+            return None
+        tx, ty, tyaw = self.true_pose()
+        return math.hypot(est[0] - tx, est[1] - ty), abs(wrap_scalar(est[2] - tyaw))
+
+    @property
+    def contact(self) -> Contact | None:
+        """What the footprint touches (or was stopped by) at the last step; None: nothing."""
+        return self.surroundings.contact
+
+    @property
+    def contact_events(self) -> list[ContactEvent]:
+        return self.surroundings.events
+
+    def scene_at(self, t: float) -> Scene:
+        """The map and the obstacles at time ``t``, as the sensors see them."""
+        if not len(self.obstacles):
+            return self.scene
+        return self.scene.with_solids(Solid(p.height, p.polygon, p.circle, p.name)
+                                      for p in self.obstacles.prisms_at(t))
+
+    # -- running -------------------------------------------------------------------------------
+    def step(self) -> None:
+        """One control period of the emulator and driver, then the sensors that are due."""
+        self.loop.step()
+        now = self.loop.now
+        if now + 1e-9 >= self._next_scan:
+            self._next_scan += self._scan_period
+            self._sense_scan(now)
+        if now + 1e-9 >= self._next_frame:
+            self._next_frame += self._frame_period
+            assert self.camera is not None
+            self.frame = self.camera.render(self.scene_at(now), self.true_pose(), now)
+            self.frames += 1
+
+    @property
+    def scan(self) -> LaserScan | None:
+        """The merged /scan (base_link) of the last scan tick, None before the first."""
+        if self._scan is None and self._tick is not None:
+            t, pose = self._tick
+            self._scan = self.rig.scan(self.scene_at(t), pose, t)
+            self.scans += 1
+        return self._scan
+
+    def _sense_scan(self, now: float) -> None:
+        self._tick = (now, self.true_pose())
+        self._scan = None
+        odom = self.odom_pose()
+        loc = self.localizer
+        if odom is None or not loc.running:
+            return
+        ref, p = self._fed, loc.params
+        if ref is not None and math.hypot(odom[0] - ref[0], odom[1] - ref[1]) < p.update_min_d \
+                and abs(wrap_scalar(odom[2] - ref[2])) < p.update_min_a:
+            return  # the localizer would skip it (amcl's thresholds): no need to cast it
+        self._fed = odom
+        est = loc.update(odom, self.scan)  # type: ignore[arg-type]
+        if est is not None:
+            self.estimate = est
+
+    # -- localization controls (through here, so that the next scan reaches the filter) -------
+    def initial_pose(self, pose: Sequence[float], cov: Sequence[float] | None = None) -> None:
+        """/initialpose (map frame); WorldError and nothing changed on bad input."""
+        self.localizer.initial_pose(check_pose(pose), cov)
+        self._fed = None
+
+    def start_localization(self, on: bool) -> tuple[bool, str]:
+        """/start_localization."""
+        answer = self.localizer.start(on)
+        self._fed = None
+        return answer
+
+    def run(self, seconds: float, on_step: Callable[[WorldSim], None] | None = None) -> None:
+        for _ in range(round(seconds / self.loop.mcu.dt)):
+            self.step()
+            if on_step is not None:
+                on_step(self)
+
+    def run_until(self, condition: Callable[[WorldSim], bool], timeout: float) -> bool:
+        end = self.now + timeout
+        while self.now < end:
+            if condition(self):
+                return True
+            self.step()
+        return condition(self)
+
+    def drive(self, linear: float, angular: float, seconds: float, smoothed: bool = False,
+              on_step: Callable[[WorldSim], None] | None = None) -> None:
+        """Publish a twist at 20 Hz (as a navigation stack does) for ``seconds``."""
+        every = max(1, round(0.05 / self.loop.mcu.dt))
+        for k in range(round(seconds / self.loop.mcu.dt)):
+            if k % every == 0:
+                self.loop.driver.set_twist(linear, angular, smoothed)
+            self.step()
+            if on_step is not None:
+                on_step(self)
+

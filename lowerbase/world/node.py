@@ -97,7 +97,7 @@ class WorldNode:
                                    ground_truth=setup.ground_truth)
         self.odom: Pose | None = None
         self.stats: dict[str, int] = {"scans": 0, "frames": 0, "bad_odom": 0,
-                                      "bad_initialpose": 0, "amcl_poses": 0}
+                                      "bad_initialpose": 0, "amcl_poses": 0, "frames_dropped": 0}
         self._pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
         self._services: list[Any] = []
@@ -293,23 +293,38 @@ class WorldNode:
         self.stats["frames"] += 1
 
     def spin(self) -> None:
-        """Scans at the lidars' rate, frames at the camera's, until rospy shuts down."""
+        """Scans at the lidars' rate in this thread, camera frames at the camera's rate in a
+        thread of its own (numpy releases the GIL: the two share the cores), until rospy
+        shuts down. A late scan is caught up (within 1 s); a late frame is dropped, counted."""
         rospy = self.rospy
         rospy.on_shutdown(self.stop.set)
-        due = {"scan": time.monotonic(), "frame": time.monotonic()}
-        periods = {"scan": 1.0 / self.lidars.rate_hz}
+        camera = None
         if self.camera is not None:
-            periods["frame"] = 1.0 / self.camera.config.rate_hz
-        work = {"scan": self.scan_once, "frame": self.frame_once}
-        while not self.stop.is_set() and not rospy.is_shutdown():
-            key = min(periods, key=lambda k: due[k])
-            self.stop.wait(max(due[key] - time.monotonic(), 0.0))
+            camera = threading.Thread(target=self._loop, name="world-camera", daemon=True,
+                                      args=(self.frame_once, self.camera.config.rate_hz, False))
+            camera.start()
+        self._loop(self.scan_once, self.lidars.rate_hz, True)
+        if camera is not None:
+            camera.join(timeout=5.0)
+
+    def _loop(self, work: Any, rate_hz: float, catch_up: bool) -> None:
+        period = 1.0 / rate_hz
+        due = time.monotonic()
+        while not self.stop.is_set() and not self.rospy.is_shutdown():
+            self.stop.wait(max(due - time.monotonic(), 0.0))
             if self.stop.is_set():
                 break
-            work[key]()
-            due[key] += periods[key]
-            if time.monotonic() - due[key] > 1.0:  # overloaded: do not burst to catch up
-                due[key] = time.monotonic()
+            try:
+                work()
+            except LowerbaseError as exc:  # e.g. a camera mounted above the walls
+                log.error("%s; stopping this sensor", exc)
+                return
+            due += period
+            late = time.monotonic() - due
+            if late > (1.0 if catch_up else period):
+                if not catch_up:
+                    self.stats["frames_dropped"] += int(late / period)
+                due = time.monotonic()
 
     def shutdown(self) -> None:
         self.stop.set()

@@ -108,12 +108,21 @@ class SimHarness:
         truth.x, truth.y, truth.yaw = pose.x, pose.y, pose.yaw
         if scenario.initial.charger:
             self.loop.mcu.bms.connect_charger()
+        self.world: Any = None  # WorldSim of a [world] table (scenario_world.py)
+        if scenario.world is not None:
+            from lowerbase.world.sim import WorldSim
+
+            self.world = WorldSim(scenario.world.config(), loop=self.loop)
+        self.world_names: tuple[str, ...] = scenario.world.contact_names if self.world else ()
 
     def now(self) -> float:
         return self.loop.now
 
     def step(self) -> None:
-        self.loop.step()
+        if self.world is not None:
+            self.world.step()
+        else:
+            self.loop.step()
         if self.realtime:
             if self._wall0 is None:
                 self._wall0 = time.monotonic() - self.loop.now
@@ -300,6 +309,11 @@ def _sample(now: float, harness: Harness, publisher: _Publisher) -> dict[str, fl
     s["robot_state"] = float(d.system_status.get("RobotState", -1))
     s["link"] = float(LINK_STATES.index(d.state.value))
     s["reboots"] = float(d.reboots)
+    world = getattr(harness, "world", None)
+    if world is not None:
+        from lowerbase.bench.scenario_world import world_sample
+
+        s.update(world_sample(world, harness.world_names))  # type: ignore[attr-defined]
     return s
 
 

@@ -223,6 +223,10 @@ COLUMNS: dict[str, str] = {
     "robot_state": "",  # SystemStatus RobotState (-1 until received)
     "link": "",  # index into LINK_STATES
     "reboots": "",  # reboots the driver has seen
+    # with a [world] (scenario_world.py): movebase_pose2d, its error against the truth, and
+    # the contact bit mask (bit i: WorldSpec.contact_names[i])
+    "amcl_x": "m", "amcl_y": "m", "amcl_yaw": "rad", "amcl_error": "m", "amcl_yaw_error": "rad",
+    "contact": "",
 }
 
 
@@ -550,6 +554,7 @@ class Scenario:
     expectations: tuple[Expectation, ...] = ()
     sample_period: float = 0.05  #: [s] trace sampling period
     source: str = "<dict>"  #: file it was loaded from
+    world: Any = None  #: scenario_world.WorldSpec of a [world] table, or None
 
     @property
     def faults(self) -> tuple[FaultAt, ...]:
@@ -560,12 +565,14 @@ class Scenario:
         needs = [f"{a.kind} at t={a.at:g} s" for a in self.timeline if a.kind in IN_PROCESS_ONLY]
         if not self.initial.pose.is_origin:
             needs.append("an initial pose other than the origin")
+        if self.world is not None:
+            needs.append("a [world] (it reads the emulator's ground truth)")
         return needs
 
 
 # -- loading and validation --------------------------------------------------------------------
 
-_TOP = {"scenario", "initial", "timeline", "expect"}
+_TOP = {"scenario", "initial", "timeline", "expect", "world"}
 _SCENARIO_KEYS = {"name", "description", "duration", "profile", "sample_period"}
 _INITIAL_KEYS = {"soc", "x", "y", "yaw", "charger"}
 
@@ -709,6 +716,11 @@ def _build(data: Mapping[str, Any], source: str, base: Path | None) -> Scenario:
         charger=init.flag("charger", False),
     )
     init.done()
+    world = None
+    if "world" in data:
+        from lowerbase.bench.scenario_world import parse_world
+
+        world = parse_world(data["world"], base)
     items = data.get("timeline", [])
     if not isinstance(items, list):
         raise ConfigError("timeline must be an array of tables ([[timeline]])")
@@ -716,10 +728,12 @@ def _build(data: Mapping[str, Any], source: str, base: Path | None) -> Scenario:
     checks = data.get("expect", [])
     if not isinstance(checks, list):
         raise ConfigError("expect must be an array of tables ([[expect]])")
-    expectations = tuple(_expectation(item, i, duration) for i, item in enumerate(checks))
+    expectations = tuple(_expectation(item, i, duration, world)
+                         for i, item in enumerate(checks))
     return Scenario(name=name, duration=duration, description=description, profile=profile,
                     initial=initial, timeline=tuple(sorted(timeline, key=lambda a: a.at)),
-                    expectations=expectations, sample_period=sample_period, source=source)
+                    expectations=expectations, sample_period=sample_period, source=source,
+                    world=world)
 
 
 def _action(item: Any, index: int, duration: float) -> Action:
@@ -822,15 +836,19 @@ def _at_or_during(t: _Table, duration: float) -> tuple[float | None, tuple[float
     return at, during, sometime
 
 
-def _expectation(item: Any, index: int, duration: float) -> Expectation:
+def _expectation(item: Any, index: int, duration: float, world: Any = None) -> Expectation:
     t = _Table(item, f"expect[{index}]")
     kind = t.text("kind", choices=("stopped", "moving", "status", "pose", "soc", "state",
-                                   "link", "reboots"))
+                                   "link", "reboots", "localization", "contact"))
     t.where = f"expect[{index}] ({kind})"
     name = t.text("name", "")
     sources = ("truth", "measured")
     exp: Expectation
-    if kind == "stopped":
+    if kind in ("localization", "contact"):
+        from lowerbase.bench.scenario_world import make_expectation
+
+        exp = make_expectation(kind, t, name, duration, world)
+    elif kind == "stopped":
         exp = Stopped(name, after=t.number("after", lo=0.0, hi=duration, required=True),
                       within=t.number("within", lo=0.0, hi=3600.0, required=True),
                       until=t.opt_number("until", lo=0.0, hi=duration),

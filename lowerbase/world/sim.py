@@ -30,8 +30,13 @@ from lowerbase.bench.simloop import SimLoop
 from lowerbase.errors import WorldError
 from lowerbase.firmware_model.profile import Profile
 from lowerbase.world.camera import CameraFrame, DepthCamera
-from lowerbase.world.footprint import DEFAULT_FOOTPRINT, Contact, Footprint, check_pose, \
-    validate_pose
+from lowerbase.world.footprint import (
+    DEFAULT_FOOTPRINT,
+    Contact,
+    Footprint,
+    check_pose,
+    validate_pose,
+)
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lidar import LaserScan, LidarRig
 from lowerbase.world.localization import AmclParams, Localizer, PoseEstimate

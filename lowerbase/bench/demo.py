@@ -24,6 +24,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -214,11 +215,13 @@ class BusHarness:
 
 
 def run_over_bus(scenario: Scenario, workdir: Path, *, tap: FrameTap | None = None,
-                 progress: Any = None, bus_config: dict[str, Any] | None = None) -> RunResult:
+                 progress: Any = None, bus_config: dict[str, Any] | None = None,
+                 on_start: Callable[[Harness], None] | None = None) -> RunResult:
     """Run ``scenario`` against ``lowerbase emulate`` in a child process, in real time.
 
     ``workdir`` receives ``emulator.log`` and ``truth.csv``. KeyboardInterrupt ends the run
-    early (``result.interrupted``); the child is stopped on every way out.
+    early (``result.interrupted``); the child is stopped on every way out. ``on_start`` gets
+    the harness once the clocks are aligned (e.g. an MCAP recorder attaching to its driver).
     """
     from lowerbase.transport import open_bus
 
@@ -242,6 +245,8 @@ def run_over_bus(scenario: Scenario, workdir: Path, *, tap: FrameTap | None = No
         bus = open_bus(config)
         harness = BusHarness(bus, truth_path=truth_path, tap=tap)
         harness.start()
+        if on_start is not None:
+            on_start(harness)
         result = run_scenario(scenario, harness, mode="processes", progress=progress)
     finally:
         if harness is not None:

@@ -29,6 +29,7 @@ SUBCOMMANDS = (
     "decode",
     "demo",
     "record",
+    "mcap",
     "ros-env",
 )
 

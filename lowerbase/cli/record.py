@@ -55,16 +55,36 @@ class LiveCount:
             self._shown = False
 
 
+class McapFrames:
+    """``can.Logger``'s two methods over an MCAP file: /can/frames and /can/decoded/<Message>
+    at the frames' own timestamps (docs/recording.md). No driver runs here, so no /odom."""
+
+    def __init__(self, path: Path) -> None:
+        from lowerbase.recording.mcap_writer import McapRecorder
+
+        self.recorder = McapRecorder(path)
+
+    def on_message_received(self, msg: Any) -> None:
+        if msg.is_error_frame or msg.is_remote_frame:
+            return
+        self.recorder(float(msg.timestamp), "rx" if msg.is_rx else "tx",
+                      int(msg.arbitration_id), bytes(msg.data))
+
+    def stop(self) -> None:
+        self.recorder.close()
+
+
 def add_subparser(subparsers: Any) -> None:
     from lowerbase.transport import add_bus_arguments
 
     p = subparsers.add_parser(
         "record",
-        help="record a live bus to .log (candump), .asc, .blf, .csv or .trc",
+        help="record a live bus to .log (candump), .asc, .blf, .csv, .trc or .mcap",
         description="Record every frame on a bus (default: lowerbase's udp_multicast) with "
         "python-can's writers; the suffix picks the format. Stop with Ctrl-C or --duration.",
     )
-    p.add_argument("file", help="output file: .log, .asc, .blf, .csv or .trc")
+    p.add_argument("file", help="output file: .log, .asc, .blf, .csv, .trc, or .mcap (raw "
+                   "frames and decoded signals for Foxglove; docs/recording.md)")
     add_bus_arguments(p)
     p.add_argument("--duration", type=positive_seconds, metavar="S", help="stop after S seconds")
     p.add_argument("--only", action="append", metavar="NAME",
@@ -83,7 +103,8 @@ def run(args: argparse.Namespace) -> int:
     from lowerbase.protocol.codec import default_codec
     from lowerbase.transport import config_from_args, describe, open_bus
 
-    path = check_recording_path(args.file)
+    mcap = Path(args.file).suffix.lower() == ".mcap"
+    path = Path(args.file) if mcap else check_recording_path(args.file)
     codec = default_codec()
     ids: set[int] | None = None
     if args.only:
@@ -100,9 +121,11 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     count = 0
     try:
-        writer = can.Logger(str(path))
-    except (OSError, ValueError) as exc:
+        writer = McapFrames(path) if mcap else can.Logger(str(path))
+    except (OSError, ValueError, LowerbaseError) as exc:
         bus.shutdown()
+        if isinstance(exc, ConfigError):
+            raise
         raise ConfigError(f"cannot write {path}: {exc}") from None
     print(f"lowerbase record: {describe(config)} -> {path}; Ctrl-C stops", file=sys.stderr)
     end = time.monotonic() + args.duration if args.duration is not None else None

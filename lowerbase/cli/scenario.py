@@ -40,11 +40,17 @@ def add_subparser(subparsers: Any) -> None:
                         "process on the default transport, the driver here (real time)")
     run.add_argument("--record", metavar="FILE",
                      help="record every frame: .log (candump), .asc, .blf, .csv or .trc")
+    mcap = run.add_mutually_exclusive_group()
+    mcap.add_argument("--mcap", metavar="FILE.mcap",
+                      help="write the run's ROS1 topics, ground truth and CAN frames here "
+                      "(default: run.mcap in the report directory; docs/recording.md)")
+    mcap.add_argument("--no-mcap", dest="mcap", action="store_false",
+                      help="do not write the MCAP recording")
     run.add_argument("--progress", action="store_true",
                      help="show the progress bar even when stderr is not a terminal")
     run.add_argument("--status", action="store_true",
                      help="show a live status line (pose, speed, SOC, StatusCode) instead")
-    run.set_defaults(func=run_command, mode="simulated")
+    run.set_defaults(func=run_command, mode="simulated", mcap=None)
 
     check = sub.add_parser("check", help="validate scenario files without running them")
     check.add_argument("scenarios", nargs="+", metavar="FILE|NAME")
@@ -89,35 +95,77 @@ def log_to_file(path: Path, *, echo: bool = False) -> Iterator[None]:
         handler.close()
 
 
+def mcap_path(out: Path, mcap: str | Path | bool | None) -> Path | None:
+    """Where ``execute`` writes the MCAP: ``out/run.mcap`` (True), none (False/None) or the
+    given path (ConfigError unless it ends in .mcap)."""
+    from lowerbase.errors import ConfigError
+
+    if mcap is True:
+        return out / "run.mcap"
+    if mcap is None or mcap is False:
+        return None
+    path = Path(mcap)
+    if path.suffix.lower() != ".mcap":
+        raise ConfigError(f"--mcap {path}: the file name must end in .mcap")
+    return path
+
+
 def execute(scenario: Any, out: Path, *, mode: str = "simulated", record: str | None = None,
             progress: Any = None, debug: bool = False,
-            bus_config: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+            bus_config: dict[str, Any] | None = None,
+            mcap: str | Path | bool | None = True) -> tuple[Any, dict[str, Any]]:
     """Run ``scenario`` in ``mode``, optionally recording, and write the report into ``out``.
 
-    Log records of the run go to ``out/run.log`` (also to stderr with ``debug``).
+    Log records of the run go to ``out/run.log`` (also to stderr with ``debug``). ``mcap``:
+    see :func:`mcap_path` (the driver's topics, the truth and the frames; docs/recording.md).
     """
     from lowerbase.bench.recording import BusRecorder, check_recording_path
     from lowerbase.bench.report import write_report
-    from lowerbase.bench.runner import run_simulated
+    from lowerbase.bench.runner import SimHarness, run_scenario
 
     if mode == "processes":
         from lowerbase.bench.demo import check_over_bus
 
         check_over_bus(scenario)  # before anything is started or written
+    mcap_file = mcap_path(out, mcap)
     recorder = BusRecorder(check_recording_path(record)) if record else None
+    mcap_rec = None
+    if mcap_file is not None:
+        from lowerbase.recording.mcap_writer import McapRecorder
+
+        mcap_rec = McapRecorder(mcap_file)
+    taps = [t for t in (recorder, mcap_rec) if t is not None]
+
+    def tap(t: float, direction: str, frame_id: int, data: bytes) -> None:
+        for each in taps:
+            each(t, direction, frame_id, data)
+
+    def attach(harness: Any) -> None:
+        if mcap_rec is not None:
+            mcap_rec.attach(harness.driver, harness.now, harness.truth)
+
     try:
         with log_to_file(out / "run.log", echo=debug):
             if mode == "processes":
                 from lowerbase.bench.demo import run_over_bus
 
-                result = run_over_bus(scenario, out, tap=recorder, progress=progress,
-                                      bus_config=bus_config)
+                result = run_over_bus(scenario, out, tap=tap if taps else None,
+                                      progress=progress, bus_config=bus_config,
+                                      on_start=attach)
             else:
-                result = run_simulated(scenario, tap=recorder, realtime=mode == "realtime",
-                                       progress=progress)
+                realtime = mode == "realtime"
+                harness = SimHarness(scenario, tap=tap if taps else None, realtime=realtime)
+                attach(harness)
+                try:
+                    result = run_scenario(scenario, harness, progress=progress,
+                                          mode="realtime" if realtime else "simulated")
+                finally:
+                    harness.close()
     finally:
         if recorder is not None:
             recorder.close()
+        if mcap_rec is not None:
+            mcap_rec.close()
         if progress is not None:
             progress.done()
     summary = write_report(result, out, recording=recorder.path if recorder else None)
@@ -154,10 +202,13 @@ def run_command(args: argparse.Namespace) -> int:
     print(f"scenario {scenario.name}: {scenario.description or scenario.source} "
           f"({scenario.duration:g} s, {args.mode})", file=sys.stderr)
     result, _ = execute(scenario, out, mode=args.mode, record=args.record, progress=progress,
-                        debug=args.debug)
+                        debug=args.debug, mcap=True if args.mcap is None else args.mcap)
     print_outcomes(result, out)
     if args.record:
         print(f"recording: {args.record}")
+    written = mcap_path(out, True if args.mcap is None else args.mcap)
+    if written is not None:
+        print(f"mcap: {written} (Foxglove, PlotJuggler; `lowerbase mcap to-bag` for rosbag)")
     if result.interrupted:
         return 130
     return 0 if result.passed else 1

@@ -1,0 +1,59 @@
+"""``lowerbase mcap``: convert between MCAP and rosbag, and summarise an MCAP file.
+
+``to-bag`` and ``from-bag`` copy messages unchanged (ROS1 bytes are the same in both formats;
+``lowerbase.recording.convert``); ``info`` lists the topics, types and counts. No ROS needed.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+
+def add_subparser(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "mcap", help="convert MCAP <-> rosbag (.bag), list an MCAP file's topics",
+        description="MCAP recordings (scenario run, demo, record; docs/recording.md) and "
+        "ROS1 bags, both ways, without a ROS install.")
+    sub = p.add_subparsers(title="actions", dest="mcap_command", metavar="ACTION")
+    p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
+    to_bag = sub.add_parser("to-bag", help="MCAP -> rosbag (JSON channels become "
+                            "std_msgs/String)")
+    to_bag.add_argument("input", metavar="IN.mcap")
+    to_bag.add_argument("output", metavar="OUT.bag")
+    to_bag.set_defaults(func=to_bag_command)
+    from_bag = sub.add_parser("from-bag", help="rosbag -> MCAP (ROS1 channels)")
+    from_bag.add_argument("input", metavar="IN.bag")
+    from_bag.add_argument("output", metavar="OUT.mcap")
+    from_bag.set_defaults(func=from_bag_command)
+    info = sub.add_parser("info", help="topics, message types and counts of an MCAP file")
+    info.add_argument("input", metavar="FILE.mcap")
+    info.set_defaults(func=info_command)
+
+
+def _report(done: Any, output: str) -> None:
+    print(f"{done.messages} message(s) on {len(done.topics)} topic(s) -> {output}")
+    for topic, n in sorted(done.skipped.items()):
+        print(f"skipped {topic}: {n} message(s) of an encoding rosbag cannot hold")
+
+
+def to_bag_command(args: argparse.Namespace) -> int:
+    from lowerbase.recording.convert import mcap_to_bag
+
+    _report(mcap_to_bag(args.input, args.output), args.output)
+    return 0
+
+
+def from_bag_command(args: argparse.Namespace) -> int:
+    from lowerbase.recording.convert import bag_to_mcap
+
+    _report(bag_to_mcap(args.input, args.output), args.output)
+    return 0
+
+
+def info_command(args: argparse.Namespace) -> int:
+    from lowerbase.recording.convert import mcap_summary
+
+    for line in mcap_summary(args.input):
+        print(line)
+    return 0

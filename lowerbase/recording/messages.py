@@ -1,0 +1,139 @@
+"""DriverCore state -> ROS1 messages without ROS: the content of ``lowerbase.driver.ros_io``.
+
+Each builder fills the same fields with the same values as its namesake in ``ros_io`` (which
+builds genpy classes and needs rospy); tests/recording compares the serialised bytes of both
+for the same core state. Messages are rosbags objects of :func:`~.ros1_types.ros1_types`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from lowerbase.recording.ros1_types import Ros1Types
+
+POSE_AXES = (0, 1, 5)  #: (x, y, yaw) in nav_msgs/Odometry's 6x6 pose covariance
+TWIST_AXES = (0, 5)  #: (vx, wz) in its 6x6 twist covariance
+
+
+def to_ns(t: float) -> int:
+    """``t`` [s] in integer nanoseconds, exact to the float's fraction also for epoch times
+    (whole seconds and the fraction converted apart); clamped at 0 (ROS1 time is unsigned)."""
+    if not t > 0.0:
+        return 0
+    sec = math.floor(t)
+    return sec * 1_000_000_000 + round((t - sec) * 1e9)
+
+
+def stamp_of(t: float, types: Ros1Types) -> Any:
+    """ROS time of ``t`` [s] (clamped at 0: ROS1 time is unsigned)."""
+    ns = to_ns(t)
+    return types.message("builtin_interfaces/Time", sec=ns // 1_000_000_000,
+                         nanosec=ns % 1_000_000_000)
+
+
+def header(types: Ros1Types, seq: int, t: float, frame_id: str) -> Any:
+    return types.message("std_msgs/Header", seq=seq, stamp=stamp_of(t, types),
+                         frame_id=frame_id)
+
+
+def embed_planar(cov: Sequence[float], axes: Sequence[int], unobserved: float,
+                 extra: Mapping[int, float] | None = None) -> np.ndarray:
+    """As ``ros_io.embed_planar``: the n x n ``cov`` at ``axes`` of a 6x6, ``unobserved`` on
+    the other diagonal entries except ``extra`` (axis -> variance)."""
+    n = len(axes)
+    if len(cov) != n * n:
+        raise ValueError(f"expected a {n}x{n} covariance, got {len(cov)} values")
+    m = np.zeros(36)
+    m[::7] = unobserved
+    for a, ia in enumerate(axes):
+        for b, ib in enumerate(axes):
+            m[ia * 6 + ib] = float(cov[a * n + b])
+    for axis, variance in (extra or {}).items():
+        m[axis * 6 + axis] = variance
+    return m
+
+
+def quaternion_from_yaw(types: Ros1Types, yaw: float) -> Any:
+    half = 0.5 * yaw
+    return types.message("geometry_msgs/Quaternion", x=0.0, y=0.0, z=math.sin(half),
+                         w=math.cos(half))
+
+
+def _vector(types: Ros1Types, x: float = 0.0, y: float = 0.0, z: float = 0.0) -> Any:
+    return types.message("geometry_msgs/Vector3", x=float(x), y=float(y), z=float(z))
+
+
+def odometry_msg(types: Ros1Types, head: Any, child_frame_id: str,
+                 pose: tuple[float, float, float], twist: tuple[float, float],
+                 pose_cov: Sequence[float], twist_cov: Sequence[float],
+                 unobserved: float = 1e6) -> Any:
+    """nav_msgs/Odometry of a planar base (``ros_io.odometry_msg``)."""
+    position = types.message("geometry_msgs/Point", x=float(pose[0]), y=float(pose[1]), z=0.0)
+    p = types.message("geometry_msgs/PoseWithCovariance", pose=types.message(
+        "geometry_msgs/Pose", position=position, orientation=quaternion_from_yaw(types, pose[2])),
+        covariance=embed_planar(pose_cov, POSE_AXES, unobserved))
+    t = types.message("geometry_msgs/TwistWithCovariance", twist=types.message(
+        "geometry_msgs/Twist", linear=_vector(types, twist[0]), angular=_vector(
+            types, 0.0, 0.0, twist[1])),
+        covariance=embed_planar(twist_cov, TWIST_AXES, unobserved,
+                                extra={1: float(twist_cov[0])}))
+    return types.message("nav_msgs/Odometry", header=head, child_frame_id=child_frame_id,
+                         pose=p, twist=t)
+
+
+def tf_from_odometry(types: Ros1Types, odom: Any) -> Any:
+    """tf2_msgs/TFMessage with the transform ``odom`` carries, as tf2_ros' broadcaster
+    sends it (``ros_io.transform_from_odometry``; the inner header's seq stays 0)."""
+    h = odom.header
+    p = odom.pose.pose.position
+    transform = types.message(
+        "geometry_msgs/TransformStamped",
+        header=types.message("std_msgs/Header", seq=0, stamp=h.stamp, frame_id=h.frame_id),
+        child_frame_id=odom.child_frame_id,
+        transform=types.message("geometry_msgs/Transform", translation=_vector(
+            types, p.x, p.y, p.z), rotation=odom.pose.pose.orientation))
+    return types.message("tf2_msgs/TFMessage", transforms=[transform])
+
+
+def imu_msg(types: Ros1Types, head: Any, gyro: Sequence[float], accel: Sequence[float],
+            gyro_variance: float, accel_variance: float) -> Any:
+    """sensor_msgs/Imu without orientation (``ros_io.imu_msg``)."""
+    return types.message(
+        "sensor_msgs/Imu", header=head,
+        orientation=types.message("geometry_msgs/Quaternion", x=0.0, y=0.0, z=0.0, w=0.0),
+        orientation_covariance=np.array([-1.0] + [0.0] * 8),
+        angular_velocity=_vector(types, *gyro),
+        angular_velocity_covariance=_diag3(gyro_variance),
+        linear_acceleration=_vector(types, *accel),
+        linear_acceleration_covariance=_diag3(accel_variance))
+
+
+def _diag3(variance: float) -> np.ndarray:
+    return np.array([variance, 0.0, 0.0, 0.0, variance, 0.0, 0.0, 0.0, variance])
+
+
+def battery_msg(types: Ros1Types, head: Any, fields: Mapping[str, float | int]) -> Any:
+    """woosh_msgs/Battery from ``BmsFrameAccumulator.battery_fields()``."""
+    return types.message("woosh_msgs/Battery", header=head, **fields)
+
+
+def bms_msg(types: Ros1Types, head: Any, fields: Mapping[str, float | int]) -> Any:
+    """woosh_msgs/BMS from ``BmsFrameAccumulator.bms_fields()``."""
+    return types.message("woosh_msgs/BMS", header=head, **fields)
+
+
+def status_code_msg(types: Ros1Types, code: int) -> Any:
+    return types.message("std_msgs/UInt64", data=int(code) & 0xFFFF_FFFF_FFFF_FFFF)
+
+
+def can_frame_msg(types: Ros1Types, head: Any, frame_id: int, data: bytes) -> Any:
+    """can_msgs/Frame of a classic data frame (data padded to 8 bytes, dlc = its length)."""
+    payload = np.zeros(8, dtype=np.uint8)
+    payload[: len(data)] = np.frombuffer(data[:8], dtype=np.uint8)
+    return types.message("can_msgs/Frame", header=head, id=frame_id,
+                         is_rtr=False, is_extended=frame_id > 0x7FF, is_error=False,
+                         dlc=min(len(data), 8), data=payload)

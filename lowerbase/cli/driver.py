@@ -107,8 +107,10 @@ def replay_parameters(args: argparse.Namespace) -> dict[str, float] | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import sys
+
     from lowerbase.driver import node
-    from lowerbase.errors import ConfigError
+    from lowerbase.errors import ConfigError, LowerbaseError
 
     ros_args = split_ros_args(args.ros_args)
     parameters = replay_parameters(args)
@@ -116,8 +118,6 @@ def run(args: argparse.Namespace) -> int:
     if args.replay:
         if args.serial or getattr(args, "interface", None) or getattr(args, "channel", None):
             raise ConfigError("--replay replaces the bus: drop the bus options")
-        import sys
-
         replay = node.ReplayLink(args.replay, parameters=parameters)  # checked before rospy
         if replay.advice:
             print(f"lowerbase driver: {replay.advice}", file=sys.stderr, flush=True)
@@ -126,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
             replay.finished = finished
             return replay
     else:
+        replay = None
         from lowerbase.transport import config_from_args
 
         config = config_from_args(args)
@@ -133,4 +134,12 @@ def run(args: argparse.Namespace) -> int:
         def link_factory(finished: Any) -> Any:
             return node.BusLink(config)
 
-    return node.run(link_factory, ros_args)
+    code = node.run(link_factory, ros_args)
+    if replay is not None:
+        if replay.skipped_lines:
+            print(f"lowerbase driver: {replay.skipped_lines} line(s) of {replay.path.name} were "
+                  "not frames and were skipped", file=sys.stderr, flush=True)
+        if replay.error is not None:  # corrupt or truncated: the replay did not reach the end
+            raise LowerbaseError(f"{replay.error}; the replay stopped there "
+                                 f"({replay.frames} frames replayed)")
+    return code

@@ -13,6 +13,7 @@ from lowerbase.clock import SimClock
 from lowerbase.driver.core import DriverCore, LinkState
 from lowerbase.driver.links import ReplayLink
 from lowerbase.firmware_model.profile import load_profile
+from lowerbase.protocol.codec import default_codec
 
 PARAMETERS = load_profile().chassis.as_wire_dict()
 
@@ -146,3 +147,96 @@ def test_cli_says_when_a_recording_starts_late_and_replays_it_with_parameters(
     assert "answered with the given parameters" in capsys.readouterr().err
     assert link.answering and link.finished is not None
     assert link.parameters == {**PARAMETERS, "wheelPerimeter": 0.7}
+
+
+# -- bad files: read as `lowerbase decode` reads them -----------------------------------------
+
+
+def _heartbeats(path: Path, n: int) -> Path:
+    """``n`` Heartbeats, all stamped at one instant (a replay of them does not wait)."""
+    hb = default_codec().message("Heartbeat")
+    with can.Logger(str(path)) as logger:
+        for k in range(n):
+            logger.on_message_received(can.Message(
+                timestamp=1000.0, arbitration_id=hb.frame_id, is_extended_id=False,
+                data=hb.encode({"Uptime": float(k), "BootCounter": 3, "Counter": k & 0xF,
+                                "ProtocolVersion": 1})))
+    return path
+
+
+def test_a_log_with_a_non_utf8_line_skips_that_line_only(whole: Path, tmp_path: Path) -> None:
+    lines = whole.read_bytes().splitlines(keepends=True)
+    bad = tmp_path / "bad.log"
+    bad.write_bytes(b"".join(lines[:50]) + b"(1000.5) vcan0 \xff\xfe#00\n" + b"".join(lines[50:]))
+    clock = SimClock()
+    link = ReplayLink(bad, clock=clock)
+    assert link.scan_error is None and link.has_parameter_exchange
+    core = replay(link, clock)
+    assert link.skipped_lines == 1 and link.error is None
+    clean_clock = SimClock()
+    clean = ReplayLink(whole, clock=clean_clock)
+    replay(clean, clean_clock)
+    assert link.frames == clean.frames > 1000
+    assert core.state == LinkState.READY
+
+
+def corrupt(path: Path) -> Path:
+    raw = path.read_bytes()
+    half = len(raw) // 2
+    path.write_bytes(raw[:half] + bytes(b ^ 0x5A for b in raw[half:half + 64])
+                     + raw[half + 64:])
+    return path
+
+
+def truncate(path: Path) -> Path:
+    path.write_bytes(path.read_bytes()[:len(path.read_bytes()) // 2])
+    return path
+
+
+@pytest.mark.parametrize("spoil, says", [(corrupt, "corrupt file"), (truncate, "truncated")])
+def test_a_bad_blf_is_named_not_mistaken_for_a_late_recording_and_stops_with_an_error(
+        spoil: object, says: str, tmp_path: Path) -> None:
+    path = spoil(_heartbeats(tmp_path / "run.blf", 2000))  # type: ignore[operator]
+    clock = SimClock()
+    link = ReplayLink(path, clock=clock)
+    assert link.advice is not None and says in link.advice
+    assert "parameter exchange" not in link.advice  # that is not what is wrong with it
+    replay(link, clock)
+    assert link.error is not None and says in link.error and "after frame" in link.error
+    assert link.frames < 2000  # what comes before the damage (a whole BLF container)
+
+
+def _run_cli_to_the_end(argv: list[str], monkeypatch: pytest.MonkeyPatch) -> int:
+    from lowerbase.cli import main
+    from lowerbase.driver import node
+
+    def fake_run(link_factory: object, ros_args: object) -> int:  # the reader, no rospy
+        link = link_factory(lambda: None)  # type: ignore[operator]
+        link.clock = SimClock()
+        link.run_reader(lambda frame_id, data: None, threading.Event())
+        return 0
+
+    monkeypatch.setattr(node, "run", fake_run)
+    return main(["driver", *argv])
+
+
+@pytest.mark.parametrize("spoil, says", [(corrupt, "corrupt file"), (truncate, "truncated")])
+def test_cli_exits_non_zero_on_a_bad_blf(
+        spoil: object, says: str, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch, woosh_msgs: object) -> None:
+    path = spoil(_heartbeats(tmp_path / "run.blf", 2000))  # type: ignore[operator]
+    assert _run_cli_to_the_end(["--replay", str(path)], monkeypatch) == 1
+    err = capsys.readouterr().err
+    assert "starts after the driver's parameter exchange" not in err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith(f"lowerbase driver: error: {path}: after frame") and says in last
+    assert "Traceback" not in err
+
+
+def test_cli_reports_skipped_lines_and_exits_0(
+        whole: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch, woosh_msgs: object) -> None:
+    bad = tmp_path / "bad.log"
+    bad.write_bytes(whole.read_bytes() + b"\xff not a frame\n")
+    assert _run_cli_to_the_end(["--replay", str(bad)], monkeypatch) == 0
+    assert "1 line(s) of bad.log were not frames" in capsys.readouterr().err

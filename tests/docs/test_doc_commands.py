@@ -137,6 +137,16 @@ CHECKS: dict[str, Check] = {
     "lowerbase record bus.log --duration 10": Check(
         "run", "written to bus.log", (("--duration 10", "--duration 1"),), peer=True,
         why="bounded to 1 s"),
+    "lowerbase scenario run watchdog --mcap watchdog.mcap": Check(
+        "run", "mcap: watchdog.mcap", files=("watchdog.mcap",)),
+    "lowerbase mcap info prep/run.mcap": Check("run", "/ground_truth/odom"),
+    "lowerbase mcap to-bag prep/run.mcap run.bag": Check("run", "-> run.bag",
+                                                          files=("run.bag",)),
+    "lowerbase mcap from-bag run.bag back.mcap": Check("run", "-> back.mcap",
+                                                        files=("back.mcap",)),
+    "lowerbase record run.mcap --duration 10": Check(
+        "run", "written to run.mcap", (("--duration 10", "--duration 1"),), peer=True,
+        why="bounded to 1 s"),
     "lowerbase decode": Check("run", "Heartbeat", why="candump's lines given on stdin",
                               stdin="(1.0) vcan0 090#D430000003000101\n"),
     "lowerbase dbc --signals": Check("run", "WheelFeedback"),
@@ -177,13 +187,16 @@ def test_the_extraction_finds_the_everyday_commands() -> None:
 
 @pytest.fixture(scope="module")
 def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Files the documented commands name: my.toml, robot.toml, run.blf."""
+    """Files the documented commands name: my.toml, robot.toml, run.blf, prep/run.mcap,
+    run.bag."""
     d = tmp_path_factory.mktemp("doc-commands")
     (d / "my.toml").write_text(MY_SCENARIO, encoding="utf-8")
     shutil.copy(ROOT / "lowerbase" / "profiles" / "default.toml", d / "robot.toml")
     subprocess.run([sys.executable, "-m", "lowerbase", "scenario", "run", "my.toml",
                     "--record", "run.blf", "--out", "prep"], cwd=d, check=True,
                    capture_output=True, timeout=60)
+    subprocess.run([sys.executable, "-m", "lowerbase", "mcap", "to-bag", "prep/run.mcap",
+                    "run.bag"], cwd=d, check=True, capture_output=True, timeout=60)
     return d
 
 

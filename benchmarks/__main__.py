@@ -11,8 +11,9 @@ from pathlib import Path
 
 from benchmarks.common import Row
 
-MODULES = ("bench_protocol", "bench_emulator", "bench_fleet", "bench_bms", "bench_driver",
-           "bench_scenarios", "bench_world", "bench_localization", "bench_recording")
+MODULES = ("bench_protocol", "bench_emulator", "bench_fleet", "bench_bus", "bench_bms",
+           "bench_driver", "bench_scenarios", "bench_world", "bench_localization",
+           "bench_recording")
 
 
 def _fmt(v: float) -> str:

@@ -15,7 +15,7 @@ from lowerbase.firmware_model.mcu import Command, Mcu
 from lowerbase.firmware_model.profile import load_profile
 from lowerbase.firmware_model.runner import bus_sender
 from lowerbase.firmware_model.sim import SimRig
-from lowerbase.protocol.codec import default_codec
+from lowerbase.protocol.codec import Codec, default_codec
 from lowerbase.transport import free_loopback_port, open_bus
 
 GROUP = "239.74.163.98"
@@ -81,34 +81,51 @@ def jitter(seconds: float) -> list[Row]:
     start = time.monotonic() + 1.0  # skip the boot
     while time.monotonic() < end:
         msg = bus.recv(0.5)
-        if msg is None or msg.arbitration_id not in codec or time.monotonic() < start:
+        if msg is None or time.monotonic() < start:
             continue
-        m = codec.message(msg.arbitration_id)
-        if not m.is_periodic or "Lower" not in m.senders:
-            continue
-        key = m.name
-        if m.name == "WheelFeedback":
-            key += "/" + ("left" if msg.data[7] & 1 == 0 else "right")
-        elif m.name == "LedState":
-            key += f"/{msg.data[0]:02x}"
-        stamps[key].append(msg.timestamp)
+        key = periodic_key(codec, msg.arbitration_id, bytes(msg.data))
+        if key is not None:
+            stamps[key].append(msg.timestamp)
     bus.shutdown()
     proc.wait(timeout=10)
     rows = []
-    for key in sorted(stamps):
-        name = key.split("/")[0]
-        if name == "LedState" and not key.endswith("/02"):
-            continue  # one submodule stands for the 16
-        cycle = codec.message(name).cycle_time or 0.0
-        ts = stamps[key]
-        dev = [abs((b - a) - cycle) * 1e3 for a, b in itertools.pairwise(ts)]
-        if not dev:
-            continue
+    for key, cycle, dev in deviations(codec, stamps):
         rows.append(Row("jitter", f"{key} ({cycle * 1e3:g} ms) p50/p99/max",
                         percentile(dev, 50), "ms",
                         f"p99 {percentile(dev, 99):.2f} ms, max {max(dev):.2f} ms, "
-                        f"{len(ts)} frames"))
+                        f"{len(stamps[key])} frames"))
     return rows
+
+
+def periodic_key(codec: Codec, frame_id: int, data: bytes) -> str | None:
+    """The stream a periodic frame of the lower computer belongs to (``WheelFeedback/left``,
+    ``LedState/02``, ``Heartbeat``), or None for any other frame."""
+    if frame_id not in codec:
+        return None
+    m = codec.message(frame_id)
+    if not m.is_periodic or "Lower" not in m.senders:
+        return None
+    if m.name == "WheelFeedback":
+        return m.name + "/" + ("left" if data[7] & 1 == 0 else "right")
+    if m.name == "LedState":
+        return m.name + f"/{data[0]:02x}"
+    return m.name
+
+
+def deviations(codec: Codec, stamps: dict[str, list[float]]
+               ) -> list[tuple[str, float, list[float]]]:
+    """(stream, cycle [s], |period - cycle| [ms] of each pair of consecutive frames) for
+    each stream of :func:`periodic_key` (one LedState submodule stands for the 16)."""
+    out = []
+    for key in sorted(stamps):
+        name = key.split("/")[0]
+        if name == "LedState" and not key.endswith("/02"):
+            continue
+        cycle = codec.message(name).cycle_time or 0.0
+        dev = [abs((b - a) - cycle) * 1e3 for a, b in itertools.pairwise(stamps[key])]
+        if dev:
+            out.append((key, cycle, dev))
+    return out
 
 
 def run(quick: bool = False) -> list[Row]:

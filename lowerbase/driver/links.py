@@ -6,6 +6,10 @@ interface taken down) closes the bus and reports the link down (``on_down``: the
 shows ``lost`` at once); the bus is then reopened every ``reopen_period`` until it opens, and
 frames flow again: no respawn. :class:`ReplayLink` (lowerbase.driver.replay) feeds a
 recorded log instead.
+
+A BusLink listens only to what the lower computer sends (:func:`listen_to_lower`) unless the
+configuration names its own ``can_filters``: on udp_multicast (and SocketCAN) other devices'
+frames on a shared bus are dropped in the kernel and never wake the driver.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ from typing import Any
 from lowerbase.clock import Clock, RealClock
 from lowerbase.driver.replay import REPLAY_SUFFIXES, ReplayLink
 from lowerbase.errors import LowerbaseError
+from lowerbase.protocol.codec import default_codec
 from lowerbase.transport import describe, is_catalog_frame, open_bus
 
 log = logging.getLogger(__name__)
@@ -32,20 +37,48 @@ FrameSink = Callable[[int, bytes], None]
 DownSink = Callable[[str], None]
 Opener = Callable[[dict[str, Any]], Any]
 
+#: compares the whole ID and ignores the extended flag (a foreign extended frame on a catalog
+#: ID still arrives, and is dropped as not a catalog frame)
+FULL_ID_MASK = 0x1FFFFFFF
+
+
+def filters_in_kernel(bus: object) -> bool:
+    """Whether ``bus`` drops filtered frames before they reach the process (udp_multicast's
+    socket filter, SocketCAN's CAN_RAW_FILTER). Other buses filter in python-can, where
+    ``recv(0)`` returns None at a filtered frame with more waiting: they are left unfiltered."""
+    return type(bus).__name__ in ("GroupOnlyMulticastBus", "SocketcanBus")
+
+
+def upper_listens_to() -> list[int]:
+    """The IDs the driver reads: every frame the lower computer sends."""
+    return sorted(m.frame_id for m in default_codec() if "Lower" in m.senders)
+
+
+def listen_to_lower(bus: Any) -> bool:
+    """Set ``bus``'s filters to :func:`upper_listens_to` unless it has filters already or
+    cannot filter in the kernel (:func:`filters_in_kernel`); True when set."""
+    set_filters = getattr(bus, "set_filters", None)
+    if set_filters is None or getattr(bus, "filters", None) or not filters_in_kernel(bus):
+        return False
+    set_filters([{"can_id": i, "can_mask": FULL_ID_MASK} for i in upper_listens_to()])
+    return True
+
 
 class BusLink:
     """A python-can bus that is closed on any error and reopened every ``reopen_period``."""
 
     def __init__(
         self, config: dict[str, Any], reopen_period: float = 1.0, *,
-        opener: Opener | None = None, clock: Clock | None = None,
+        opener: Opener | None = None, clock: Clock | None = None, catalog_filter: bool = True,
     ) -> None:
         self.config = config
+        #: listen to the lower computer's IDs only (unless ``config`` has ``can_filters``)
+        self.catalog_filter = catalog_filter and not config.get("can_filters")
         self.reopen_period = reopen_period
         self.description = describe(config)
         self._open_bus: Opener = opener or open_bus
         self.clock = clock or RealClock()
-        self._bus: Any = self._open_bus(config)  # the first failure is the user's: raise it
+        self._bus: Any = self._open(config)  # the first failure is the user's: raise it
         self._failed: str | None = None  # a transmit error: the reader closes the bus
         self._next_open = -math.inf
         self._last_error_log = -math.inf
@@ -53,6 +86,12 @@ class BusLink:
         self.rx_errors = 0
         self.reopens = 0
         self.frames = 0
+
+    def _open(self, config: dict[str, Any]) -> Any:
+        bus = self._open_bus(config)
+        if self.catalog_filter:
+            listen_to_lower(bus)
+        return bus
 
     @property
     def is_open(self) -> bool:
@@ -100,7 +139,7 @@ class BusLink:
             if now < self._next_open:
                 return self._next_open - now
             try:
-                self._bus = self._open_bus(self.config)
+                self._bus = self._open(self.config)
             except (LowerbaseError, Exception) as exc:
                 self._next_open = now + self.reopen_period
                 self._log_error(f"cannot reopen: {exc}")

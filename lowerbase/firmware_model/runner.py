@@ -11,6 +11,12 @@ all of them, then one step each.
 Given a :class:`~lowerbase.transport.peers.PeerMonitor` (fed with what the MCU sends through
 ``bus_sender(..., on_sent=...)``), the runner warns once, and counts ``two_lower_computers`` in
 the MCU's stats, when another lower computer's Heartbeats share the bus.
+
+Both runners listen only to what a lower computer reads (:func:`listen_to_upper`: the upper
+side's IDs, and Heartbeats for the PeerMonitor) unless the bus has filters of its own: on
+udp_multicast (and SocketCAN) other devices' frames are then dropped in the kernel and never
+wake the emulator, however full the bus is. A frame on a listened ID that is not a classic
+frame (extended, remote) still arrives and is counted as ``rx_not_classic``.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from lowerbase.clock import Clock, SimClock
 from lowerbase.errors import ConfigError
 from lowerbase.firmware_model.mcu import Mcu
 from lowerbase.firmware_model.profile import Profile
+from lowerbase.protocol.codec import Codec
 from lowerbase.transport import is_catalog_frame
 from lowerbase.transport.peers import PeerMonitor
 
@@ -62,6 +69,34 @@ def bus_sender(
     return send
 
 
+#: a filter mask that compares the whole ID (11 or 29 bits) and ignores the extended flag, so
+#: a foreign extended frame on a catalog ID still arrives to be counted as not classic
+FULL_ID_MASK = 0x1FFFFFFF
+
+
+def filters_in_kernel(bus: object) -> bool:
+    """Whether ``bus`` drops filtered frames before they reach the process (udp_multicast's
+    socket filter, SocketCAN's CAN_RAW_FILTER). Other buses filter in python-can, where
+    ``recv(0)`` returns None at a filtered frame with more waiting: they are left unfiltered."""
+    return type(bus).__name__ in ("GroupOnlyMulticastBus", "SocketcanBus")
+
+
+def lower_listens_to(codec: Codec) -> list[int]:
+    """The IDs a lower computer reads: every frame the upper side sends, and Heartbeats (a
+    second lower computer on the bus is noticed by them)."""
+    return sorted({m.frame_id for m in codec if "Upper" in m.senders}
+                  | {codec.message("Heartbeat").frame_id})
+
+
+def listen_to_upper(bus: can.BusABC, codec: Codec) -> bool:
+    """Set ``bus``'s filters to :func:`lower_listens_to` unless it has filters already (the
+    user's) or cannot filter in the kernel (:func:`filters_in_kernel`); True when set."""
+    if getattr(bus, "filters", None) or not filters_in_kernel(bus):
+        return False
+    bus.set_filters([{"can_id": i, "can_mask": FULL_ID_MASK} for i in lower_listens_to(codec)])
+    return True
+
+
 def _receive(mcu: Mcu, msg: can.Message, peers: PeerMonitor | None) -> None:
     if is_catalog_frame(msg):
         data = bytes(msg.data)
@@ -83,10 +118,14 @@ def run(
     stop: threading.Event | None = None,
     on_step: Callable[[Mcu], None] | None = None,
     peers: PeerMonitor | None = None,
+    catalog_filter: bool = True,
 ) -> None:
     """Run until ``duration`` [s] of (simulated or real) time has passed or ``stop`` is set.
 
-    ``peers``: warn once when a second lower computer is on the bus (see the module)."""
+    ``peers``: warn once when a second lower computer is on the bus (see the module).
+    ``catalog_filter``: listen to the upper side's IDs only (:func:`listen_to_upper`)."""
+    if catalog_filter:
+        listen_to_upper(bus, mcu.codec)
     stop = stop or threading.Event()
     start = clock.now()
     deadline = start
@@ -158,15 +197,20 @@ def run_fleet(
     duration: float | None = None,
     stop: threading.Event | None = None,
     on_step: Callable[[], None] | None = None,
+    catalog_filter: bool = True,
 ) -> None:
     """Run every chassis until ``duration`` [s] has passed or ``stop`` is set.
 
     Each control period: the frames waiting on any chassis' bus go to that chassis (one
     ``epoll`` wait tells which buses have any; buses without a file descriptor are polled),
     then every MCU steps once and ``on_step()`` is called. In real time the wait lasts until
-    the period's deadline, as :func:`run` does for one chassis."""
+    the period's deadline, as :func:`run` does for one chassis. ``catalog_filter``: as
+    :func:`run`'s, on every chassis' bus."""
     if not fleet:
         return
+    if catalog_filter:
+        for chassis in fleet:
+            listen_to_upper(chassis.bus, chassis.mcu.codec)
     periods = {c.mcu.dt for c in fleet}
     if len(periods) != 1:
         raise ConfigError("a fleet runs on one control period; the profiles' rates.control_hz "

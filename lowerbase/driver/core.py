@@ -94,6 +94,11 @@ class DriverConfig:
 #: [s] how far a Heartbeat's Uptime may stray from the receiver's clock (plus 2 % of the gap)
 UPTIME_SLACK = 0.5
 _ESTOP_OR_FAULT = (3, 4, "EmergencyStop", "Fault")  # SystemStatus RobotState
+_ESTOP_BITS = int(StatusBit.ESTOP_BUTTON | StatusBit.ESTOP_COMMAND)
+#: commands that put the chassis on hold on purpose: no automatic enable until EnableCanControl
+HOLD_COMMANDS = ("EStopSet", "Standby")
+#: [s] after an EStopRelease is sent the chassis counts as released (its status follows)
+RELEASE_GRACE = 0.3
 
 Send = Callable[[int, bytes], None]
 Listener = Callable[[str, "DriverCore"], None]
@@ -136,6 +141,10 @@ class DriverCore:
         self._configured_ok = False
         self._control_can: bool | None = None  # ControlMode Can in the latest SystemStatus
         self._enable_wanted = False  # first contact or a confirmed reboot, not enabled yet
+        #: the operator put the chassis on hold (EStopSet, Standby) and has not enabled it
+        #: since: a reboot does not end the hold (no automatic enable after it)
+        self.operator_hold = False
+        self._estop_release_sent = -math.inf
         self._last_enable = -math.inf
         #: notices a second lower computer on the bus (warned once, stats two_lower_computers)
         self.peers = PeerMonitor(self.codec)
@@ -204,6 +213,12 @@ class DriverCore:
 
     def control(self, command: str) -> None:
         """Send a ControlCommand by name (EnableCanControl, EStopSet, FaultClear, ...)."""
+        if command in HOLD_COMMANDS:
+            self.operator_hold = True
+        elif command == "EnableCanControl":
+            self.operator_hold = False
+        elif command == "EStopRelease":
+            self._estop_release_sent = self.clock.now()
         self._emit("ControlCommand", {"Command": command})
 
     def write_parameter(self, name: str, value: float) -> None:
@@ -299,8 +314,9 @@ class DriverCore:
             if behind:
                 self.reboots += 1
                 log.warning("the lower computer rebooted (boot #%d, up %.1f s): reading "
-                            "parameters again", boot, uptime)
-                self._enable_wanted = self.config.auto_enable
+                            "parameters again%s", boot, uptime, "; kept in standby (the "
+                            "operator's hold: call ~enable)" if self.operator_hold else "")
+                self._enable_wanted = self.config.auto_enable and not self.operator_hold
                 self._configure("reboot")
             else:  # ahead of the old timeline: not a reboot; follow the new one
                 self.stats["heartbeat_timeline_jump"] += 1
@@ -569,6 +585,13 @@ class DriverCore:
     def commanding(self) -> bool:
         """True while a twist is being sent (fresh, or its final stop not sent yet)."""
         return self._twist is not None
+
+    @property
+    def e_stopped(self) -> bool:
+        """The chassis shows an e-stop (button or command) and no EStopRelease was just sent."""
+        shown = self.system_status.get("RobotState") in (3, "EmergencyStop") or bool(
+            self.status_code & _ESTOP_BITS)
+        return shown and self.clock.now() - self._estop_release_sent > RELEASE_GRACE
 
     @property
     def link_up(self) -> bool:

@@ -11,12 +11,16 @@ service                type               ControlCommand
                                           then waits in standby: call ``~enable``)
 ``~fault_clear``       std_srvs/Trigger   FaultClear (latched faults whose cause is gone)
 ``~odometer_reset``    std_srvs/Trigger   OdometerReset (the lower computer's total distance)
-``~reboot``            std_srvs/Trigger   Reboot (the driver reconfigures and enables again)
+``~reboot``            std_srvs/Trigger   Reboot (the driver reconfigures; enables again
+                                          unless the operator put it on hold, below)
 =====================  =================  =====================================================
 
 ``success`` is true when the command went out, false (with the reason in ``message``) while
-the link to the lower computer is not up; the effect shows on ``status_code`` and
-``~link_state``. This module holds the table and the ROS-free decision; the node advertises.
+the link to the lower computer is not up, and for ``~enable`` while the chassis is e-stopped
+("e-stopped: call ~estop false first"); the effect shows on ``status_code`` and
+``~link_state``. An operator hold (``~estop true`` or ``~standby``) lasts until ``~enable``:
+a reboot, even one asked for with ``~reboot``, does not end it (no automatic enable).
+This module holds the table and the ROS-free decision; the node advertises.
 """
 
 from __future__ import annotations
@@ -44,6 +48,9 @@ def send_control(core: DriverCore, command: str) -> tuple[bool, str]:
         core.stats["service_refused"] += 1
         return False, (f"{command} not sent: the lower computer link is {core.state.value} "
                        "(see ~link_state)")
+    if command == "EnableCanControl" and core.e_stopped:
+        core.stats["service_refused"] += 1
+        return False, "e-stopped: call ~estop false first"
     core.control(command)
     core.stats[f"service_{command}"] += 1
     return True, f"{command} sent"

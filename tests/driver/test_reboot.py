@@ -88,14 +88,26 @@ def test_forged_heartbeats_never_enable_a_chassis_put_in_standby() -> None:
     assert loop.driver.stats["heartbeat_inconsistent"] >= 1
 
 
-def test_a_real_reboot_of_a_chassis_in_standby_is_re_enabled() -> None:
+def test_a_real_reboot_of_a_chassis_put_in_standby_on_purpose_keeps_it_in_standby() -> None:
+    """The operator's hold (Standby, EStopSet) survives a reboot; EnableCanControl ends it."""
     loop = SimLoop(bms=None)
     assert loop.run_until(ready, timeout=3.0)
     loop.driver.control("Standby")
     loop.run(1.0)
     loop.driver.control("Reboot")
+    assert loop.run_until(lambda lp: lp.driver.reboots == 1, timeout=3.0)
+    loop.run(2.0)
+    assert loop.driver.state == LinkState.STANDBY and loop.mcu.state.name == "STANDBY"
+    loop.driver.control("EnableCanControl")
+    assert loop.run_until(ready, timeout=1.0)
+
+
+def test_a_real_reboot_of_an_active_chassis_is_re_enabled() -> None:
+    loop = SimLoop(bms=None)
     assert loop.run_until(ready, timeout=3.0)
-    assert loop.driver.reboots == 1
+    loop.driver.control("Reboot")
+    assert loop.run_until(lambda lp: lp.driver.reboots == 1, timeout=3.0)
+    assert loop.run_until(ready, timeout=3.0)
 
 
 def test_a_lost_enable_is_retried_until_the_chassis_is_in_can_control() -> None:

@@ -54,6 +54,9 @@ def add_bus_arguments(parser: argparse.ArgumentParser, *, serial: bool = True) -
     from can.cli import add_bus_arguments as can_add_bus_arguments
 
     can_add_bus_arguments(parser)
+    from lowerbase.transport.options import use_strict_bus_kwargs
+
+    use_strict_bus_kwargs(parser)  # a key given twice is refused, not silently replaced
     if serial:
         parser.add_argument(
             "--serial",

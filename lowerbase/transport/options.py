@@ -10,6 +10,7 @@ parameter's declared type (int, float, bool, str) or refused with a one-line :cl
 
 from __future__ import annotations
 
+import argparse
 import difflib
 import inspect
 import logging
@@ -106,6 +107,55 @@ def _convert(interface: str, key: str, value: Any, want: type | None) -> Any:
     return value if isinstance(value, str) else str(value)
 
 
+_FILTER = re.compile(r"^([0-9A-Fa-f]{1,8})([:~])([0-9A-Fa-f]{1,8})$")
+
+
+def _can_filters(value: Any) -> list[dict[str, Any]]:
+    """``can_filters`` from the command line: hex ID:MASK (or ID~MASK: all but those) pairs
+    separated by commas, as python-can's ``--filter`` takes them."""
+    if isinstance(value, list):
+        return value
+    filters = []
+    for part in str(value).split(","):
+        m = _FILTER.match(part.strip())
+        if m is None:
+            raise ConfigError(f"--bus-kwargs can_filters={value}: expected hex ID:MASK pairs "
+                              "separated by commas, e.g. can_filters=100:7FF,200:7F0")
+        can_id, mask = int(m[1], 16), int(m[3], 16)
+        if m[2] == "~":
+            can_id |= 0x20000000  # CAN_INV_FILTER, as python-can's --filter
+        filters.append({"can_id": can_id, "can_mask": mask})
+    return filters
+
+
+class BusKwargsAction(argparse.Action):
+    """python-can's ``--bus-kwargs key=value ...``, but a key given twice (also across
+    repeated flags) is refused instead of the last one silently winning."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        from can.util import cast_from_string
+
+        kwargs: dict[str, Any] = dict(getattr(namespace, self.dest, None) or {})
+        for arg in values if isinstance(values, list) else [values]:
+            m = re.match(r"^(?P<name>[_a-zA-Z][-_a-zA-Z0-9]*)=(?P<value>\S*?)$", str(arg))
+            if m is None:
+                raise argparse.ArgumentError(self, f"{arg!r} is not KEY=VALUE")
+            key = m["name"].replace("-", "_")
+            if key in kwargs:
+                raise argparse.ArgumentError(self, f"{key} given twice")
+            kwargs[key] = cast_from_string(m["value"])
+        setattr(namespace, self.dest, kwargs)
+
+
+def use_strict_bus_kwargs(parser: argparse.ArgumentParser) -> None:
+    """Make ``parser``'s ``--bus-kwargs`` a :class:`BusKwargsAction` (after python-can's
+    ``add_bus_arguments``)."""
+    for action in parser._actions:
+        if action.dest == "bus_kwargs":
+            action.__class__ = BusKwargsAction
+
+
 def check_bus_kwargs(interface: str, bus_kwargs: dict[str, Any]) -> dict[str, Any]:
     """``bus_kwargs`` with values of the declared types; ConfigError for an unknown key (with a
     did-you-mean) or a value of the wrong type."""
@@ -122,8 +172,14 @@ def check_bus_kwargs(interface: str, bus_kwargs: dict[str, Any]) -> dict[str, An
             options = ", ".join(sorted(known - _FACTORY_KEYS))
             raise ConfigError(f"--bus-kwargs: {interface} has no option {key!r}; {hint}"
                               f"its options: {options}")
+        if key == "can_filters":
+            checked[key] = _can_filters(value)
+            continue
         p = params.get(key)
         checked[key] = _convert(interface, key, value, _declared_type(p) if p else None)
+        if key == "port" and isinstance(checked[key], int) and not 1 <= checked[key] <= 65535:
+            raise ConfigError(f"--bus-kwargs port={value}: {interface}'s port must be "
+                              "1-65535")
     return checked
 
 

@@ -45,7 +45,39 @@ def test_python_can_range_checks_are_one_line(
         capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     line = _one_error_line(capsys, ["record", str(tmp_path / "r.log"), "--duration", "0.1",
                                     "--bus-kwargs", "port=70000"])
-    assert "0-65535" in line
+    assert "1-65535" in line
+
+
+@pytest.mark.parametrize("port", ["0", "70000", "-1"])
+def test_a_port_out_of_range_says_the_range_it_wants(
+        port: str, capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    line = _one_error_line(capsys, ["record", str(tmp_path / "r.log"), "--duration", "0.1",
+                                    "--bus-kwargs", f"port={port}"])
+    assert f"port={port}" in line and "must be 1-65535" in line and "0-65535" not in line
+
+
+@pytest.mark.parametrize("argv", [["port=43114", "port=43115"],
+                                  ["port=43114", "--bus-kwargs", "port=43115"]])
+def test_a_bus_kwargs_key_given_twice_is_refused(
+        argv: list[str], capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    line = _one_error_line(capsys, ["record", str(tmp_path / "r.log"), "--duration", "0.1",
+                                    "--bus-kwargs", *argv])
+    assert "port given twice" in line
+
+
+def test_can_filters_says_the_expected_format() -> None:
+    with pytest.raises(ConfigError, match=r"expected hex ID:MASK pairs.*can_filters=100:7FF"):
+        check_bus_kwargs("udp_multicast", {"can_filters": "abc"})
+    assert check_bus_kwargs("udp_multicast", {"can_filters": "100:7FF,200~7F0"}) == {
+        "can_filters": [{"can_id": 0x100, "can_mask": 0x7FF},
+                        {"can_id": 0x200 | 0x20000000, "can_mask": 0x7F0}]}
+
+
+def test_can_filters_from_the_command_line_are_one_line(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    line = _one_error_line(capsys, ["record", str(tmp_path / "r.log"), "--duration", "0.1",
+                                    "--bus-kwargs", "can_filters=abc"])
+    assert "expected hex ID:MASK" in line and "string indices" not in line
 
 
 def test_known_keys_come_from_the_constructor_and_the_kwargs_it_reads() -> None:

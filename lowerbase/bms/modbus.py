@@ -165,6 +165,9 @@ class SlaveCore:
         if unit != self.device.unit:
             self.dropped["other unit id"] += 1  # normal on a shared line: not logged
             return None
+        if pdu[0] == 0 or pdu[0] & 0x80:  # 0 is invalid, 0x80-0xFF mark exception responses:
+            self.drop("invalid function code", f"0x{pdu[0]:02X}")  # an answer would look
+            return None  # like an exception frame itself
         return handle_pdu(self.device, pdu)
 
 

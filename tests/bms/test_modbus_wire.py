@@ -167,6 +167,16 @@ def test_unanswered_frames_keep_the_stream_in_step(server: BmsServer, sock: sock
     assert server.dropped["frame with a protocol id other than 0"] == 1
 
 
+@pytest.mark.parametrize("fc", ["00", "80", "83", "ff"])
+def test_invalid_function_codes_are_dropped_not_answered(
+        server: BmsServer, sock: socket.socket, fc: str) -> None:
+    """0 is no function code, 0x80-0xFF mark exception responses (Modbus Application Protocol
+    6.0 / 7): an answer `80 01` or `FF 01` would look like an exception frame itself."""
+    sock.sendall(h(f"00 01 00 00 00 06 01 {fc} 01 00 00 02"))
+    exchange(sock, f"00 02 00 00 00 06 {READ_OV}", f"00 02 00 00 00 07 {OV_ANSWER}")
+    assert server.dropped["invalid function code"] == 1
+
+
 def test_broadcast_writes_without_answering(server: BmsServer, sock: socket.socket) -> None:
     sock.sendall(h("00 01 00 00 00 06 00 06 01 00 0e 74"))
     exchange(sock, f"00 02 00 00 00 06 {READ_OV}", "00 02 00 00 00 07 01 03 04 0e 74 0d ac")

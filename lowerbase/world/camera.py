@@ -178,7 +178,8 @@ class DepthCamera:
         step = max(min(scene.grid.resolution / (2.0 * reach), 0.01), 1e-4)
         lo, hi = float(rel[moving].min()), float(rel[moving].max())
         bins = np.arange(math.ceil((hi - lo) / step) + 1)
-        hits = cast_grid(scene.mask, scene.grid, cam[0], cam[1], yaw + lo + bins * step, reach)
+        hits = cast_grid(scene.mask, scene.grid, cam[0], cam[1], yaw + lo + bins * step, reach,
+                         scene.grid_field)
         # Per bin: the face hit (x = const or y = const) as an offset from the camera.
         is_x = hits.face == FACE_X
         offset = np.where(is_x, hits.face_coord - cam[0], hits.face_coord - cam[1])

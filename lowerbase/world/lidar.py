@@ -127,7 +127,8 @@ class Lidar:
         c, s = math.cos(bt), math.sin(bt)
         lx, ly = bx + c * cfg.x - s * cfg.y, by + s * cfg.x + c * cfg.y
         world = self._angles + (bt + cfg.yaw)
-        dist = cast_grid(scene.mask, scene.grid, lx, ly, world, cfg.range_max).distance
+        dist = cast_grid(scene.mask, scene.grid, lx, ly, world, cfg.range_max,
+                         scene.grid_field).distance
         solids = solids_taller_than(scene.solids, cfg.z)
         if solids:
             dist = np.minimum(dist, cast_solids(solids, lx, ly, world))

@@ -1,12 +1,15 @@
 """Exact 2D ray casting, vectorised over rays: the shared core of the lidar and the depth camera.
 
 Grid: a ray enters a new cell exactly where it crosses a vertical (x = const) or horizontal
-(y = const) cell boundary. For every ray the crossings are enumerated in closed form, the cell
-entered at each is looked up in the occupancy mask (``np.take``), and the first occupied one gives
-the hit: the distance is exact (floating point) to the boundary of the first occupied cell the ray
-passes through, corner cuts included. The crossings are processed in growing distance chunks and
-rays that have hit (or left the grid) drop out, so the cost follows the distances actually
-travelled, not the maximum range.
+(y = const) cell boundary. The crossings are enumerated in closed form, the cell entered at each
+is looked up in the occupancy mask (``np.take``), and the first occupied one gives the hit: the
+distance is exact (floating point) to the boundary of the first occupied cell the ray passes
+through, corner cuts included. Only the stretches near walls are enumerated: a distance field
+(scipy's Euclidean distance transform of the mask, made a lower bound on the clearance of every
+point of a cell) lets each ray skip, sphere-tracing style, any stretch that cannot meet an
+occupied cell; the crossings are enumerated in short windows where the clearance is small, and
+rays that have hit (or left the grid) drop out. Skipping never changes a result: the crossings
+and their distances are computed by the same closed-form expressions from the ray's origin.
 
 Solids: obstacles the map does not know, as prisms from the floor to a height: polygons (any
 simple polygon, as a closed ring of vertices) and circles (people). Ray/segment and ray/circle
@@ -28,7 +31,10 @@ FACE_NONE = 0   # no hit, or the ray starts inside an occupied cell
 FACE_X = 1      # hit a cell boundary x = const (the face normal is along x)
 FACE_Y = 2      # hit a cell boundary y = const
 
-_CHUNKS_CELLS = (16.0, 64.0, 256.0, 1024.0)  # chunk ends [cells]; the last one grows by x4
+_SKIP_MIN = 3.0      # [cells] a ray skips ahead when its clearance is at least this ...
+_WINDOW = 6.0        # [cells] ... else enumerates the crossings of the next window this long,
+_WINDOW_MAX = 96.0   # doubling on each miss in a row (a ray grazing a wall) up to this
+_MARGIN = 0.01       # [cells] taken off the clearance: floating point and float32 rounding
 
 
 @dataclass(frozen=True)
@@ -40,13 +46,53 @@ class GridHits:
     face_coord: np.ndarray  # [m] the boundary's x (FACE_X) or y (FACE_Y) in the map frame
 
 
+@dataclass(frozen=True, eq=False)
+class GridField:
+    """An occupancy mask prepared for :func:`cast_grid`, built once per map.
+
+    ``occupied`` is the mask padded with one free cell on every side, flattened; ``clearance``
+    (same layout, float32, cells) is a lower bound on the distance from any point of the cell
+    to any occupied cell: the distance transform between cell centres less sqrt(2) (half a
+    diagonal at each end) and a margin; 0 on the padding ring, where points off the grid are
+    clamped.
+    """
+
+    shape: tuple[int, int]
+    occupied: np.ndarray
+    clearance: np.ndarray
+
+    @classmethod
+    def from_mask(cls, mask: np.ndarray) -> GridField:
+        from scipy.ndimage import distance_transform_edt
+
+        mask = np.asarray(mask, dtype=bool)
+        if mask.ndim != 2:
+            raise WorldError(f"an occupancy mask must be 2D, got shape {mask.shape}")
+        h, w = mask.shape
+        padded = np.zeros((h + 2, w + 2), dtype=bool)
+        padded[1:-1, 1:-1] = mask
+        if padded.any():
+            edt = distance_transform_edt(~padded)
+            clear = np.maximum(edt - (math.sqrt(2.0) + _MARGIN), 0.0).astype(np.float32)
+        else:  # nothing to hit: any step up to the grid's far corner is safe
+            clear = np.full(padded.shape, float(h + w + 4), dtype=np.float32)
+        clear[0, :] = clear[-1, :] = clear[:, 0] = clear[:, -1] = 0.0
+        return cls((h, w), padded.ravel(), clear.ravel())
+
+
 def cast_grid(mask: np.ndarray, grid: OccupancyGrid, x0: np.ndarray | float,
-              y0: np.ndarray | float, angles: np.ndarray, max_range: float | np.ndarray
-              ) -> GridHits:
+              y0: np.ndarray | float, angles: np.ndarray, max_range: float | np.ndarray,
+              grid_field: GridField | None = None) -> GridHits:
     """Cast rays from (x0, y0) [m, map frame] at ``angles`` [rad] against ``mask`` (bool, the
-    grid's shape, True = occupied). Cells outside the grid are free."""
+    grid's shape, True = occupied). Cells outside the grid are free. ``grid_field`` is the
+    mask's :class:`GridField` if the caller keeps one (:attr:`Scene.grid_field`), else it is
+    built here (a distance transform of the whole mask)."""
     if grid.origin[2] != 0.0:
         raise WorldError("sensors need a map whose origin yaw is 0; rotate the map image instead")
+    fld = GridField.from_mask(mask) if grid_field is None else grid_field
+    if fld.shape != np.shape(mask):
+        raise WorldError(f"the grid field's shape {fld.shape} is not the mask's "
+                         f"{np.shape(mask)}")
     angles = np.asarray(angles, dtype=float)
     shape = angles.shape
     ang = angles.ravel()
@@ -54,44 +100,74 @@ def cast_grid(mask: np.ndarray, grid: OccupancyGrid, x0: np.ndarray | float,
     res = grid.resolution
     gx = np.broadcast_to((np.asarray(x0, dtype=float) - grid.origin[0]) / res, shape).ravel()
     gy = np.broadcast_to((np.asarray(y0, dtype=float) - grid.origin[1]) / res, shape).ravel()
-    u_max = np.broadcast_to(np.asarray(max_range, dtype=float) / res, shape).ravel().copy()
+    u_max = np.broadcast_to(np.asarray(max_range, dtype=float) / res, shape).ravel()
     c, s = np.cos(ang), np.sin(ang)
-    h, w = mask.shape
-    flat = np.ascontiguousarray(mask, dtype=bool).ravel()
+    h, w = fld.shape
+    stride = w + 2
 
     dist_u = np.full(n, np.inf)
     face = np.zeros(n, dtype=np.int8)
     coord = np.zeros(n)
 
-    col0, row0 = np.floor(gx).astype(np.int64), np.floor(gy).astype(np.int64)
-    inside0 = (col0 >= 0) & (col0 < w) & (row0 >= 0) & (row0 < h)
-    start_hit = np.zeros(n, dtype=bool)
-    start_hit[inside0] = flat[row0[inside0] * w + col0[inside0]]
+    col0 = np.clip(np.floor(gx), -1, w).astype(np.intp) + 1
+    row0 = np.clip(np.floor(gy), -1, h).astype(np.intp) + 1
+    start_hit = fld.occupied.take(row0 * stride + col0)
     dist_u[start_hit] = 0.0
     # Leave the grid's box: nothing can be hit beyond it (slab method on [0, w] x [0, h]).
     u_max = np.minimum(u_max, _exit_distance(gx, gy, c, s, w, h))
 
+    # Per active ray: where it is [cells], and its next window's length.
     active = np.flatnonzero(~start_hit & (u_max > 0))
-    lo = 0.0
-    hi_iter = iter(_CHUNKS_CELLS)
-    hi = next(hi_iter)
+    pos = np.zeros(active.size)
+    window = np.full(active.size, _WINDOW)
     while active.size:
-        ux, Xx = _first_hits(flat, w, h, gx[active], gy[active], c[active], s[active],
-                                 lo, np.minimum(hi, u_max[active]))
-        uy, Yy = _first_hits(flat, h, w, gy[active], gx[active], s[active], c[active],
-                                 lo, np.minimum(hi, u_max[active]), transpose=True)
+        ax, ay, ac, as_, am = gx[active], gy[active], c[active], s[active], u_max[active]
+        pos = _skip(fld, ax, ay, ac, as_, pos, am)
+        go = pos < am
+        if not go.all():
+            active, pos, window = active[go], pos[go], window[go]
+            ax, ay, ac, as_, am = ax[go], ay[go], ac[go], as_[go], am[go]
+        if not active.size:
+            break
+        hi = np.minimum(pos + window, am)
+        ux, bx = _window_hits(fld.occupied, w, h, ax, ay, ac, as_, pos, hi)
+        uy, by = _window_hits(fld.occupied, h, w, ay, ax, as_, ac, pos, hi, transpose=True)
         hit_x = ux <= uy
         u = np.where(hit_x, ux, uy)
         got = np.isfinite(u)
         idx = active[got]
         dist_u[idx] = u[got]
         face[idx] = np.where(hit_x[got], FACE_X, FACE_Y)
-        coord[idx] = np.where(hit_x[got], grid.origin[0] + Xx[got] * res,
-                              grid.origin[1] + Yy[got] * res)
-        active = active[~got & (u_max[active] > hi)]
-        lo = hi
-        hi = next(hi_iter, hi * 4.0)
+        coord[idx] = np.where(hit_x[got], grid.origin[0] + bx[got] * res,
+                              grid.origin[1] + by[got] * res)
+        go = ~got & (hi < am)
+        active, pos = active[go], hi[go]
+        window = np.minimum(window[go] * 2.0, _WINDOW_MAX)
     return GridHits((dist_u * res).reshape(shape), face.reshape(shape), coord.reshape(shape))
+
+
+def _skip(field: GridField, gx: np.ndarray, gy: np.ndarray, c: np.ndarray, s: np.ndarray,
+          pos: np.ndarray, u_max: np.ndarray) -> np.ndarray:
+    """Advance each ray by its clearance while that is at least ``_SKIP_MIN`` (no crossing into
+    an occupied cell is passed: see :class:`GridField`); returns the new positions [cells]."""
+    h, w = field.shape
+    stride = w + 2
+    pos = pos.copy()
+    todo = np.arange(pos.size)
+    x, y, cc, ss, p, um = gx, gy, c, s, pos, u_max
+    while todo.size:
+        col = np.clip(np.floor(x + p * cc), -1, w).astype(np.intp)
+        row = np.clip(np.floor(y + p * ss), -1, h).astype(np.intp)
+        r = field.clearance.take((row + 1) * stride + (col + 1))
+        p = p + r
+        moved = (r >= _SKIP_MIN) & (p < um)
+        if not moved.all():
+            pos[todo] = np.where(r >= _SKIP_MIN, p, p - r)
+            todo = todo[moved]
+            if not todo.size:
+                break
+            x, y, cc, ss, p, um = x[moved], y[moved], cc[moved], ss[moved], p[moved], um[moved]
+    return pos
 
 
 def _exit_distance(gx: np.ndarray, gy: np.ndarray, c: np.ndarray, s: np.ndarray, w: int,
@@ -102,16 +178,17 @@ def _exit_distance(gx: np.ndarray, gy: np.ndarray, c: np.ndarray, s: np.ndarray,
     return np.maximum(np.minimum(tx, ty), 0.0)
 
 
-def _first_hits(flat: np.ndarray, n_along: int, n_across: int, ga: np.ndarray, gb: np.ndarray,
-                ca: np.ndarray, cb: np.ndarray, u_lo: float, u_hi: np.ndarray,
-                transpose: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def _window_hits(occupied: np.ndarray, n_along: int, n_across: int, ga: np.ndarray,
+                 gb: np.ndarray, ca: np.ndarray, cb: np.ndarray, u_lo: np.ndarray,
+                 u_hi: np.ndarray, transpose: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """First occupied cell entered through a boundary a = const with u in [u_lo, u_hi).
 
-    ``a`` is the axis whose boundaries are crossed (x, or y with ``transpose``), ``b`` the other.
-    Returns the ray distance [cells] (inf: none) and the boundary's a-coordinate [cells].
+    ``a`` is the axis whose boundaries are crossed (x, or y with ``transpose``), ``b`` the other;
+    ``occupied`` is the padded flat mask of :class:`GridField`. Returns the ray distance [cells]
+    (inf: none) and the boundary's a-coordinate [cells]. The k-th boundary's distance is
+    ``(d0 + k) / |ca|`` whatever the window: windows only choose which k are looked at.
     """
     m = ga.size
-    inf = np.full(m, np.inf)
     abs_ca = np.abs(ca)
     moving = abs_ca > 1e-12
     base = np.where(ca > 0, np.floor(ga) + 1.0, np.floor(ga))  # first boundary crossed
@@ -120,25 +197,29 @@ def _first_hits(flat: np.ndarray, n_along: int, n_across: int, ga: np.ndarray, g
         k_lo = np.where(moving, np.ceil(u_lo * abs_ca - d0), 0.0)
         k_hi = np.where(moving, np.ceil(u_hi * abs_ca - d0), 0.0)
     k_lo = np.maximum(k_lo, 0.0)
-    count = np.maximum(k_hi - k_lo, 0.0).astype(np.int64)
-    width = int(count.max(initial=0))
+    count = np.maximum(k_hi - k_lo, 0.0)
+    width = int(count.max(initial=0.0))
     if width == 0:
-        return inf, np.zeros(m)
-    k = k_lo[:, None] + np.arange(width)[None, :]
-    valid = np.arange(width)[None, :] < count[:, None]
+        return np.full(m, np.inf), np.zeros(m)
+    steps = np.arange(width, dtype=float)
+    k = k_lo[:, None] + steps
     step = np.where(ca > 0, 1.0, -1.0)[:, None]
     boundary = base[:, None] + step * k                          # a-coordinate of the boundary
     u = (d0[:, None] + k) / np.where(moving, abs_ca, 1.0)[:, None]
-    cell_a = (boundary - (ca < 0)[:, None]).astype(np.int64)     # the cell entered
-    cell_b = np.floor(gb[:, None] + u * cb[:, None]).astype(np.int64)
-    valid &= (cell_a >= 0) & (cell_a < n_along) & (cell_b >= 0) & (cell_b < n_across)
-    # Row-major (h, w): with ``transpose`` a = row and b = col, else a = col and b = row.
-    index = cell_a * n_across + cell_b if transpose else cell_b * n_along + cell_a
-    occ = np.zeros(valid.shape, dtype=bool)
-    occ[valid] = flat[index[valid]]
-    any_hit = occ.any(axis=1)
+    cell_a = (boundary - (ca < 0)[:, None]).astype(np.intp)      # the cell entered
+    cell_b = np.floor(gb[:, None] + u * cb[:, None]).astype(np.intp)
+    np.clip(cell_a, -1, n_along, out=cell_a)   # off the grid: onto the free padding ring
+    np.clip(cell_b, -1, n_across, out=cell_b)
+    # Row-major padded (h + 2, w + 2): with ``transpose`` a = row and b = col, else a = col.
+    if transpose:
+        index = (cell_a + 1) * (n_across + 2) + (cell_b + 1)
+    else:
+        index = (cell_b + 1) * (n_along + 2) + (cell_a + 1)
+    occ = occupied.take(index)
+    occ &= steps[None, :] < count[:, None]
     first = np.argmax(occ, axis=1)
     rows = np.arange(m)
+    any_hit = occ[rows, first]
     u_hit = np.where(any_hit, u[rows, first], np.inf)
     return u_hit, np.where(any_hit, boundary[rows, first], 0.0)
 
@@ -179,13 +260,15 @@ class Solid:
 @dataclass(frozen=True, eq=False)
 class Scene:
     """What the sensors see at one instant: the map (its walls extruded to ``wall_height``) and
-    the solids (obstacles at that time). The occupancy mask is computed once per map."""
+    the solids (obstacles at that time). The occupancy mask is computed once per map, and its
+    :class:`GridField` on first use (shared by :meth:`with_solids`)."""
 
     grid: OccupancyGrid
     solids: tuple[Solid, ...] = ()
     wall_height: float = 2.0
     occupied_threshold: int = 50
     mask: np.ndarray = field(init=False, repr=False)
+    _fields: list[GridField] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.wall_height) and self.wall_height > 0):
@@ -194,6 +277,14 @@ class Scene:
             raise WorldError("sensors need a map whose origin yaw is 0; rotate the image instead")
         object.__setattr__(self, "solids", tuple(self.solids))
         object.__setattr__(self, "mask", self.grid.occupied(self.occupied_threshold))
+        object.__setattr__(self, "_fields", [])
+
+    @property
+    def grid_field(self) -> GridField:
+        """The mask prepared for :func:`cast_grid` (a distance transform: built once)."""
+        if not self._fields:
+            self._fields.append(GridField.from_mask(self.mask))
+        return self._fields[0]
 
     def with_solids(self, solids: Iterable[Solid]) -> Scene:
         """The same map (mask reused) with other obstacles, e.g. those at another time."""
@@ -201,7 +292,7 @@ class Scene:
         for name, value in (("grid", self.grid), ("solids", tuple(solids)),
                             ("wall_height", self.wall_height),
                             ("occupied_threshold", self.occupied_threshold),
-                            ("mask", self.mask)):
+                            ("mask", self.mask), ("_fields", self._fields)):
             object.__setattr__(new, name, value)
         return new
 

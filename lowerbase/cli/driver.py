@@ -49,6 +49,11 @@ def add_subparser(subparsers: Any) -> None:
     )
     p.__class__ = RosArgvParser  # add_parser builds the class chosen by the main parser
     add_bus_arguments(p)
+    p.add_argument("--robot", choices=("wheeled", "legged"), default="wheeled",
+                   help="wheeled (default): driver_base for the differential-drive chassis; "
+                   "legged: legged_driver, the quadruped's seed interface (robot_state, "
+                   "planning/*, set_map, set_listen) over four leg buses: udp_multicast ports "
+                   "PORT..PORT+3 (docs/legged.md)")
     p.add_argument("--replay", metavar="FILE",
                    help="feed a python-can log (.log, .asc, .blf, ...) through the driver "
                    "instead of a live bus, with its original timing; the node stops at its "
@@ -113,6 +118,8 @@ def run(args: argparse.Namespace) -> int:
     from lowerbase.errors import ConfigError, LowerbaseError
 
     ros_args = split_ros_args(args.ros_args)
+    if getattr(args, "robot", "wheeled") == "legged":
+        return run_legged(args, ros_args)
     parameters = replay_parameters(args)
     node.import_ros()  # one clear line when ROS or woosh_msgs is missing, before anything else
     if args.replay:
@@ -143,3 +150,16 @@ def run(args: argparse.Namespace) -> int:
             raise LowerbaseError(f"{replay.error}; the replay stopped there "
                                  f"({replay.frames} frames replayed)")
     return code
+
+
+def run_legged(args: argparse.Namespace, ros_args: list[str]) -> int:
+    from lowerbase.errors import ConfigError
+    from lowerbase.legged import node as legged_node
+    from lowerbase.transport import config_from_args
+
+    if args.replay or args.replay_profile or args.replay_param:
+        raise ConfigError("--replay is for the wheeled robot; drop it with --robot legged")
+    if args.serial:
+        raise ConfigError("the legged robot is on four CAN buses: drop --serial")
+    legged_node.import_ros()  # one clear line when ROS or lowerbase_legged_msgs is missing
+    return legged_node.run(config_from_args(args), ros_args)

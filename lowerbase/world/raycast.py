@@ -31,9 +31,10 @@ FACE_NONE = 0   # no hit, or the ray starts inside an occupied cell
 FACE_X = 1      # hit a cell boundary x = const (the face normal is along x)
 FACE_Y = 2      # hit a cell boundary y = const
 
-_SKIP_MIN = 3.0      # [cells] a ray skips ahead when its clearance is at least this ...
-_WINDOW = 6.0        # [cells] ... else enumerates the crossings of the next window this long,
+_SKIP_MIN = 2.0      # [cells] a ray skips ahead when its clearance is at least this ...
+_WINDOW = 8.0        # [cells] ... else enumerates the crossings of the next window this long,
 _WINDOW_MAX = 96.0   # doubling on each miss in a row (a ray grazing a wall) up to this
+_SKIP_STEPS = 10     # skips per round at most (the last few rays converge slowly)
 _MARGIN = 0.01       # [cells] taken off the clearance: floating point and float32 rounding
 
 
@@ -149,24 +150,31 @@ def cast_grid(mask: np.ndarray, grid: OccupancyGrid, x0: np.ndarray | float,
 def _skip(field: GridField, gx: np.ndarray, gy: np.ndarray, c: np.ndarray, s: np.ndarray,
           pos: np.ndarray, u_max: np.ndarray) -> np.ndarray:
     """Advance each ray by its clearance while that is at least ``_SKIP_MIN`` (no crossing into
-    an occupied cell is passed: see :class:`GridField`); returns the new positions [cells]."""
+    an occupied cell is passed: see :class:`GridField`), at most ``_SKIP_STEPS`` times; returns
+    the new positions [cells]."""
     h, w = field.shape
-    stride = w + 2
+    stride = float(w + 2)
     pos = pos.copy()
     todo = np.arange(pos.size)
-    x, y, cc, ss, p, um = gx, gy, c, s, pos, u_max
-    while todo.size:
-        col = np.clip(np.floor(x + p * cc), -1, w).astype(np.intp)
-        row = np.clip(np.floor(y + p * ss), -1, h).astype(np.intp)
-        r = field.clearance.take((row + 1) * stride + (col + 1))
+    x, y, cc, ss, p, um = gx + 1.0, gy + 1.0, c, s, pos, u_max  # padded cell coordinates
+    # Off the grid (an origin outside it), points are clamped onto the ring of clearance 0.
+    clamp = bool(((x < 0) | (x > w + 1) | (y < 0) | (y > h + 1)).any())
+    for _ in range(_SKIP_STEPS):
+        fx, fy = np.floor(x + p * cc), np.floor(y + p * ss)
+        if clamp:
+            np.clip(fx, 0, w + 1, out=fx)
+            np.clip(fy, 0, h + 1, out=fy)
+        r = field.clearance.take((fy * stride + fx).astype(np.intp))
+        big = r >= _SKIP_MIN
         p = p + r
-        moved = (r >= _SKIP_MIN) & (p < um)
+        moved = big & (p < um)
         if not moved.all():
-            pos[todo] = np.where(r >= _SKIP_MIN, p, p - r)
+            pos[todo] = np.where(big, p, p - r)
             todo = todo[moved]
             if not todo.size:
-                break
+                return pos
             x, y, cc, ss, p, um = x[moved], y[moved], cc[moved], ss[moved], p[moved], um[moved]
+    pos[todo] = p
     return pos
 
 

@@ -154,6 +154,25 @@ class Body:
                     min(max(yaw_rate, -p.max_yaw_rate), p.max_yaw_rate))
         self._cmd_time = self.time
 
+    @property
+    def command_fresh(self) -> bool:
+        """Whether the last velocity command is younger than ``command_timeout``."""
+        return self.time - self._cmd_time <= self.p.command_timeout
+
+    def external_fault(self, fault: Fault) -> None:
+        """Latch a fault the lower computer detects outside the actuators (body over-
+        temperature, battery protection): the same reaction as an actuator fault (standing or
+        walking: sit down, then damped; otherwise damped at once)."""
+        if self.fault:
+            self.fault |= fault
+            return
+        self.fault, self.fault_joint = fault, NO_JOINT
+        if self.state in (S.STANDING_MODE, S.IN_CONTROL):
+            self._sit_from = self.height
+            self._enter(S.SITDOWN_MODE)
+        elif self.state in (S.MOTOR_COMMUTATION, S.MOTOR_ENABLED, S.IN_TEST_MODE):
+            self._enter(S.MOTOR_DISABLED)
+
     def _standing_up(self) -> bool:
         return self.height < self.p.stand_height - 1e-9
 

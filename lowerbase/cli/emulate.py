@@ -17,6 +17,8 @@ log = logging.getLogger("lowerbase.emulate")
 
 #: where --truth-udp sends without a value (lowerbase.world.truth_stream's default)
 _TRUTH_UDP_DEFAULT = "127.0.0.1:43213"
+#: where --foxglove listens without a value (lowerbase.recording.live's default)
+_FOXGLOVE_DEFAULT = "127.0.0.1:8765"
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -37,6 +39,11 @@ def add_subparser(subparsers: Any) -> None:
         + ", ".join(f"defect:{name}" for name in DEFECTS) + ".",
     )
     add_bus_arguments(p)
+    p.add_argument("--robot", choices=("wheeled", "legged"), default="wheeled",
+                   help="wheeled: the differential-drive chassis (default); legged: the "
+                   "quadruped's lower computer on four leg buses (udp_multicast ports "
+                   "PORT..PORT+3, virtual CHANNEL/0..3, else -c can0,can1,can2,can3; "
+                   "docs/legged.md)")
     p.add_argument("--slcan", metavar="PORT",
                    help="act as an slcan USB-CAN adapter on PORT (pty:LINK creates a pty)")
     p.add_argument("--profile", metavar="FILE", help="robot profile TOML (default: packaged)")
@@ -76,6 +83,10 @@ def add_subparser(subparsers: Any) -> None:
                    help="stream the ground truth (t,x,y,yaw,v,w,contact) at 50 Hz as UDP "
                    "datagrams to HOST:PORT, for lowerbase world (default "
                    f"{_TRUTH_UDP_DEFAULT}; HOST defaults to 127.0.0.1)")
+    p.add_argument("--foxglove", nargs="?", const=_FOXGLOVE_DEFAULT, metavar="HOST:PORT",
+                   help="live view: serve the ground truth and every frame (raw and decoded) "
+                   f"to Foxglove over WebSocket (default {_FOXGLOVE_DEFAULT}; "
+                   "docs/recording.md)")
     world = p.add_argument_group(
         "world (contact)", "with --map the robot stops at walls and obstacles; give lowerbase "
         "world the same --map/--obstacles/--place")
@@ -97,12 +108,20 @@ def run(args: argparse.Namespace) -> int:
     from lowerbase.transport import config_from_args, describe, open_bus
     from lowerbase.transport.peers import PeerMonitor
 
+    if getattr(args, "robot", "wheeled") == "legged":
+        from lowerbase.legged.emulate import run_legged
+
+        return run_legged(args)
     if args.simulated and args.duration is None:
         raise ConfigError("--simulated needs --duration (it runs as fast as the CPU allows)")
     if args.truth_udp is not None:  # a bad address is refused before anything starts
         from lowerbase.world.truth_stream import parse_address
 
         parse_address(args.truth_udp)
+    if args.foxglove is not None and args.fleet is None:
+        from lowerbase.recording.live import parse_address as parse_foxglove
+
+        parse_foxglove(args.foxglove)
     if args.map is None and (args.obstacles or args.initial_pose or args.place):
         raise ConfigError("--obstacles, --initial-pose and --place go with --map NAME|FILE")
     profile = load_profile(args.profile)
@@ -124,7 +143,15 @@ def run(args: argparse.Namespace) -> int:
         raise
     stop = threading.Event()
     clock = SimClock() if args.simulated else RealClock(stop)
+    feed = None
     try:
+        if args.foxglove is not None:
+            from lowerbase.recording.live import EmulatorFeed, start_live
+
+            live = start_live(args.foxglove, name="lowerbase emulate",
+                              announce=lambda line: print(f"lowerbase emulate: {line}",
+                                                          flush=True))
+            feed = EmulatorFeed([live], clock)
         codec = default_codec()
         # warns once when another lower computer (emulator or firmware) shares this bus
         peers = PeerMonitor(codec)
@@ -139,7 +166,12 @@ def run(args: argparse.Namespace) -> int:
                 name, values = codec.decode(frame_id, data, decode_choices=True, strict=False)
                 print(f"{clock.now():10.3f} {name:<18} {values}", flush=True)
 
+        if feed is not None:
+            send = _fed(send, feed)
         mcu = Mcu(profile, clock, send, params_path=args.params, bms=bms, faults=faults)
+        if feed is not None:
+            feed.bind(mcu)
+            mcu.receive = _fed(mcu.receive, feed, "rx")  # type: ignore[method-assign]
         where = getattr(bus, "stream", None)
         target = where.name if where is not None else describe(config)
         print(f"lowerbase emulate: lower computer on {target} "
@@ -159,22 +191,35 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGTERM, _stop)
         if args.map is not None:
             _install_world(mcu, args)
-        hooks = _truth_hooks(args)
+        hooks = _truth_hooks(args) + ([feed] if feed is not None else [])
         with contextlib.suppress(KeyboardInterrupt):
             run_mcu(mcu, bus, clock, duration=args.duration, stop=stop,
                     on_step=_chain(hooks), peers=peers)
         for hook in hooks:
             hook.close()
+        feed = None
         mcu.shutdown()
         stats = ", ".join(f"{k} {v}" for k, v in sorted(mcu.stats.items()))
         print(f"lowerbase emulate: stopped after {clock.now() - mcu.boot_time:.1f} s; {stats}",
               file=sys.stderr)
     finally:
+        if feed is not None:
+            feed.close()
         if bms is not None:
             bms.close()
         with contextlib.suppress(can.CanError):
             bus.shutdown()
     return 0
+
+
+def _fed(inner: Any, feed: Any, direction: str = "tx") -> Any:
+    """``inner(frame_id, data)`` that also hands the frame to the live view (--foxglove)."""
+
+    def each(frame_id: int, data: bytes) -> None:
+        inner(frame_id, data)
+        feed.frame(direction, frame_id, data)
+
+    return each
 
 
 class _SinceBoot:
@@ -241,7 +286,7 @@ def _chassis_count(text: str) -> int:
 
 #: single-chassis options a fleet does not take (each chassis has its own pack, no files)
 _NOT_WITH_FLEET = ("serial", "slcan", "params", "bms_tcp", "bms_rtu", "bms_external",
-                   "print_frames", "truth", "truth_udp", "map")
+                   "print_frames", "truth", "truth_udp", "map", "foxglove")
 
 
 def _run_fleet(args: argparse.Namespace, profile: Any, faults: list[Any]) -> int:

@@ -78,6 +78,9 @@ CHECKS: dict[str, Check] = {
     "lowerbase world --map empty_room --ground-truth --no-camera": Check("skip", why=ROS),
     "lowerbase emulate --fleet 100": Check("start", "Ctrl-C stops"),
     "lowerbase driver --bus-kwargs port=43115": Check("skip", why=ROS),
+    "lowerbase driver --robot legged": Check("skip", why=ROS),
+    "lowerbase driver --robot legged _mapping_plugin:=false '_gps_origin:=[31.2,121.5,4.0]'":
+        Check("skip", why=ROS),
     "lowerbase emulate --fault stall:left@10+2": Check("start", "Ctrl-C stops"),
     "lowerbase emulate --serial pty:/tmp/chassis-tty": Check(
         "start", "chassis-tty", (("/tmp/chassis-tty", "{dir}/chassis-tty"),),

@@ -137,7 +137,8 @@ def rig(legged_master: RosMaster, tmp_path_factory: pytest.TempPathFactory  # no
         script = tmp / "probe.py"
         script.write_text(PROBE)
         probe = Probe(script, legged_master.env,
-                      {"/robot_state": "lowerbase_legged_msgs/RobotState"})
+                      {"/robot_state": "lowerbase_legged_msgs/RobotState",
+                       "/real/robot_state": "lowerbase_legged_msgs/RobotState"})
         yield {"rig": rigs[0], "probe": probe, "master": legged_master, "tmp": tmp,
                "rigs": rigs}
     finally:
@@ -285,7 +286,8 @@ def test_set_map_saves_the_map_or_times_out_without_the_plugin(
     assert (reply.success, reply.message) == (True, "Map saved.")
     assert read_pcd(rig["rig"].map_dir / "lab.pcd") == pytest.approx(points)
     # a second robot whose mapping plugin is off, in a namespace of its own
-    nomap = Rig(rig["master"], rig["tmp"], "nomap", "__ns:=nomap", "_mapping_plugin:=false")
+    nomap = Rig(rig["master"], rig["tmp"], "nomap", "__ns:=nomap", "_mapping_plugin:=false",
+                "_gps_origin:=[31.2,121.5,4.0]")
     rig["rigs"].append(nomap)
     deadline = time.monotonic() + 20.0  # until the node hears its lower computer
     while not call("/nomap/planning/get_waypoints", legged_srvs.GetWaypoints).success:
@@ -295,3 +297,59 @@ def test_set_map_saves_the_map_or_times_out_without_the_plugin(
                  initial_pose=pose)
     assert (reply.success, reply.message) == (False, TIMEOUT)
     assert not (nomap.map_dir / "lab.pcd").exists()
+    # ~gps_origin came through the command line: gps waypoints are accepted (refused without)
+    from lowerbase_legged_msgs.msg import Waypoint as Wp
+
+    gps = [Wp(frame="gps", x=31.2001, y=121.5, z=4.0, use_z=False)]
+    reply = call("/nomap/planning/set_waypoints", legged_srvs.SetWaypoints, waypoints=gps,
+                 repetition=1, current_index=0)
+    assert (reply.success, reply.message) == (True, SET_SUCCESS)
+    reply = call("/planning/set_waypoints", legged_srvs.SetWaypoints, waypoints=gps,
+                 repetition=1, current_index=0)
+    assert not reply.success and "gps datum" in reply.message
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_against_the_legged_emulator(rig: dict[str, Any], legged_srvs: ModuleType  # noqa: F811
+                                     ) -> None:
+    """The real lower computer (`lowerbase emulate --robot legged`), when it is installed:
+    ~walk reaches IN_CONTROL and the robot walks to a waypoint."""
+    pytest.importorskip("lowerbase.legged.emulate", reason="the legged emulator is not built")
+    from lowerbase_legged_msgs.msg import Waypoint as Wp
+    from std_srvs.srv import Trigger  # type: ignore[import-untyped]
+
+    master: RosMaster = rig["master"]
+    bus = {"interface": "udp_multicast", "channel": TEST_GROUP, "port": free_udp_port(),
+           "hop_limit": 0}
+    emulator = Proc(["emulate", "--robot", "legged", *bus_cli_args(bus)], master.env)
+    node = Proc(["driver", "--robot", "legged", *bus_cli_args(bus), "__ns:=real",
+                 f"_map_dir:={rig['tmp'] / 'real'}"],
+                {k: v for k, v in master.env.items() if k != "ROS_IP"})
+    try:
+        emulator.wait_for("Ctrl-C stops", timeout=30.0)
+        node.wait_for("(legged) on", timeout=30.0)
+        deadline = time.monotonic() + 20.0
+        while not (reply := call("/real/legged_driver/walk", Trigger)).success:
+            assert time.monotonic() < deadline, reply.message
+            time.sleep(0.1)
+        goal = (0.5, 0.0)
+        deadline = time.monotonic() + 30.0
+        while True:
+            reply = call("/real/planning/set_waypoints", legged_srvs.SetWaypoints,
+                         waypoints=[Wp(frame="odom", x=goal[0], y=goal[1], z=0.0, use_z=False)],
+                         repetition=1, current_index=0)
+            if reply.success:
+                break
+            assert time.monotonic() < deadline, reply.message
+            time.sleep(0.2)
+        probe: Probe = rig["probe"]
+        stats = probe.wait_for(lambda s: s["/real/robot_state"]["msg"]["state"] == S.IN_CONTROL
+                               and math.dist(s["/real/robot_state"]["msg"]["base_pos"][:2],
+                                             goal) < 0.15, 60.0, "the emulated robot at 0.5, 0")
+        st = stats["/real/robot_state"]["msg"]
+        assert [a["name"] for a in st["actuator_states"]] == list(JOINT_NAMES)
+        assert st["voltage"] > 0 and st["body_temperature"] > 0
+    finally:
+        node.stop()
+        emulator.stop()

@@ -33,6 +33,9 @@ def add_subparser(subparsers: Any) -> None:
                    help="another scenario (default: demo)")
     p.add_argument("--record", metavar="FILE",
                    help="also record the bus: .log (candump), .asc, .blf, .csv or .trc")
+    p.add_argument("--foxglove", nargs="?", const="127.0.0.1:8765", metavar="HOST:PORT",
+                   help="live view: watch the run in Foxglove over WebSocket (default "
+                   "127.0.0.1:8765; docs/recording.md)")
     p.set_defaults(func=run)
 
 
@@ -58,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
           file=err)
     status = StatusLine(force=not args.fast)
     result, summary = execute(scenario, out, mode=mode, record=args.record, progress=status,
-                              debug=args.debug, bus_config=bus)
+                              debug=args.debug, bus_config=bus, foxglove=args.foxglove)
     print_outcomes(result, None, stream=err)
     final = summary["final"]
     err_m = final.get("odom_error_m")

@@ -46,6 +46,10 @@ def add_subparser(subparsers: Any) -> None:
                       "(default: run.mcap in the report directory; docs/recording.md)")
     mcap.add_argument("--no-mcap", dest="mcap", action="store_false",
                       help="do not write the MCAP recording")
+    run.add_argument("--foxglove", nargs="?", const="127.0.0.1:8765", metavar="HOST:PORT",
+                     help="live view: serve the MCAP's channels to Foxglove over WebSocket "
+                     "(default 127.0.0.1:8765); use with --realtime or --processes to watch "
+                     "at the robot's pace (docs/recording.md)")
     run.add_argument("--progress", action="store_true",
                      help="show the progress bar even when stderr is not a terminal")
     run.add_argument("--status", action="store_true",
@@ -113,11 +117,14 @@ def mcap_path(out: Path, mcap: str | Path | bool | None) -> Path | None:
 def execute(scenario: Any, out: Path, *, mode: str = "simulated", record: str | None = None,
             progress: Any = None, debug: bool = False,
             bus_config: dict[str, Any] | None = None,
-            mcap: str | Path | bool | None = True) -> tuple[Any, dict[str, Any]]:
+            mcap: str | Path | bool | None = True,
+            foxglove: str | None = None) -> tuple[Any, dict[str, Any]]:
     """Run ``scenario`` in ``mode``, optionally recording, and write the report into ``out``.
 
     Log records of the run go to ``out/run.log`` (also to stderr with ``debug``). ``mcap``:
     see :func:`mcap_path` (the driver's topics, the truth and the frames; docs/recording.md).
+    ``foxglove``: HOST:PORT of a live Foxglove WebSocket server with the same channels (on the
+    simulated clock it streams as fast as the run goes).
     """
     from lowerbase.bench.recording import BusRecorder, check_recording_path
     from lowerbase.bench.report import write_report
@@ -128,12 +135,26 @@ def execute(scenario: Any, out: Path, *, mode: str = "simulated", record: str | 
 
         check_over_bus(scenario)  # before anything is started or written
     mcap_file = mcap_path(out, mcap)
-    recorder = BusRecorder(check_recording_path(record)) if record else None
-    mcap_rec = None
-    if mcap_file is not None:
-        from lowerbase.recording.mcap_writer import McapRecorder
+    live = None
+    if foxglove is not None:  # a bad address or a busy port stops here, before any file
+        from lowerbase.recording.live import start_live
 
-        mcap_rec = McapRecorder(mcap_file)
+        live = start_live(foxglove, announce=lambda line: print(line, file=sys.stderr))
+    try:
+        recorder = BusRecorder(check_recording_path(record)) if record else None
+        mcap_rec: Any = None
+        if mcap_file is not None:
+            from lowerbase.recording.mcap_writer import McapRecorder
+
+            mcap_rec = McapRecorder(mcap_file, extra=(live,) if live is not None else ())
+        elif live is not None:
+            from lowerbase.recording.publisher import RunPublisher
+
+            mcap_rec = RunPublisher([live])
+    except BaseException:
+        if live is not None:
+            live.close()
+        raise
     taps = [t for t in (recorder, mcap_rec) if t is not None]
 
     def tap(t: float, direction: str, frame_id: int, data: bytes) -> None:
@@ -192,6 +213,10 @@ def run_command(args: argparse.Namespace) -> int:
     from lowerbase.bench.demo import ProgressBar, StatusLine
     from lowerbase.bench.scenario import find_scenario, load_scenario
 
+    if args.foxglove is not None:  # a bad address is refused before anything is said
+        from lowerbase.recording.live import parse_address
+
+        parse_address(args.foxglove)
     scenario = load_scenario(find_scenario(args.scenario))
     out = Path(args.out) if args.out else default_out(scenario.name)
     progress: Any
@@ -202,7 +227,8 @@ def run_command(args: argparse.Namespace) -> int:
     print(f"scenario {scenario.name}: {scenario.description or scenario.source} "
           f"({scenario.duration:g} s, {args.mode})", file=sys.stderr)
     result, _ = execute(scenario, out, mode=args.mode, record=args.record, progress=progress,
-                        debug=args.debug, mcap=True if args.mcap is None else args.mcap)
+                        debug=args.debug, mcap=True if args.mcap is None else args.mcap,
+                        foxglove=args.foxglove)
     print_outcomes(result, out)
     if args.record:
         print(f"recording: {args.record}")

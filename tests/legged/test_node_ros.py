@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -99,6 +100,24 @@ def test_four_leg_buses_from_one_bus_option() -> None:
     with pytest.raises(ConfigError, match="lower port"):
         leg_bus_configs({**udp, "port": 65534})
     assert lower_ids() == [0, 128, 144, 272, 273, 288, 289, 320, 768, 769, 770, 771, 772]
+
+
+def test_cli_errors_are_one_line(capsys: pytest.CaptureFixture[str],
+                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    from lowerbase.cli import main
+
+    assert main(["driver", "--robot", "legged", "--replay", "run.blf"]) == 1
+    assert "--replay is for the wheeled robot" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "lowerbase_legged_msgs", None)
+    assert main(["driver", "--robot", "legged"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and ("lowerbase_legged_msgs is not generated" in err
+                                      or "ROS is not installed" in err)
+    monkeypatch.setitem(sys.modules, "rospy", None)
+    assert main(["driver", "--robot", "legged"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("lowerbase driver: error: ROS is not installed") and \
+        err.count("\n") == 1
 
 
 # -- the node -----------------------------------------------------------------------------------

@@ -23,7 +23,7 @@ help:
 	@echo "make test   - set up and run ruff, mypy and the whole test suite"
 	@echo "make test-oldest - the test suite on the oldest supported Python (3.10, from pyenv)"
 	@echo "make bench  - run the benchmarks and print the results (WRITE=1: into docs/benchmarks.md)"
-	@echo "make docs   - regenerate docs/protocol.md and docs/status-codes.md"
+	@echo "make docs   - regenerate docs/protocol.md, docs/status-codes.md, docs/legged-protocol.md"
 
 system-deps:
 	@bash scripts/install-ros.sh
@@ -70,6 +70,7 @@ bench: env
 docs: env
 	$(PY) -m lowerbase dbc --export-docs docs/protocol.md
 	$(PY) -m lowerbase.protocol.status_codes docs/status-codes.md
+	$(PY) -m lowerbase.protocol.docs --legged docs/legged-protocol.md
 
 clean:
 	rm -rf $(VENV) $(OLDEST_VENV) build .pytest_cache .mypy_cache .ruff_cache

@@ -117,7 +117,10 @@ NO_JOINT = 15
 
 
 class Fault(IntFlag):
-    """LocomotionStatus.Fault bits (latched until a MOTOR_DISABLED or COMM_* request clears)."""
+    """LocomotionStatus.Fault bits. Latched: a MOTOR_READY request clears them once every
+    cause is gone (actuators cooled below their clear temperature, the body below
+    ``thermal.body_clear_c``, the BMS's discharge switch closed and the SOC above critical);
+    until then MOTOR_READY is answered Faulted (docs/legged.md)."""
 
     ACTUATOR_OVER_TEMPERATURE = 1 << 0
     ACTUATOR_ERROR = 1 << 1

@@ -180,3 +180,94 @@ def render(codec: Codec | None = None) -> str:
     for m in codec:
         out += _message_section(m)
     return "\n".join(out).rstrip() + "\n"
+
+
+def render_legged(codec: Codec | None = None) -> str:
+    """docs/legged-protocol.md from ``legged.dbc`` (the legged robot's four buses)."""
+    from lowerbase.legged.protocol import (
+        COMMAND_MESSAGES,
+        LEGS,
+        MOTOR_IDS,
+        REPLY_ID,
+        Special,
+        legged_codec,
+        special_frame,
+    )
+
+    codec = codec or legged_codec()
+    rate = _bitrate(codec)
+    mean = busload.mean_frame_bits(8)
+    per_leg = 2 * len(MOTOR_IDS) * 1000  # commands + replies at 1 kHz
+    leg_ids = {*COMMAND_MESSAGES, REPLY_ID}
+    out = [
+        "# The legged robot's wire protocol",
+        "",
+        "Generated from `lowerbase/protocol/legged.dbc` by `python -m lowerbase.protocol.docs "
+        "--legged docs/legged-protocol.md`; do not edit by hand (a test checks it is current). "
+        "The lower computer that speaks it: docs/legged.md.",
+        "",
+        f"Four classic CAN 2.0A buses at {rate // 1000} kbit/s, one per leg: "
+        + ", ".join(f"bus {k} {leg}" for k, leg in enumerate(LEGS))
+        + ". On each leg bus the " + ", ".join(MOTOR_IDS) + " actuators have CAN IDs "
+        + ", ".join(str(i) for i in MOTOR_IDS.values())
+        + f" and answer on ID {REPLY_ID} with their ID in byte 0. The actuator frames are the "
+        "MIT mini-cheetah motor protocol, big-endian (Motorola); the body frames travel on bus "
+        "0 only and are little-endian (Intel). Periodic body frames carry a 4-bit rolling "
+        "counter (+1 per frame, mod 16).",
+        "",
+        "## Catalog",
+        "",
+        "| ID | message | DLC | cycle | sender | buses |",
+        "|---|---|---|---|---|---|",
+    ]
+    for m in codec:
+        cycle = f"{m.cycle_time * 1000:g} ms" if m.cycle_time else "event"
+        buses = "every leg bus" if m.frame_id in leg_ids else "bus 0"
+        out.append(f"| 0x{m.frame_id:03X} | {m.name} | {m.length} | {cycle} | "
+                   f"{', '.join(m.senders)} | {buses} |")
+    out += [
+        "",
+        "## Special frames",
+        "",
+        "Eight-byte payloads on an actuator's command ID that no DBC signal expresses; a "
+        "receiver tests for them before decoding (`lowerbase.legged.protocol.parse_special`). "
+        "The actuator answers each with a MotorReply.",
+        "",
+        "| payload | command |",
+        "|---|---|",
+        *(f"| {special_frame(s).hex(' ').upper()} | {s.name.lower().replace('_', ' ')} |"
+          for s in Special),
+        "",
+        "## Bus load",
+        "",
+        f"Each leg bus carries {len(MOTOR_IDS)} commands and {len(MOTOR_IDS)} replies per "
+        f"millisecond: {per_leg:,} eight-byte frames/s, {per_leg * mean / rate:.0%} of "
+        f"{rate // 1000} kbit/s with typical bit stuffing ({mean:.2f} bits per frame, "
+        "`lowerbase/protocol/busload.py`); bus 0 adds the body frames.",
+        "",
+        "## Messages",
+        "",
+    ]
+    for m in codec:
+        out += _message_section(m, serial=False)
+    return "\n".join(out).rstrip() + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m lowerbase.protocol.docs [--legged] FILE``: write the generated document
+    (chassis.dbc's docs/protocol.md, or with --legged legged.dbc's docs/legged-protocol.md)."""
+    import argparse
+
+    from lowerbase.files import write_atomic
+
+    p = argparse.ArgumentParser(prog="python -m lowerbase.protocol.docs")
+    p.add_argument("--legged", action="store_true", help="legged.dbc instead of chassis.dbc")
+    p.add_argument("file")
+    args = p.parse_args(argv)
+    write_atomic(args.file, render_legged() if args.legged else render())
+    print(f"wrote {args.file}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -79,6 +79,9 @@ CHECKS: dict[str, Check] = {
     "lowerbase emulate --fleet 100": Check("start", "Ctrl-C stops"),
     "lowerbase driver --bus-kwargs port=43115": Check("skip", why=ROS),
     "lowerbase driver --robot legged": Check("skip", why=ROS),
+    "lowerbase emulate --robot legged": Check("start", "Ctrl-C stops"),
+    "lowerbase emulate --robot legged --simulated --duration 10": Check(
+        "run", "stopped after 10.0 s"),
     "lowerbase driver --robot legged _mapping_plugin:=false '_gps_origin:=[31.2,121.5,4.0]'":
         Check("skip", why=ROS),
     "lowerbase emulate --fault stall:left@10+2": Check("start", "Ctrl-C stops"),

@@ -7,15 +7,25 @@ JSON signals on top (what ``lowerbase scenario run`` writes by default). Rows: t
 time per simulated second for each, and the file size per simulated second. Best of a few
 repeats, measured back to back.
 
+The live view (``--foxglove``): the same messages served by the Foxglove WebSocket server
+(``lowerbase.recording.live.FoxgloveSink``) at the full frame rate of a drive on the simulated
+clock (SimLoop: every emulator and driver frame, the driver topics, the truth). Rows: this
+process's CPU time per simulated second without a publisher, with the live server and no
+client (nothing is built: no channel is subscribed), and with a client (a child process on
+loopback speaking the WebSocket protocol) subscribed to every channel.
+
 ``python -m benchmarks.bench_recording [--quick]`` prints the rows.
 """
 
 from __future__ import annotations
 
+import json
+import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from benchmarks.common import Row
 
@@ -55,6 +65,10 @@ def run(quick: bool = False) -> list[Row]:
                 if key == "all":
                     size = path.stat().st_size
     base = best["none"] / sim
+    return [*_mcap_rows(best, base, size, sim), *_live_rows(repeat)]
+
+
+def _mcap_rows(best: dict[str, float], base: float, size: int, sim: float) -> list[Row]:
     return [
         Row("recording", "demo scenario, no recorder", 1e3 * base, "ms wall per sim s",
             f"{sim:g} s simulated"),
@@ -68,7 +82,99 @@ def run(quick: bool = False) -> list[Row]:
     ]
 
 
+LIVE_WARMUP = 2.0  #: simulated s before the measurement: every channel is open by then
+LIVE_DRIVE = 20.0  #: simulated s measured
+
+
+def _live(variant: str) -> tuple[float, int, int]:
+    """(CPU s of this process, messages sent, messages the client got) over LIVE_DRIVE
+    simulated s (a client that lags loses the oldest: the server's per-client backlog).
+    variant: "none" (no publisher), "idle" (live server, no client), "client"."""
+    from lowerbase.bench.simloop import SimLoop
+    from lowerbase.recording.live import FoxgloveSink
+    from lowerbase.recording.publisher import RunPublisher
+
+    sink = FoxgloveSink("127.0.0.1", 0) if variant != "none" else None
+    pub = RunPublisher([sink]) if sink is not None else None
+    loop = SimLoop(tap=pub)
+    tr = loop.mcu.truth
+    if pub is not None:
+        pub.attach(loop.driver, loop.clock.now, lambda: (tr.x, tr.y, tr.yaw, tr.v, tr.w))
+    loop.run(LIVE_WARMUP)
+    client: Any = None
+    if variant == "client" and sink is not None:
+        client = subprocess.Popen([sys.executable, "-m", "benchmarks.bench_recording",
+                                   "--client", sink.url], stdout=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 30
+        while not all(sink.subscribed(t) for t in sink.topics):
+            if time.monotonic() > deadline or client.poll() is not None:
+                raise RuntimeError("the benchmark's WebSocket client did not subscribe")
+            time.sleep(0.01)
+    before = sum(pub.counts.values()) if pub is not None else 0
+    t0 = time.process_time()
+    loop.drive(0.5, 0.3, LIVE_DRIVE)
+    cpu = time.process_time() - t0
+    sent = sum(pub.counts.values()) - before if pub is not None else 0
+    got = 0
+    if pub is not None:
+        pub.close()  # stops the server: the client's connection ends
+    if client is not None:
+        out, _ = client.communicate(timeout=60)
+        got = int(out.strip() or 0)
+    return cpu, sent, got
+
+
+def _live_rows(repeat: int) -> list[Row]:
+    best: dict[str, float] = {}
+    sent = got = 0
+    for _ in range(repeat):
+        for key in ("none", "idle", "client"):
+            cpu, n_sent, n_got = _live(key)
+            best[key] = min(best.get(key, float("inf")), cpu)
+            if key == "client":
+                sent, got = max(sent, n_sent), max(got, n_got)
+    base = best["none"] / LIVE_DRIVE
+    return [
+        Row("recording", "live view: drive at full frame rate, no publisher", 1e3 * base,
+            "ms CPU per sim s", f"{LIVE_DRIVE:g} s simulated (SimLoop)"),
+        Row("recording", "live view: Foxglove server, no client", 1e3 * (
+            best["idle"] / LIVE_DRIVE - base), "ms CPU per sim s", "extra; nothing built"),
+        Row("recording", "live view: Foxglove server, client on every channel", 1e3 * (
+            best["client"] / LIVE_DRIVE - base), "ms CPU per sim s",
+            f"extra; {sent / LIVE_DRIVE:.0f} messages per sim s, "
+            f"{got / LIVE_DRIVE:.0f} delivered (as fast as the simulation runs)"),
+    ]
+
+
+def _client(url: str) -> None:
+    """Subscribe to every channel advertised; print the number of messages received once the
+    server closes the connection."""
+    from websockets.exceptions import ConnectionClosed
+    from websockets.sync.client import connect
+
+    n = 0
+    with connect(url, subprotocols=["foxglove.sdk.v1"]) as ws:  # type: ignore[list-item]
+        subs = 0
+        try:
+            for raw in ws:
+                if isinstance(raw, bytes):
+                    n += 1
+                    continue
+                msg = json.loads(raw)
+                if msg["op"] == "advertise":
+                    new = [{"id": subs + i + 1, "channelId": ch["id"]}
+                           for i, ch in enumerate(msg["channels"])]
+                    subs += len(new)
+                    ws.send(json.dumps({"op": "subscribe", "subscriptions": new}))
+        except ConnectionClosed:
+            pass
+    print(n)
+
+
 if __name__ == "__main__":
+    if "--client" in sys.argv:
+        _client(sys.argv[sys.argv.index("--client") + 1])
+        sys.exit(0)
     from benchmarks.__main__ import table
 
     print(table(run(quick="--quick" in sys.argv)))

@@ -150,6 +150,12 @@ CHECKS: dict[str, Check] = {
                                                           files=("run.bag",)),
     "lowerbase mcap from-bag run.bag back.mcap": Check("run", "-> back.mcap",
                                                         files=("back.mcap",)),
+    "lowerbase scenario run watchdog --realtime --foxglove": Check(
+        "start", "live view: Foxglove", (("--foxglove", "--foxglove 127.0.0.1:{tcp}"),),
+        why="a free port for 8765"),
+    "lowerbase emulate --foxglove": Check(
+        "start", "live view: Foxglove", (("--foxglove", "--foxglove 127.0.0.1:{tcp}"),),
+        why="a free port for 8765"),
     "lowerbase record run.mcap --duration 10": Check(
         "run", "written to run.mcap", (("--duration 10", "--duration 1"),), peer=True,
         why="bounded to 1 s"),

@@ -12,7 +12,7 @@ from lowerbase.errors import ConfigError
 
 #: options of the wheeled emulator that the legged one does not take
 NOT_WITH_LEGGED = ("serial", "slcan", "params", "fault", "fleet", "bms_tcp", "bms_rtu",
-                   "bms_external", "truth", "truth_udp", "map")
+                   "bms_external", "truth", "truth_udp", "map", "foxglove")
 
 
 def run_legged(args: argparse.Namespace) -> int:

@@ -139,3 +139,13 @@ def test_emulate_robot_legged_process(lowerbase_proc: Any) -> None:
         assert seen[(k, REPLY_ID)] > 0 and seen[(k, 1)] > 0, (k, seen)
     assert seen[(0, CODEC.message("Heartbeat").frame_id)] >= 1
     assert seen[(0, CODEC.message("LocomotionStatus").frame_id)] > 10
+
+
+@pytest.mark.parametrize("flag", [["--foxglove"], ["--map", "warehouse"], ["--fleet", "2"]])
+def test_wheeled_only_options_are_refused_in_one_line(
+        flag: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    from lowerbase.cli import main
+
+    assert main(["emulate", "--robot", "legged", "--duration", "1", *flag]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--robot legged does not take" in err[0], err

@@ -15,7 +15,8 @@ MCAP file, ``live.FoxgloveSink``), so a recording and the live view carry the sa
 
 :meth:`RunPublisher.truth_sample` writes the truth alone (``lowerbase emulate``: no driver).
 Messages are ROS1-serialised (``message_encoding`` "ros1", schemas "ros1msg" with the full
-definition) without a ROS install (:mod:`.ros1_types`); each is built and serialised once,
+definition) without a ROS install: the high-rate ones packed directly (:mod:`.fastser`), the
+others as rosbags objects (:mod:`.ros1_types`); each is built and serialised once,
 and not at all while no sink wants its channel (a live view nobody subscribes to). Times are
 the run's time in nanoseconds (scenario seconds from the lower computer's first boot); header
 stamps are the same time. docs/recording.md lists the topics.
@@ -31,6 +32,7 @@ from typing import Any
 from lowerbase.driver.node import Throttle
 from lowerbase.driver.settings import NodeSettings
 from lowerbase.errors import LowerbaseError
+from lowerbase.recording import fastser as fs
 from lowerbase.recording import messages as m
 from lowerbase.recording.ros1_types import ros1_types
 from lowerbase.recording.sinks import ChannelSpec, Sink
@@ -39,6 +41,8 @@ TRUTH_TOPIC = "/ground_truth/odom"
 FRAMES_TOPIC = "/can/frames"
 DECODED_PREFIX = "/can/decoded/"
 CAN_FRAME_ID = "can0"  #: header.frame_id of /can/frames (the channel name of recordings)
+
+_ZERO9, _ZERO4 = (0.0,) * 9, (0.0,) * 4  #: the truth's covariances
 
 Truth = Callable[[], "tuple[float, float, float, float, float] | None"]
 
@@ -110,8 +114,14 @@ class RunPublisher:
         self._seq[topic] += 1
         return False
 
-    def _emit(self, topic: str, pairs: list[tuple[Sink, Any]], data: bytes, t: float) -> None:
-        ns = m.to_ns(t)
+    def _ros1(self, topic: str, type_name: str) -> list[tuple[Sink, Any]]:
+        """The pairs that want ``topic`` now; its header seq advances either way (as a rospy
+        publisher's does without subscribers): ``self._seq[topic]`` is the message's."""
+        pairs = self._open(topic, lambda: self.ros1_spec(topic, type_name))
+        self._seq[topic] += 1
+        return pairs
+
+    def _emit(self, topic: str, pairs: list[tuple[Sink, Any]], data: bytes, ns: int) -> None:
         seq = self.counts[topic]
         for sink, handle in pairs:
             sink.message(handle, ns, data, seq)
@@ -121,7 +131,7 @@ class RunPublisher:
         """Write the rosbags message ``msg`` on ``topic`` at ``t`` [s]."""
         pairs = self._open(topic, lambda: self.ros1_spec(topic, msg.__msgtype__))
         if pairs:
-            self._emit(topic, pairs, self.types.serialize(msg), t)
+            self._emit(topic, pairs, self.types.serialize(msg), m.to_ns(t))
 
     def header(self, topic: str, t: float, frame_id: str) -> Any:
         """A std_msgs/Header with the topic's next seq (from 1, as a rospy publisher's)."""
@@ -132,9 +142,11 @@ class RunPublisher:
 
     def __call__(self, t: float, direction: str, frame_id: int, data: bytes) -> None:
         """Frame tap: /can/frames and /can/decoded/<Message>."""
-        if self._wanted(FRAMES_TOPIC, "can_msgs/Frame"):
-            self.write(FRAMES_TOPIC, m.can_frame_msg(
-                self.types, self.header(FRAMES_TOPIC, t, CAN_FRAME_ID), frame_id, data), t)
+        ns = m.to_ns(t)
+        pairs = self._ros1(FRAMES_TOPIC, "can_msgs/Frame")
+        if pairs:
+            self._emit(FRAMES_TOPIC, pairs, fs.can_frame(
+                self._seq[FRAMES_TOPIC], ns, CAN_FRAME_ID, frame_id, data), ns)
         if not self.decoded:
             return
         try:
@@ -145,18 +157,20 @@ class RunPublisher:
         topic = DECODED_PREFIX + name
         pairs = self._open(topic, lambda: self.json_spec(name))
         if pairs:
-            self._emit(topic, pairs, json.dumps(values).encode(), t)
+            self._emit(topic, pairs, json.dumps(values).encode(), ns)
 
     # -- the truth ---------------------------------------------------------------------------
 
     def truth_sample(self, t: float, truth: tuple[float, float, float, float, float]) -> None:
         """/ground_truth/odom at ``t`` [s]: ``truth`` = (x, y, yaw, v, w)."""
-        if not self._wanted(TRUTH_TOPIC, "nav_msgs/Odometry"):
+        pairs = self._ros1(TRUTH_TOPIC, "nav_msgs/Odometry")
+        if not pairs:
             return
         x, y, yaw, v, w = truth
-        self.write(TRUTH_TOPIC, m.odometry_msg(
-            self.types, self.header(TRUTH_TOPIC, t, self.truth_frame),
-            self.truth_child_frame, (x, y, yaw), (v, w), [0.0] * 9, [0.0] * 4, 0.0), t)
+        ns = m.to_ns(t)
+        self._emit(TRUTH_TOPIC, pairs, fs.odometry(
+            self._seq[TRUTH_TOPIC], ns, self.truth_frame, self.truth_child_frame, (x, y, yaw),
+            (v, w), _ZERO9, _ZERO4, 0.0), ns)
 
     # -- the driver --------------------------------------------------------------------------
 
@@ -181,16 +195,20 @@ class RunPublisher:
             if core.imu is not None and topics["imu"] and self._throttles["imu"].ready(
                     core.clock.now()):
                 topic = topic_name(topics["imu"])
-                if not self._wanted(topic, "sensor_msgs/Imu"):
+                pairs = self._ros1(topic, "sensor_msgs/Imu")
+                if not pairs:
                     return
                 gyro, accel = core.imu
-                self.write(topic, m.imu_msg(
-                    self.types, self.header(topic, now, s.imu_frame), gyro, accel,
-                    s.imu_angular_velocity_variance, s.imu_linear_acceleration_variance), now)
+                ns = m.to_ns(now)
+                self._emit(topic, pairs, fs.imu(
+                    self._seq[topic], ns, s.imu_frame, gyro, accel,
+                    s.imu_angular_velocity_variance, s.imu_linear_acceleration_variance), ns)
         elif what == "status_code":
             if topics["status_code"] and self._throttles["status_code"].ready(core.clock.now()):
-                self.write(topic_name(topics["status_code"]),
-                           m.status_code_msg(self.types, core.status_code), now)
+                topic = topic_name(topics["status_code"])
+                pairs = self._open(topic, lambda: self.ros1_spec(topic, "std_msgs/UInt64"))
+                if pairs:
+                    self._emit(topic, pairs, fs.uint64(core.status_code), m.to_ns(now))
         elif what == "battery":
             self._battery_dirty = True
 
@@ -215,33 +233,32 @@ class RunPublisher:
                                now)
 
     def _odometry(self, core: Any, now: float) -> None:
-        s, types = self.settings, self.types
+        s = self.settings
         unobserved = core.config.odometry_noise.unobserved_variance
+        ns = m.to_ns(now)
         odo = core.odometry
         if odo is not None and s.topics["odom_raw"]:
             topic = topic_name(s.topics["odom_raw"])
-            if self._wanted(topic, "nav_msgs/Odometry"):
-                self.write(topic, m.odometry_msg(
-                    types, self.header(topic, now, s.odom_frame), s.base_frame,
-                    (odo.x, odo.y, odo.yaw), (odo.linear, odo.angular), odo.pose_covariance,
-                    odo.twist_covariance, unobserved), now)
+            pairs = self._ros1(topic, "nav_msgs/Odometry")
+            if pairs:
+                self._emit(topic, pairs, fs.odometry(
+                    self._seq[topic], ns, s.odom_frame, s.base_frame, (odo.x, odo.y, odo.yaw),
+                    (odo.linear, odo.angular), odo.pose_covariance, odo.twist_covariance,
+                    unobserved), ns)
         ekf = core.ekf
         topic = topic_name(s.topics["odom"] or "/odom")
-        odom = bool(s.topics["odom"]) and bool(self._open(
-            topic, lambda: self.ros1_spec(topic, "nav_msgs/Odometry")))
-        tf = s.publish_tf and bool(self._open(
-            "/tf", lambda: self.ros1_spec("/tf", "tf2_msgs/TFMessage")))
-        if not (odom or tf):
-            self._seq[topic] += 1  # as if published (see _wanted)
-        else:
-            msg = m.odometry_msg(
-                types, self.header(topic, now, s.odom_frame), s.base_frame, ekf.pose,
-                ekf.twist, [float(v) for v in ekf.pose_covariance().ravel()],
-                [float(v) for v in ekf.twist_covariance().ravel()], unobserved)
-            if odom:
-                self.write(topic, msg, now)
-            if tf:
-                self.write("/tf", m.tf_from_odometry(types, msg), now)
+        odom = self._ros1(topic, "nav_msgs/Odometry") if s.topics["odom"] else []
+        if not s.topics["odom"]:
+            self._seq[topic] += 1  # as if published (see _ros1)
+        tf = self._open("/tf", lambda: self.ros1_spec("/tf", "tf2_msgs/TFMessage")) \
+            if s.publish_tf else []
+        if odom:
+            self._emit(topic, odom, fs.odometry(
+                self._seq[topic], ns, s.odom_frame, s.base_frame, ekf.pose, ekf.twist,
+                ekf.pose_covariance().ravel().tolist(), ekf.twist_covariance().ravel().tolist(),
+                unobserved), ns)
+        if tf:  # tf2_ros' broadcaster: the odometry's transform, inner header seq 0
+            self._emit("/tf", tf, fs.tf_planar(ns, s.odom_frame, s.base_frame, ekf.pose), ns)
         truth = self._truth() if self._truth is not None else None
         if truth is not None:
             self.truth_sample(now, truth)

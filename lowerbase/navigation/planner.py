@@ -85,19 +85,20 @@ class FootprintCells:
     """The cells a footprint covers, per heading: ``max_cost(costs, x, y, yaw)`` (vectorised)
     is the highest cost under the footprint placed at each pose, as costmap_2d's
     footprintCost does with the polygon's outline and interior. Headings are binned to
-    ``bins`` per turn; the outline is rasterised (skimage.draw) half a cell larger than the
-    polygon so that the binning and the cell centres never let a corner slip past a wall."""
+    ``bins`` per turn; the polygon is rasterised (skimage.draw) grown by what these cells cannot
+    resolve: half a cell plus the bin's sweep at the outermost vertex
+    polygon (the pose's place inside its cell and the heading's bin) and its outline's cells
+    count, so a corner never slips past a wall."""
 
     def __init__(self, points: Sequence[tuple[float, float]], resolution: float,
-                 bins: int = 72) -> None:
+                 bins: int = 144) -> None:
         pts = np.asarray(points, dtype=np.float64)
         if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3 or not np.isfinite(pts).all():
             raise PlanningError(f"a footprint is at least 3 finite [x, y] points, got {points!r}")
         self.points = pts
         self.resolution = float(resolution)
         self.bins = bins
-        grow = 0.5 * self.resolution * math.sqrt(2.0) + \
-            np.hypot(pts[:, 0], pts[:, 1]).max() * math.pi / bins
+        grow = 0.5 * self.resolution + np.hypot(pts[:, 0], pts[:, 1]).max() * math.pi / bins
         norm = np.hypot(pts[:, 0], pts[:, 1])[:, None]
         grown = pts + pts / np.maximum(norm, 1e-9) * grow
         self.offsets: list[tuple[np.ndarray, np.ndarray]] = []

@@ -10,7 +10,9 @@ Scans are cast lazily, since ray casting is the costly part: at every scan tick 
 rate) the true pose is recorded; the scan itself is cast when the localizer will use it (after
 amcl's ``update_min_d`` / ``update_min_a`` of /odom motion, or after a control through
 :meth:`WorldSim.initial_pose` / :meth:`WorldSim.start_localization`) or when
-:attr:`WorldSim.scan` is read: either way it is the scan of that tick, exactly.
+:attr:`WorldSim.scan` is read: either way it is the scan of that tick, exactly. The localizer
+gets it with /odom at the scan's stamp (:meth:`WorldSim.odom_at`, interpolated between the
+/odom samples around it, as amcl's tf lookup does), once /odom has reached that stamp.
 
 It reads the robot's truth only through :class:`~lowerbase.world.truth.LoopTruth`; the
 emulator's frame is placed on the map at the start pose (``map_from_truth``). What a ROS node
@@ -133,6 +135,10 @@ class WorldSim:
         self._tick: tuple[float, Pose2D] | None = None  #: the last scan tick: (t, true pose)
         self._scan: LaserScan | None = None
         self._fed: Pose2D | None = None  #: /odom when the localizer last got a scan
+        #: the last two /odom samples (stamp, pose): the scan's odometry is interpolated
+        self._odom_hist: list[tuple[float, Pose2D]] = []
+        #: a scan tick (t, true pose) the localizer will use once /odom reaches its stamp
+        self._pending: tuple[float, Pose2D] | None = None
         self.frame: CameraFrame | None = None  #: the latest camera frame
         self.estimate: PoseEstimate | None = None  #: the latest /amcl_pose
         self.scans = self.frames = 0
@@ -196,6 +202,7 @@ class WorldSim:
         """One control period of the emulator and driver, then the sensors that are due."""
         self.loop.step()
         now = self.loop.now
+        self._record_odom()
         if now + 1e-9 >= self._next_scan:
             self._next_scan += self._scan_period
             self._sense_scan(now)
@@ -225,8 +232,53 @@ class WorldSim:
         if ref is not None and math.hypot(odom[0] - ref[0], odom[1] - ref[1]) < p.update_min_d \
                 and abs(wrap_scalar(odom[2] - ref[2])) < p.update_min_a:
             return  # the localizer would skip it (amcl's thresholds): no need to cast it
+        self._pending = self._tick  # a newer due tick replaces one still waiting for /odom
+        self._feed()
+
+    def _record_odom(self) -> None:
+        odo = self.loop.driver.odometry
+        if odo is None or not math.isfinite(odo.stamp):
+            return
+        if self._odom_hist and odo.stamp <= self._odom_hist[-1][0]:
+            return
+        pose = self.odom_pose()
+        assert pose is not None
+        self._odom_hist = [*self._odom_hist[-1:], (odo.stamp, pose)]
+        if self._pending is not None:
+            self._feed()
+
+    def odom_at(self, t: float) -> Pose2D | None:
+        """/odom at time ``t``, interpolated between the samples around it (as tf2 looks up
+        the odom transform at a scan's stamp); None until a sample at or after ``t`` came."""
+        if not self._odom_hist or self._odom_hist[-1][0] < t:
+            return None
+        (t1, p1) = self._odom_hist[-1]
+        if len(self._odom_hist) == 1 or t1 == t:
+            return p1
+        (t0, p0) = self._odom_hist[0]
+        if t <= t0:
+            return p0
+        f = (t - t0) / (t1 - t0)
+        return (p0[0] + f * (p1[0] - p0[0]), p0[1] + f * (p1[1] - p0[1]),
+                wrap_scalar(p0[2] + f * wrap_scalar(p1[2] - p0[2])))
+
+    def _feed(self) -> None:
+        """Give the pending scan to the localizer with /odom at its stamp, once that exists."""
+        assert self._pending is not None
+        t, pose = self._pending
+        odom = self.odom_at(t)
+        if odom is None:
+            return  # /odom has not reached the scan's stamp yet (amcl's tf message filter)
+        self._pending = None
+        if not self.localizer.running:
+            return
+        if self._tick is not None and self._tick[0] == t:
+            scan = self.scan
+        else:
+            scan = self.rig.scan(self.scene_at(t), pose, t)
+            self.scans += 1
         self._fed = odom
-        est = loc.update(odom, self.scan)  # type: ignore[arg-type]
+        est = self.localizer.update(odom, scan)  # type: ignore[arg-type]
         if est is not None:
             self.estimate = est
 

@@ -132,3 +132,39 @@ def test_bad_input_is_one_line_and_leaves_the_loop_alone(
 def test_a_place_name_is_a_start_pose() -> None:
     w = WorldSim(WorldConfig(start="A1-01", localization="off"))
     assert w.true_pose() == pytest.approx((9.5, 4.75, 0.0))
+
+
+def test_the_localizer_gets_odom_at_the_scans_stamp() -> None:
+    """amcl looks the odom transform up at the scan's stamp (tf2 interpolation): the pose fed
+    with each scan lies between the /odom samples around the scan's stamp, not the last
+    sample before it (which is 20 ms old at every scan tick of this loop)."""
+    w = started(WorldConfig(start=LANE, seed=2))
+    samples: list[tuple[float, tuple[float, float, float]]] = []
+    fed: list[tuple[float, tuple[float, float, float]]] = []
+    update = w.localizer.update
+
+    def spy(odom, scan):  # type: ignore[no-untyped-def]
+        fed.append((scan.stamp, odom))
+        return update(odom, scan)
+
+    w.localizer.update = spy  # type: ignore[method-assign]
+
+    def record(s: WorldSim) -> None:
+        odo = s.loop.driver.odometry
+        pose = s.odom_pose()
+        if odo is not None and pose is not None and (not samples or odo.stamp > samples[-1][0]):
+            samples.append((odo.stamp, pose))
+
+    w.drive(0.5, 0.4, 6.0, on_step=record)
+    assert len(fed) >= 5
+    stamps = [t for t, _ in samples]
+    for t, odom in fed[1:]:
+        i = next(k for k, s in enumerate(stamps) if s >= t)
+        (t0, p0), (t1, p1) = samples[i - 1], samples[i]
+        assert t0 < t <= t1
+        f = (t - t0) / (t1 - t0)
+        assert 0.0 < f <= 1.0
+        assert odom[0] == pytest.approx(p0[0] + f * (p1[0] - p0[0]), abs=1e-12)
+        assert odom[1] == pytest.approx(p0[1] + f * (p1[1] - p0[1]), abs=1e-12)
+        assert wrap_scalar(odom[2] - (p0[2] + f * wrap_scalar(p1[2] - p0[2]))) == \
+            pytest.approx(0.0, abs=1e-12)

@@ -168,3 +168,16 @@ def test_bad_input_is_refused() -> None:
         planner.make_plan((1, 1, 0), (2, 2, 0), tolerance=-1.0)
     with pytest.raises(PlanningError, match="goal"):
         planner.make_plan((1, 1, 0), (2, float("inf"), 0))
+
+
+def test_plans_on_the_navigation_global_costmap() -> None:
+    from lowerbase.navigation.costmap import global_costmap
+
+    grid = load_map("warehouse")
+    costmap = global_costmap(grid)
+    planner = GlobalPlanner.from_costmap(costmap, footprint=PADDED.points)
+    goal = (21.0, 9.75, 3.0)
+    plan = planner.make_plan((4.0, 4.0, 0.0), goal)
+    assert plan.ok and plan.poses[-1] == pytest.approx(goal)
+    for pose in plan.poses[1:-1]:
+        assert contact(pose, grid, footprint=PADDED) is None

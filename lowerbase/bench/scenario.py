@@ -20,7 +20,7 @@ import math
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -28,6 +28,9 @@ from lowerbase.errors import ConfigError
 from lowerbase.files import read_toml
 from lowerbase.firmware_model.faults import Fault, parse_fault
 from lowerbase.protocol.status_codes import StatusBit, describe
+
+if TYPE_CHECKING:
+    from lowerbase.bench.scenario_legged import LeggedScenario
 
 #: RobotState value table of SystemStatus (chassis.dbc)
 ROBOT_STATES = ("Boot", "Standby", "Active", "EmergencyStop", "Fault")
@@ -573,7 +576,7 @@ class Scenario:
 # -- loading and validation --------------------------------------------------------------------
 
 _TOP = {"scenario", "initial", "timeline", "expect", "world"}
-_SCENARIO_KEYS = {"name", "description", "duration", "profile", "sample_period"}
+_SCENARIO_KEYS = {"name", "description", "duration", "profile", "sample_period", "robot"}
 _INITIAL_KEYS = {"soc", "x", "y", "yaw", "charger"}
 
 
@@ -681,9 +684,30 @@ def load_scenario(path: str | Path) -> Scenario:
     return scenario_from_dict(read_toml(p, "scenario"), source=str(p), base=p.parent)
 
 
+def robot_of(data: Mapping[str, Any]) -> str:
+    """``[scenario] robot``: "wheeled" (the default) or "legged" (scenario_legged.py)."""
+    head = data.get("scenario")
+    robot = head.get("robot", "wheeled") if isinstance(head, Mapping) else "wheeled"
+    return robot if isinstance(robot, str) else "wheeled"
+
+
+def load_any_scenario(path: str | Path) -> Scenario | LeggedScenario:
+    """A wheeled or a legged (``robot = "legged"``) scenario file."""
+    p = Path(path)
+    data = read_toml(p, "scenario")
+    if robot_of(data) == "legged":
+        from lowerbase.bench.scenario_legged import legged_scenario_from_dict
+
+        return legged_scenario_from_dict(data, source=str(p), base=p.parent)
+    return scenario_from_dict(data, source=str(p), base=p.parent)
+
+
 def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
                        base: Path | None = None) -> Scenario:
     """Build a Scenario from parsed TOML; errors start with ``source``."""
+    if robot_of(data) == "legged":
+        raise ConfigError(f"{source}: a legged scenario (robot = \"legged\"): load it with "
+                          "load_any_scenario or run it with `lowerbase scenario run`")
     try:
         return _build(data, source, base)
     except ConfigError as e:
@@ -699,6 +723,7 @@ def _build(data: Mapping[str, Any], source: str, base: Path | None) -> Scenario:
     description = head.text("description", "")
     sample_period = head.number("sample_period", 0.05, lo=0.005, hi=1.0)
     profile_text = head.text("profile", "default")
+    head.text("robot", "wheeled", choices=("wheeled", "legged"))
     head.done()
     profile: Path | None = None
     if profile_text != "default":
@@ -907,13 +932,23 @@ def library_dirs() -> list[Path]:
     return [d for d in dirs if d.is_dir()]
 
 
-def library() -> dict[str, Path]:
-    """Library scenarios by name (file stem); the repository's copy wins."""
+def library(robot: str = "wheeled") -> dict[str, Path]:
+    """Library scenarios of ``robot`` ("wheeled", "legged" or "all") by name (file stem); the
+    repository's copy wins."""
     found: dict[str, Path] = {}
     for d in reversed(library_dirs()):
         for p in sorted(d.glob("*.toml")):
             found[p.stem] = p
+    if robot != "all":
+        found = {k: p for k, p in found.items() if _robot_of_file(p) == robot}
     return dict(sorted(found.items()))
+
+
+def _robot_of_file(path: Path) -> str:
+    try:
+        return robot_of(read_toml(path, "scenario"))
+    except ConfigError:
+        return "wheeled"  # loading it says what is wrong
 
 
 def find_scenario(name_or_path: str) -> Path:
@@ -921,7 +956,7 @@ def find_scenario(name_or_path: str) -> Path:
     p = Path(name_or_path)
     if p.is_file():
         return p
-    lib = library()
+    lib = library("all")
     if name_or_path in lib:
         return lib[name_or_path]
     if p.suffix or "/" in name_or_path:

@@ -211,14 +211,20 @@ def print_outcomes(result: Any, out: Path | None, *, stream: Any = None) -> None
 
 def run_command(args: argparse.Namespace) -> int:
     from lowerbase.bench.demo import ProgressBar, StatusLine
-    from lowerbase.bench.scenario import find_scenario, load_scenario
+    from lowerbase.bench.scenario import find_scenario, load_any_scenario
 
     if args.foxglove is not None:  # a bad address is refused before anything is said
         from lowerbase.recording.live import parse_address
 
         parse_address(args.foxglove)
-    scenario = load_scenario(find_scenario(args.scenario))
+    scenario = load_any_scenario(find_scenario(args.scenario))
     out = Path(args.out) if args.out else default_out(scenario.name)
+    from lowerbase.bench.scenario_legged import LeggedScenario
+
+    if isinstance(scenario, LeggedScenario):  # robot = "legged": its own runner and report
+        from lowerbase.bench.legged_report import run_command as run_legged
+
+        return run_legged(args, scenario, out)
     progress: Any
     if args.status or args.mode != "simulated":
         progress = StatusLine(force=args.status or args.progress)
@@ -241,20 +247,20 @@ def run_command(args: argparse.Namespace) -> int:
 
 
 def check_command(args: argparse.Namespace) -> int:
-    from lowerbase.bench.scenario import find_scenario, load_scenario
+    from lowerbase.bench.scenario import find_scenario, load_any_scenario
 
     for name in args.scenarios:
-        s = load_scenario(find_scenario(name))
+        s = load_any_scenario(find_scenario(name))
         print(f"{s.source}: ok ({len(s.timeline)} timeline item(s), "
               f"{len(s.expectations)} expectation(s), {s.duration:g} s)")
     return 0
 
 
 def list_command(args: argparse.Namespace) -> int:
-    from lowerbase.bench.scenario import library, load_scenario
+    from lowerbase.bench.scenario import library, load_any_scenario
 
-    for name, path in library().items():
-        s = load_scenario(path)
+    for name, path in library("all").items():
+        s = load_any_scenario(path)
         print(f"{name:<20} {s.duration:5.0f} s  {s.description}")
     return 0
 

@@ -128,6 +128,8 @@ CHECKS: dict[str, Check] = {
         why="run in a scratch directory (the report goes to ./reports)"),
     "lowerbase scenario list": Check("run", "watchdog"),
     "lowerbase scenario run watchdog": Check("run", "scenario watchdog: PASSED"),
+    "lowerbase scenario run legged_stand_walk_sit": Check(
+        "run", "scenario legged_stand_walk_sit: PASSED"),
     "lowerbase scenario run my.toml --out rep/": Check("run", "PASSED",
                                                        files=("rep/index.html",)),
     "lowerbase scenario run estop --realtime": Check("start", "realtime"),

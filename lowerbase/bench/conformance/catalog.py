@@ -35,6 +35,7 @@ class WheelSample:
     t: float  #: reception time [s] (time.monotonic)
     count: int  #: encoder register [pulses], int32
     velocity: float  #: rim speed [m/s]
+    counter: int = -1  #: the frame's rolling Counter (-1: the frame carries none)
 
 
 #: WheelFeedback's wheel numbers (the catalog: 0 left, 1 right)
@@ -51,7 +52,8 @@ def wheel_samples(frames: Iterable[tuple[float, Mapping[str, Any]]]
         side = WHEELS.get(int(v["Wheel"]))
         if side is not None:  # multiplexed: Wheel selects LeftCount.. or RightCount..
             s = "" if "Count" in v else side.title()  # also the older per-frame layout
-            out[side].append(WheelSample(t, int(v[f"{s}Count"]), float(v[f"{s}Velocity"])))
+            out[side].append(WheelSample(t, int(v[f"{s}Count"]), float(v[f"{s}Velocity"]),
+                                         int(v.get("Counter", -1))))
     return out
 
 

@@ -10,6 +10,7 @@ docs/conformance.md; the constants below carry them.
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Callable
@@ -195,6 +196,26 @@ def _int32_delta(new: int, old: int) -> int:
     return (new - old + (1 << 31)) % (1 << 32) - (1 << 31)
 
 
+def _firmware_span(ctx: Context, samples: list[WheelSample]) -> float:
+    """The time [s] between the first and last sample on the lower computer's own time base:
+    the WheelFeedback cycles counted by the rolling Counter (gaps under 16 cycles resolved)
+    times the catalog cycle. Reception times would add the host's scheduling jitter, which a
+    firmware is not to blame for; without a Counter they are all there is."""
+    msg = ctx.codec.message("WheelFeedback")
+    cycle = msg.cycle_time
+    if not cycle or any(s.counter < 0 for s in samples):
+        return samples[-1].t - samples[0].t
+    modulo = 1 << msg.signal("Counter").length
+    steps = [(b.counter - a.counter) % modulo for a, b in itertools.pairwise(samples)]
+    received = samples[-1].t - samples[0].t
+    span = sum(steps) * cycle
+    # a counter that stalls or disagrees grossly with the clock is the counter check's
+    # finding (frame.WheelFeedback.counter), not this one's: fall back to reception times
+    if 0 in steps or abs(span - received) > 0.25 * received:
+        return received
+    return span
+
+
 def check_wheel_count(ctx: Context) -> Outcome:
     segments = _cached(ctx, "motions", _measure_motions)
     geo = geometry(ctx)
@@ -203,7 +224,7 @@ def check_wheel_count(ctx: Context) -> Outcome:
         for side, samples in seg.wheels.items():
             pulses = _int32_delta(samples[-1].count, samples[0].count)
             by_count = pulses * geo.metres_per_pulse(side)
-            span = samples[-1].t - samples[0].t
+            span = _firmware_span(ctx, samples)
             by_velocity = fmean(s.velocity for s in samples) * span
             measured[f"{seg.name}_{side}_count_m"] = round(by_count, 4)
             measured[f"{seg.name}_{side}_velocity_m"] = round(by_velocity, 4)

@@ -172,6 +172,17 @@ def run(args: argparse.Namespace) -> int:
         if feed is not None:
             feed.bind(mcu)
             mcu.receive = _fed(mcu.receive, feed, "rx")  # type: ignore[method-assign]
+        if args.map is not None:  # before the ready line: contact is on from the first step
+            _install_world(mcu, args)
+        hooks = _truth_hooks(args) + ([feed] if feed is not None else [])
+
+        def _stop(*_: Any) -> None:
+            stop.set()
+
+        # Ctrl-C and SIGTERM end the loop at a period boundary, whatever runs at that moment
+        # (a KeyboardInterrupt in the middle of start-up or of a hook left no clean exit)
+        signal.signal(signal.SIGTERM, _stop)
+        signal.signal(signal.SIGINT, _stop)
         where = getattr(bus, "stream", None)
         target = where.name if where is not None else describe(config)
         print(f"lowerbase emulate: lower computer on {target} "
@@ -185,13 +196,6 @@ def run(args: argparse.Namespace) -> int:
               + "; answering ParameterRequest, VersionRequest"
               + ("" if args.print_frames else " (--print shows every frame)"), flush=True)
 
-        def _stop(*_: Any) -> None:
-            stop.set()
-
-        signal.signal(signal.SIGTERM, _stop)
-        if args.map is not None:
-            _install_world(mcu, args)
-        hooks = _truth_hooks(args) + ([feed] if feed is not None else [])
         with contextlib.suppress(KeyboardInterrupt):
             run_mcu(mcu, bus, clock, duration=args.duration, stop=stop,
                     on_step=_chain(hooks), peers=peers)

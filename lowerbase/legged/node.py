@@ -34,7 +34,8 @@ from lowerbase.clock import RealClock
 from lowerbase.errors import ConfigError, RosUnavailableError, TransportError
 from lowerbase.legged.body import ALLOWED
 from lowerbase.legged.driver_core import LeggedDriverConfig, LeggedDriverCore
-from lowerbase.legged.protocol import N_BUSES, LocomotionState, legged_codec
+from lowerbase.legged.protocol import LocomotionState, legged_codec
+from lowerbase.legged.runner import leg_bus_configs  # the emulator's convention, one copy
 from lowerbase.legged.waypoints import TIMEOUT, GpsDatum, Waypoint
 
 log = logging.getLogger(__name__)
@@ -155,25 +156,6 @@ def load_legged_settings(params: Mapping[str, Any], ros_home: Path | None = None
         map_dir=Path(map_dir).expanduser() if map_dir else home / "maps",
         listen_velocity=params.get("listen_velocity", True))
     return settings, config
-
-
-def leg_bus_configs(config: dict[str, Any]) -> list[dict[str, Any]]:
-    """The four leg buses of one bus option: udp_multicast ports PORT..PORT+3 (same group),
-    virtual channels CHANNEL/0..3, otherwise four comma-separated channels (can0,can1,...)."""
-    interface, channel = config.get("interface"), config.get("channel")
-    if interface == "udp_multicast":
-        port = int(config.get("port", 43113))
-        if port + N_BUSES - 1 > 65535:
-            raise ConfigError(f"the legs need ports {port}..{port + N_BUSES - 1}; choose a "
-                              "lower port (--bus-kwargs port=P)")
-        return [{**config, "port": port + k} for k in range(N_BUSES)]
-    if interface == "virtual":
-        return [{**config, "channel": f"{channel}/{k}"} for k in range(N_BUSES)]
-    channels = str(channel or "").split(",")
-    if len(channels) != N_BUSES or not all(channels):
-        raise ConfigError(f"{interface} needs the four leg buses as one channel list, e.g. "
-                          f"-c can0,can1,can2,can3 (FR, FL, RR, RL), not {channel!r}")
-    return [{**config, "channel": c.strip()} for c in channels]
 
 
 def lower_ids() -> list[int]:

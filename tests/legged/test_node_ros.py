@@ -95,7 +95,7 @@ def test_four_leg_buses_from_one_bus_option() -> None:
         == ["v/0", "v/1", "v/2", "v/3"]
     socketcan = leg_bus_configs({"interface": "socketcan", "channel": "can0,can1,can2,can3"})
     assert [c["channel"] for c in socketcan] == ["can0", "can1", "can2", "can3"]
-    with pytest.raises(ConfigError, match="four leg buses"):
+    with pytest.raises(ConfigError, match="four channels"):
         leg_bus_configs({"interface": "socketcan", "channel": "can0"})
     with pytest.raises(ConfigError, match="lower port"):
         leg_bus_configs({**udp, "port": 65534})

@@ -13,11 +13,11 @@ import html
 import json
 import math
 import sys
-import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
 from lowerbase.bench.legged_sim import LeggedRunResult, run_legged_scenario
+from lowerbase.bench.report import junit_xml
 from lowerbase.bench.scenario_legged import STATES, LeggedScenario
 from lowerbase.errors import ConfigError
 
@@ -68,32 +68,9 @@ def write_legged_report(result: LeggedRunResult, out: Path) -> dict[str, Any]:
 
 def _junit(result: LeggedRunResult, path: Path) -> None:
     s = result.scenario
-    failed = sum(1 for _, o in result.outcomes if o.status == "failed") + result.interrupted
-    suite = ET.Element("testsuite", {
-        "name": f"scenario.{s.name}", "tests": str(len(result.outcomes) + result.interrupted),
-        "failures": str(failed), "errors": "0", "skipped": "0",
-        "time": f"{result.wall_time:.3f}"})
-    props = ET.SubElement(suite, "properties")
-    for key, value in (("source", s.source), ("mode", result.mode), ("robot", s.robot),
-                       ("simulated_s", f"{result.trace.end:g}")):
-        ET.SubElement(props, "property", {"name": key, "value": value})
-    for exp, outcome in result.outcomes:
-        case = ET.SubElement(suite, "testcase", {"classname": f"scenario.{s.name}",
-                                                 "name": exp.title(), "time": "0"})
-        if outcome.status == "failed":
-            node = ET.SubElement(case, "failure", {"message": outcome.detail, "type": exp.kind})
-            node.text = f"{exp.describe()}: {outcome.detail}"
-        else:
-            ET.SubElement(case, "system-out").text = outcome.detail
-    if result.interrupted:
-        case = ET.SubElement(suite, "testcase", {"classname": f"scenario.{s.name}",
-                                                 "name": "run completed", "time": "0"})
-        ET.SubElement(case, "failure", {"message": "interrupted", "type": "interrupted"})
-    root = ET.Element("testsuites")
-    root.append(suite)
-    tree = ET.ElementTree(root)
-    ET.indent(tree)
-    tree.write(path, encoding="utf-8", xml_declaration=True)
+    junit_xml(s.name, (("source", s.source), ("mode", result.mode), ("robot", s.robot),
+                       ("simulated_s", f"{result.trace.end:g}")),
+              result.outcomes, result.interrupted, result.wall_time, path)
 
 
 def _plot(result: LeggedRunResult, path: Path) -> None:

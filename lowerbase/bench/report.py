@@ -23,6 +23,7 @@ import html
 import json
 import math
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -111,20 +112,30 @@ EXTRA_FILES = ("run.log", "emulator.log", "truth.csv")
 def write_junit(result: RunResult, path: Path) -> None:
     """One testsuite, one testcase per expectation; failures and skips with their detail."""
     s = result.scenario
-    failed = [o for _, o in result.outcomes if o.status == "failed"]
-    skipped = [o for _, o in result.outcomes if o.status == "skipped"]
+    junit_xml(s.name, (("source", s.source), ("mode", result.mode),
+                       ("simulated_s", f"{result.trace.end:g}")),
+              result.outcomes, result.interrupted, result.wall_time, path)
+
+
+def junit_xml(name: str, properties: Sequence[tuple[str, str]],
+              outcomes: Sequence[tuple[Any, Any]], interrupted: bool, wall_time: float,
+              path: Path) -> None:
+    """The JUnit file of a scenario run (wheeled or legged): ``outcomes`` are (expectation,
+    outcome) pairs with ``exp.title()``, ``exp.kind``, ``exp.describe()`` and
+    ``outcome.status`` / ``outcome.detail``; an interrupted run adds one failed case."""
+    failed = [o for _, o in outcomes if o.status == "failed"]
+    skipped = [o for _, o in outcomes if o.status == "skipped"]
     suite = ET.Element("testsuite", {
-        "name": f"scenario.{s.name}", "tests": str(len(result.outcomes) + result.interrupted),
-        "failures": str(len(failed) + result.interrupted), "errors": "0",
-        "skipped": str(len(skipped)), "time": f"{result.wall_time:.3f}",
+        "name": f"scenario.{name}", "tests": str(len(outcomes) + interrupted),
+        "failures": str(len(failed) + interrupted), "errors": "0",
+        "skipped": str(len(skipped)), "time": f"{wall_time:.3f}",
     })
     props = ET.SubElement(suite, "properties")
-    for key, value in (("source", s.source), ("mode", result.mode),
-                       ("simulated_s", f"{result.trace.end:g}")):
+    for key, value in properties:
         ET.SubElement(props, "property", {"name": key, "value": value})
-    for exp, outcome in result.outcomes:
+    for exp, outcome in outcomes:
         case = ET.SubElement(suite, "testcase", {
-            "classname": f"scenario.{s.name}", "name": exp.title(), "time": "0"})
+            "classname": f"scenario.{name}", "name": exp.title(), "time": "0"})
         if outcome.status == "failed":
             node = ET.SubElement(case, "failure", {"message": outcome.detail,
                                                    "type": exp.kind})
@@ -133,8 +144,8 @@ def write_junit(result: RunResult, path: Path) -> None:
             ET.SubElement(case, "skipped", {"message": outcome.detail})
         else:
             ET.SubElement(case, "system-out").text = outcome.detail
-    if result.interrupted:
-        case = ET.SubElement(suite, "testcase", {"classname": f"scenario.{s.name}",
+    if interrupted:
+        case = ET.SubElement(suite, "testcase", {"classname": f"scenario.{name}",
                                                  "name": "run completed", "time": "0"})
         ET.SubElement(case, "failure", {"message": "interrupted", "type": "interrupted"})
     root = ET.Element("testsuites")

@@ -12,7 +12,7 @@ footprint contact) is what the robot can bump into; None (the default): open flo
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
-from typing import Any
+from typing import Any, TypeVar
 
 from lowerbase.clock import SimClock
 from lowerbase.driver.core import DriverConfig, DriverCore
@@ -24,7 +24,51 @@ from lowerbase.firmware_model.truth import Surroundings
 FrameTap = Callable[[float, str, int, bytes], None]
 
 
-class SimLoop:
+L = TypeVar("L", bound="SteppedLoop")
+
+
+class SteppedLoop:
+    """Runs a simulated loop forward; a subclass gives ``step()``, ``now`` [s], ``control_dt``
+    [s] (one step) and ``twist_driver`` (the driver core that takes twists)."""
+
+    control_dt: float
+    twist_driver: DriverCore
+
+    @property
+    def now(self) -> float:
+        raise NotImplementedError
+
+    def step(self) -> None:
+        raise NotImplementedError
+
+    def run(self: L, seconds: float, on_step: Callable[[L], None] | None = None) -> None:
+        for _ in range(round(seconds / self.control_dt)):
+            self.step()
+            if on_step is not None:
+                on_step(self)
+
+    def run_until(self: L, condition: Callable[[L], bool], timeout: float) -> bool:
+        """Step until ``condition`` holds (True) or ``timeout`` [s] of simulated time passes."""
+        end = self.now + timeout
+        while self.now < end:
+            if condition(self):
+                return True
+            self.step()
+        return condition(self)
+
+    def drive(self: L, linear: float, angular: float, seconds: float, smoothed: bool = False,
+              on_step: Callable[[L], None] | None = None) -> None:
+        """Publish a twist at 20 Hz (as a navigation stack does) for ``seconds``."""
+        every = max(1, round(0.05 / self.control_dt))
+        for k in range(round(seconds / self.control_dt)):
+            if k % every == 0:
+                self.twist_driver.set_twist(linear, angular, smoothed)
+            self.step()
+            if on_step is not None:
+                on_step(self)
+
+
+class SimLoop(SteppedLoop):
     def __init__(
         self,
         profile: Profile | None = None,
@@ -49,6 +93,8 @@ class SimLoop:
         self.mcu = Mcu(self.profile, self.clock, self._from_mcu, params_path=params_path,
                        bms=bms, faults=faults)
         self.driver = DriverCore(self._from_driver, self.clock, driver_config)
+        self.control_dt = self.mcu.dt
+        self.twist_driver = self.driver
         self.mcu.truth.surroundings = surroundings
 
     @property
@@ -86,29 +132,3 @@ class SimLoop:
             self.driver.on_frame(frame_id, data, stamp)
         self.driver.tick()
         self.clock.advance(self.mcu.dt)
-
-    def run(self, seconds: float, on_step: Callable[[SimLoop], None] | None = None) -> None:
-        for _ in range(round(seconds / self.mcu.dt)):
-            self.step()
-            if on_step is not None:
-                on_step(self)
-
-    def run_until(self, condition: Callable[[SimLoop], bool], timeout: float) -> bool:
-        """Step until ``condition`` holds (True) or ``timeout`` [s] of simulated time passes."""
-        end = self.now + timeout
-        while self.now < end:
-            if condition(self):
-                return True
-            self.step()
-        return condition(self)
-
-    def drive(self, linear: float, angular: float, seconds: float, smoothed: bool = False,
-              on_step: Callable[[SimLoop], None] | None = None) -> None:
-        """Publish a twist at 20 Hz (as a navigation stack does) for ``seconds``."""
-        every = max(1, round(0.05 / self.mcu.dt))
-        for k in range(round(seconds / self.mcu.dt)):
-            if k % every == 0:
-                self.driver.set_twist(linear, angular, smoothed)
-            self.step()
-            if on_step is not None:
-                on_step(self)

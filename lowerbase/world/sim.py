@@ -24,11 +24,11 @@ would publish is read off it: :attr:`WorldSim.scan`, :attr:`WorldSim.frame`,
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from lowerbase.bench.simloop import SimLoop
+from lowerbase.bench.simloop import SimLoop, SteppedLoop
 from lowerbase.errors import WorldError
 from lowerbase.firmware_model.profile import Profile
 from lowerbase.world.camera import CameraFrame, DepthCamera
@@ -87,7 +87,7 @@ def resolve_start(map_ref: str | Path | OccupancyGrid, grid: OccupancyGrid,
     return check_pose(start)
 
 
-class WorldSim:
+class WorldSim(SteppedLoop):
     """Emulator + driver + world on one simulated clock (see the module docstring)."""
 
     def __init__(self, config: WorldConfig | None = None, *, loop: SimLoop | None = None,
@@ -111,6 +111,8 @@ class WorldSim:
             raise WorldError("the camera is asked for but the profile's [sensors.camera] is "
                              "disabled")
         self.loop = loop if loop is not None else SimLoop(profile, bms="own")
+        self.control_dt = self.loop.mcu.dt
+        self.twist_driver = self.loop.driver
         tr = self.loop.mcu.truth
         self.map_from_truth: Pose2D = compose(start, inverse((tr.x, tr.y, tr.yaw)))
         localizer = Localizer(
@@ -293,29 +295,4 @@ class WorldSim:
         answer = self.localizer.start(on)
         self._fed = None
         return answer
-
-    def run(self, seconds: float, on_step: Callable[[WorldSim], None] | None = None) -> None:
-        for _ in range(round(seconds / self.loop.mcu.dt)):
-            self.step()
-            if on_step is not None:
-                on_step(self)
-
-    def run_until(self, condition: Callable[[WorldSim], bool], timeout: float) -> bool:
-        end = self.now + timeout
-        while self.now < end:
-            if condition(self):
-                return True
-            self.step()
-        return condition(self)
-
-    def drive(self, linear: float, angular: float, seconds: float, smoothed: bool = False,
-              on_step: Callable[[WorldSim], None] | None = None) -> None:
-        """Publish a twist at 20 Hz (as a navigation stack does) for ``seconds``."""
-        every = max(1, round(0.05 / self.loop.mcu.dt))
-        for k in range(round(seconds / self.loop.mcu.dt)):
-            if k % every == 0:
-                self.loop.driver.set_twist(linear, angular, smoothed)
-            self.step()
-            if on_step is not None:
-                on_step(self)
 

@@ -334,20 +334,29 @@ def profile_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> Profil
     """Build a Profile from parsed TOML; ConfigError messages start with ``source``."""
     try:
         # [sensors] is parsed and validated by lowerbase.world.sensors, not here
-        _reject_unknown(data, [*SECTIONS, "battery", "sensors"], "section", "")
-        sections: dict[str, Any] = {}
-        for name, cls in SECTIONS.items():
-            table = data.get(name, {})
-            if not isinstance(table, Mapping):
-                raise ConfigError(f"[{name}] must be a table, not {table!r}")
-            _reject_unknown(table, [f.name for f in fields(cls)], "key", f"{name}.")  # type: ignore[arg-type]
-            sections[name] = cls(**table)
-        battery = data.get("battery", {})
-        if not isinstance(battery, Mapping):
-            raise ConfigError(f"[battery] must be a table, not {battery!r}")
-        return Profile(**sections, battery=dict(battery), source=source)
+        sections, battery = build_sections(data, SECTIONS, ignored=("sensors",))
+        return Profile(**sections, battery=battery, source=source)
     except ConfigError as e:
         raise ConfigError(f"{source}: {e}") from None
+
+
+def build_sections(data: Mapping[str, Any], classes: Mapping[str, type[_Validated]],
+                   ignored: tuple[str, ...] = ()) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The validated section objects of a profile's tables (``classes``: table name -> section
+    dataclass) and its opaque [battery] table; unknown tables and keys are refused with a
+    did-you-mean, tables in ``ignored`` are left to their own parser."""
+    _reject_unknown(data, [*classes, "battery", *ignored], "section", "")
+    sections: dict[str, Any] = {}
+    for name, cls in classes.items():
+        table = data.get(name, {})
+        if not isinstance(table, Mapping):
+            raise ConfigError(f"[{name}] must be a table, not {table!r}")
+        _reject_unknown(table, [f.name for f in fields(cls)], "key", f"{name}.")  # type: ignore[arg-type]
+        sections[name] = cls(**table)
+    battery = data.get("battery", {})
+    if not isinstance(battery, Mapping):
+        raise ConfigError(f"[battery] must be a table, not {battery!r}")
+    return sections, dict(battery)
 
 
 def _reject_unknown(table: Mapping[str, Any], known: list[str], what: str, prefix: str) -> None:

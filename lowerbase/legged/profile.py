@@ -14,7 +14,7 @@ and docs/legged.md.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from types import MappingProxyType
@@ -23,7 +23,7 @@ from typing import Any, ClassVar
 from lowerbase.bms.config import BatteryConfig, battery_config_from_mapping
 from lowerbase.errors import ConfigError
 from lowerbase.files import read_toml
-from lowerbase.firmware_model.profile import _fmt, _num, _reject_unknown, _Validated
+from lowerbase.firmware_model.profile import _fmt, _num, _Validated, build_sections
 from lowerbase.legged.actuator import ActuatorParams
 from lowerbase.legged.body import Body, BodyParams
 from lowerbase.legged.gait import LegGeometry, Trot
@@ -246,17 +246,7 @@ def load_legged_profile(path: str | Path | None = None) -> LeggedProfile:
 def legged_profile_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> LeggedProfile:
     """A LeggedProfile from parsed TOML; ConfigError messages start with ``source``."""
     try:
-        _reject_unknown(data, [*SECTIONS, "battery"], "section", "")
-        sections: dict[str, Any] = {}
-        for name, cls in SECTIONS.items():
-            table = data.get(name, {})
-            if not isinstance(table, Mapping):
-                raise ConfigError(f"[{name}] must be a table, not {table!r}")
-            _reject_unknown(table, [f.name for f in fields(cls)], "key", f"{name}.")  # type: ignore[arg-type]
-            sections[name] = cls(**table)
-        battery = data.get("battery", {})
-        if not isinstance(battery, Mapping):
-            raise ConfigError(f"[battery] must be a table, not {battery!r}")
-        return LeggedProfile(**sections, battery_table=dict(battery), source=source)
+        sections, battery = build_sections(data, SECTIONS)
+        return LeggedProfile(**sections, battery_table=battery, source=source)
     except ConfigError as e:
         raise ConfigError(f"{source}: {e}") from None

@@ -190,22 +190,11 @@ def _chain(first: tuple[float, int, bytes, bool],
 # -- ground truth out of the emulator ----------------------------------------------------------
 
 
-class TruthLog:
-    """``on_step`` hook of the MCU runner: the ground truth as CSV every ``period`` [s].
+class TruthHook:
+    """``on_step`` hook of the MCU runner that hands the ground truth to :meth:`emit` at most
+    every ``period`` [s] of emulator time, with ``t`` [s] since the first boot."""
 
-    Columns ``t,x,y,yaw,v,w``: t [s] since the first boot, pose [m, m, rad], twist [m/s,
-    rad/s]. Lines are flushed as written, so another process can follow the file.
-    """
-
-    HEADER = "t,x,y,yaw,v,w\n"
-
-    def __init__(self, path: str | Path, period: float = 0.02) -> None:
-        self.path = Path(path)
-        try:
-            self._file: TextIO = self.path.open("w", encoding="utf-8", buffering=1)
-        except OSError as exc:
-            raise ConfigError(f"cannot write {self.path}: {exc.strerror or exc}") from None
-        self._file.write(self.HEADER)
+    def __init__(self, period: float) -> None:
         self.period = period
         self._t0: float | None = None
         self._next = -math.inf
@@ -217,8 +206,33 @@ class TruthLog:
         if now < self._next:
             return
         self._next = now + self.period - 1e-9
+        self.emit(mcu, now - self._t0)
+
+    def emit(self, mcu: Any, t: float) -> None:
+        raise NotImplementedError
+
+
+class TruthLog(TruthHook):
+    """``on_step`` hook of the MCU runner: the ground truth as CSV every ``period`` [s].
+
+    Columns ``t,x,y,yaw,v,w``: t [s] since the first boot, pose [m, m, rad], twist [m/s,
+    rad/s]. Lines are flushed as written, so another process can follow the file.
+    """
+
+    HEADER = "t,x,y,yaw,v,w\n"
+
+    def __init__(self, path: str | Path, period: float = 0.02) -> None:
+        super().__init__(period)
+        self.path = Path(path)
+        try:
+            self._file: TextIO = self.path.open("w", encoding="utf-8", buffering=1)
+        except OSError as exc:
+            raise ConfigError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+        self._file.write(self.HEADER)
+
+    def emit(self, mcu: Any, t: float) -> None:
         tr = mcu.truth
-        self._file.write(f"{now - self._t0:.4f},{tr.x:.6f},{tr.y:.6f},{tr.yaw:.6f},"
+        self._file.write(f"{t:.4f},{tr.x:.6f},{tr.y:.6f},{tr.yaw:.6f},"
                          f"{tr.v:.5f},{tr.w:.5f}\n")
 
     def close(self) -> None:

@@ -35,6 +35,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from lowerbase.bench.recording import TruthHook
 from lowerbase.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -119,7 +120,7 @@ def _family(host: str) -> socket.AddressFamily:
     return socket.AF_INET6 if ":" in host else socket.AF_INET
 
 
-class TruthSender:
+class TruthSender(TruthHook):
     """MCU runner ``on_step`` hook: the ground truth as one datagram every ``period`` [s].
 
     ``contact(mcu)`` says whether the footprint touches something (default: the truth's
@@ -130,26 +131,18 @@ class TruthSender:
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
                  period: float = DEFAULT_PERIOD,
                  contact: Callable[[Any], bool] | None = None) -> None:
+        super().__init__(period)
         self.address = (host, port)
-        self.period = period
         self.contact = contact
         self.sent = 0
         self.errors = 0
         self._sock = socket.socket(_family(host), socket.SOCK_DGRAM)
-        self._t0: float | None = None
-        self._next = -math.inf
 
-    def __call__(self, mcu: Any) -> None:
-        now = mcu.clock.now()
-        if self._t0 is None:
-            self._t0 = mcu.boot_time
-        if now < self._next:
-            return
-        self._next = now + self.period - 1e-9
+    def emit(self, mcu: Any, t: float) -> None:
         tr = mcu.truth
         touching = bool(self.contact(mcu) if self.contact is not None
                         else getattr(tr, "blocked", False))
-        sample = TruthSample(now - self._t0, tr.x, tr.y, tr.yaw, tr.v, tr.w, touching,
+        sample = TruthSample(t, tr.x, tr.y, tr.yaw, tr.v, tr.w, touching,
                              self.sent, int(getattr(mcu, "boot_counter", 0)))
         self.send(sample)
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import importlib
 import os
 import queue
 import socket
@@ -9,7 +11,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -122,3 +124,22 @@ def lowerbase_proc() -> Iterator[Any]:
     yield start
     for p in procs:
         p.stop()
+
+
+@contextlib.contextmanager
+def first_on_path(out: Path, generated: Callable[[str], bool]) -> Iterator[Path]:
+    """Put freshly generated message packages in ``out`` first on ``sys.path``; modules for
+    which ``generated(name)`` holds that were already imported (a venv .pth to build/ros) are
+    hidden meanwhile and restored after, so tests check what this checkout generates."""
+    saved = {k: v for k, v in sys.modules.items() if generated(k)}
+    for k in saved:
+        del sys.modules[k]
+    sys.path.insert(0, str(out))
+    importlib.invalidate_caches()
+    try:
+        yield out
+    finally:
+        sys.path.remove(str(out))
+        for k in [k for k in sys.modules if generated(k)]:
+            del sys.modules[k]
+        sys.modules.update(saved)

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import importlib
 import os
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 
 import pytest
+
+from tests.conftest import first_on_path
 
 ROS_MODULES = (
     "rospy",
@@ -80,18 +81,8 @@ def woosh_msgs_build(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]
 
     out = tmp_path_factory.mktemp("ros")
     msggen.generate(out)
-    saved = {k: v for k, v in sys.modules.items() if _is_woosh(k)}
-    for k in saved:
-        del sys.modules[k]
-    sys.path.insert(0, str(out))
-    importlib.invalidate_caches()
-    try:
-        yield out
-    finally:
-        sys.path.remove(str(out))
-        for k in [k for k in sys.modules if _is_woosh(k)]:
-            del sys.modules[k]
-        sys.modules.update(saved)
+    with first_on_path(out, _is_woosh) as path:
+        yield path
 
 
 @pytest.fixture(scope="session")

@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import importlib
 import shutil
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 
 import pytest
 
+from tests.conftest import first_on_path
 from tests.driver.conftest import ROS_MODULES, RosMaster, is_ci, require_ros
 
 LEGGED_PKG = "lowerbase_legged_msgs"
@@ -38,18 +38,8 @@ def legged_build(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     out = tmp_path_factory.mktemp("legged_ros")
     for package in msggen.PACKAGES:
         msggen.generate(out, package=package)
-    saved = {k: v for k, v in sys.modules.items() if _generated(k)}
-    for k in saved:
-        del sys.modules[k]
-    sys.path.insert(0, str(out))
-    importlib.invalidate_caches()
-    try:
-        yield out
-    finally:
-        sys.path.remove(str(out))
-        for k in [k for k in sys.modules if _generated(k)]:
-            del sys.modules[k]
-        sys.modules.update(saved)
+    with first_on_path(out, _generated) as path:
+        yield path
 
 
 @pytest.fixture(scope="module")

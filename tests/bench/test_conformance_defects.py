@@ -141,7 +141,9 @@ def test_two_lower_computers_on_one_bus_are_warned_once(
     bus = bus_cli_args(udp_bus_config)
     for _ in range(2):
         lowerbase_proc("emulate", *bus, "--no-bms").wait_for("lower computer on")
-    main(["conformance", *bus, "--only", "frame.Heartbeat.present", "--observe", "2.5"])
+    # 4 s: eight Heartbeats a stream, so a stream the loaded host broke up (a stalled sender
+    # catching up) still reaches the monitor's three consistent ones
+    main(["conformance", *bus, "--only", "frame.Heartbeat.present", "--observe", "4"])
     err = capsys.readouterr().err
     warnings = [line for line in err.splitlines() if "WARNING" in line]
     assert len(warnings) == 1, err

@@ -1,0 +1,514 @@
+"""move_base without ROS: :class:`Navigator`, goals, replanning and navigation modes on the
+simulated clock.
+
+The caller (``lowerbase.navigation.sim.NavSim`` on a WorldSim, or the rospy layer) feeds it the
+robot's map pose and sensor data and sends the twist it answers, at 20 Hz:
+
+- :meth:`Navigator.update_sensors` marks and clears the local costmap (rolling window) from the
+  merged /scan and the depth camera's cloud;
+- :meth:`Navigator.tick` plans (on the global costmap with the local marks pasted in, see
+  ``combined``), follows the plan with :class:`PathController`, and runs the goal's state machine
+  (actionlib's: PENDING -> ACTIVE -> SUCCEEDED / ABORTED / PREEMPTED):
+
+  * reached within ``xy_tolerance`` / ``yaw_tolerance`` (5 cm, 2 deg): SUCCEEDED;
+  * BLOCKED by an obstacle: wait or replan around it as the navigation mode says (``modes``);
+    no path: ABORTED; more than ``max_replans`` replans while blocked: ABORTED;
+  * no progress (``progress_distance`` / ``progress_angle``) for ``stuck_timeout`` s while not
+    waiting for an obstacle (an e-stop, a wheel fault, a robot pushed against something):
+    ABORTED;
+  * a new goal preempts the active one (PREEMPTED), so does :meth:`Navigator.cancel`.
+
+``poses`` with a goal is a path to follow through: ``execution_mode`` 1 point by point (each pose
+is reached within the tolerances, yaw included, and the robot stops there before the next),
+0 free (one path planned between consecutive poses, driven through without stopping; only the
+target is reached within the tolerances).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from lowerbase.errors import WorldError
+from lowerbase.navigation.combined import CombinedCosts
+from lowerbase.navigation.controller import (
+    ControllerConfig,
+    Limits,
+    PathController,
+    Status,
+    wrap,
+)
+from lowerbase.navigation.costmap import (
+    CostmapParams,
+    LayeredCostmap,
+    global_costmap,
+    local_costmap,
+)
+from lowerbase.navigation.layers import InflationParams
+from lowerbase.navigation.modes import Mode, NavDir, NavigationModeGoal
+from lowerbase.navigation.planner import (
+    INSCRIBED,
+    FootprintCells,
+    GlobalPlanner,
+    Plan,
+    PlanningError,
+)
+from lowerbase.world.footprint import DEFAULT_POINTS, Footprint
+from lowerbase.world.grid import OccupancyGrid
+from lowerbase.world.lidar import LaserScan
+
+Pose = tuple[float, float, float]
+
+__all__ = ["GoalResult", "GoalState", "Mode", "NavCommand", "NavigationError",
+           "NavigationModeGoal", "Navigator", "NavigatorConfig", "Pose"]
+
+
+class NavigationError(WorldError):
+    """A navigation request that cannot be taken: a NaN or off-map goal."""
+
+
+class GoalState(enum.Enum):
+    """actionlib's goal states; SUCCEEDED, ABORTED and PREEMPTED are final."""
+
+    PENDING = "pending"
+    ACTIVE = "active"
+    SUCCEEDED = "succeeded"
+    ABORTED = "aborted"
+    PREEMPTED = "preempted"
+
+    @property
+    def terminal(self) -> bool:
+        return self in (GoalState.SUCCEEDED, GoalState.ABORTED, GoalState.PREEMPTED)
+
+
+def _inflation() -> CostmapParams:
+    return CostmapParams(inflation=InflationParams(inflation_radius=1.0, cost_scaling_factor=3.0))
+
+
+@dataclass(frozen=True)
+class NavigatorConfig:
+    """move_base's parameters for the Navigator (times in s, distances in m, angles in rad)."""
+
+    xy_tolerance: float = 0.05
+    yaw_tolerance: float = math.radians(2.0)
+    blocked_patience: float = 1.0  #: BLOCKED this long before replanning (modes 0, 1)
+    max_replans: int = 5  #: replans while blocked per goal before ABORTED
+    stuck_timeout: float = 10.0  #: no progress this long (not waiting): ABORTED
+    progress_distance: float = 0.05  #: moving this far counts as progress
+    progress_angle: float = math.radians(5.0)  #: turning this far counts as progress
+    default_max_speed: float = 0.6  #: cruise speed when the mode's max_speed <= 0
+    goal_tolerance: float = 0.0  #: the planner's tolerance for goals (GetPlan's)
+    replan_interval: float = 0.5  #: at most one early replan (path ahead blocked) per this
+    costmap: CostmapParams = field(default_factory=_inflation)  #: global costmap
+    local_size: float = 5.0  #: local rolling window, square [m]
+    cost_scale: float = 50.0  #: planner: a cell of cost c is 1 + c/cost_scale long
+    fuzzy_cost_scale: float = 1000.0  #: the same in mode 0 (inflation weighs little)
+    clearance_margin: float = 0.1  #: keep-out beyond the footprint's radius (modes 0, 1)
+    controller: ControllerConfig = field(default_factory=ControllerConfig)
+
+    def __post_init__(self) -> None:
+        for name in ("xy_tolerance", "yaw_tolerance", "blocked_patience", "stuck_timeout",
+                     "progress_distance", "progress_angle", "default_max_speed",
+                     "goal_tolerance", "replan_interval", "local_size", "cost_scale",
+                     "fuzzy_cost_scale", "clearance_margin"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise NavigationError(f"navigator {name} = {v!r} is invalid; allowed: >= 0")
+        if not isinstance(self.max_replans, int) or self.max_replans < 0:
+            raise NavigationError(f"navigator max_replans = {self.max_replans!r} is invalid; "
+                                  f"allowed: an integer >= 0")
+
+
+@dataclass(frozen=True)
+class NavCommand:
+    """One control step: the twist to send (/base_cmd_vel), the goal's state, the controller's
+    status and why (the reason of a final state, or what the robot waits for)."""
+
+    linear: float
+    angular: float
+    state: GoalState
+    status: Status
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class GoalResult:
+    """A goal that ended: its id (1, 2, ... in sending order), final state, reason, time."""
+
+    goal_id: int
+    state: GoalState
+    reason: str
+    stamp: float
+
+
+def _pose(value: Sequence[float], what: str) -> Pose:
+    try:
+        x, y, yaw = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise NavigationError(f"the {what} is (x, y, yaw) numbers, got {value!r}") from None
+    if not all(math.isfinite(v) for v in (x, y, yaw)):
+        raise NavigationError(f"the {what} must be finite numbers, got ({x}, {y}, {yaw})")
+    return x, y, yaw
+
+
+class Navigator:
+    """move_base's core (see the module docstring)."""
+
+    def __init__(self, grid: OccupancyGrid, config: NavigatorConfig | None = None,
+                 limits: Limits | None = None,
+                 footprint: Footprint | Sequence[tuple[float, float]] = DEFAULT_POINTS
+                 ) -> None:
+        self.config = cfg = config or NavigatorConfig()
+        self.grid = grid
+        fp = footprint if isinstance(footprint, Footprint) else Footprint(tuple(footprint))
+        params = replace(cfg.costmap, footprint=fp)
+        self.global_costmap: LayeredCostmap = global_costmap(grid, params)
+        centre = (grid.origin[0] + grid.width * grid.resolution / 2,
+                  grid.origin[1] + grid.height * grid.resolution / 2, 0.0)
+        self.local_costmap: LayeredCostmap = local_costmap(
+            grid, centre, replace(params, width=cfg.local_size, height=cfg.local_size,
+                                  static_map=False, resolution=grid.resolution))
+        self.combined = CombinedCosts(self.global_costmap, self.local_costmap)
+        self.limits = limits or Limits()
+        self.mode = NavigationModeGoal()
+        self._footprints()
+        self.controller = PathController(
+            self.combined.costs, grid.resolution, self.combined.origin,
+            footprint=[tuple(p) for p in self._fp_forward.points], limits=self.limits,
+            config=self._controller_config())
+        self.state: GoalState | None = None  #: None before the first goal
+        self.goal_id = 0
+        self.target: Pose | None = None
+        self.results: list[GoalResult] = []  #: every goal that ended, oldest first
+        self.reason = ""  #: the result's reason (or what the active goal waits for)
+        self.feedback_pose: Pose | None = None
+        self.distance_remaining = 0.0
+        self.replans = 0  #: replans of the current goal because it was blocked
+        self.early_replans = 0  #: replans because the local costmap blocked the path ahead
+        self.plans = 0
+        self.path: list[Pose] = []  #: the plan being followed (map frame)
+        self._reset_goal_state()
+
+    # -- setup -----------------------------------------------------------------------------------
+    def _footprints(self) -> None:
+        pts = [(float(x), float(y)) for x, y in self.global_costmap.padded.points]
+        res = self.grid.resolution
+        self._fp_forward = FootprintCells(pts, res)
+        self._fp_reverse = FootprintCells([(-x, -y) for x, y in pts], res)
+
+    def _controller_config(self) -> ControllerConfig:
+        cfg = self.config
+        speed = self.mode.max_speed if self.mode.max_speed > 0 else cfg.default_max_speed
+        speed = min(speed, self.limits.max_linear)
+        return replace(cfg.controller, max_speed=max(speed, 1e-3),
+                       xy_tolerance=cfg.xy_tolerance, yaw_tolerance=cfg.yaw_tolerance)
+
+    def _reset_goal_state(self) -> None:
+        self._waypoints: list[Pose] = []
+        self._point_by_point = False
+        self._leg_ends: list[int] = []  # free mode: path index where each waypoint is
+        self._need_plan = False
+        self._blocked_since: float | None = None
+        self._progress_ref: tuple[float, Pose] | None = None
+        self._last_early = -math.inf
+        self._seen_version = -1
+        self._reverse = False
+
+    def set_limits(self, limits: Limits) -> None:
+        """maxLinear/maxAngular and the acceleration limits (driver_base's /parameter)."""
+        self.limits = limits
+        self.controller.limits = limits
+        self.controller.config = self._controller_config()
+
+    def set_mode(self, goal: NavigationModeGoal) -> tuple[bool, str]:
+        """/navigation_mode: (accepted, message). A refused goal changes nothing."""
+        why = goal.check()
+        if why:
+            return False, f"navigation mode refused: {why}"
+        self.mode = goal
+        self.controller.config = self._controller_config()
+        note = ""
+        if goal.navigation_mode == Mode.WAIT_THEN_AVOID and goal.waiting_timeout < 0:
+            note = " (waiting_timeout < 0 in mode 3: precise avoidance)"
+        return True, f"navigation mode {goal.effective_mode.name.lower()}{note}"
+
+    def set_footprint(self, points: Sequence[Sequence[float]]) -> None:
+        """A new footprint for both costmaps and the footprint checks (WorldError if bad)."""
+        self.global_costmap.set_footprint(points)
+        self.local_costmap.set_footprint(points)
+        self.combined.invalidate_static()
+        self._footprints()
+        self.controller.footprint = self._fp_reverse if self._reverse else self._fp_forward
+        self.combined.refresh()
+
+    # -- sensors and plans -----------------------------------------------------------------------
+    def update_sensors(self, pose: Sequence[float], scan: LaserScan | None = None,
+                       cloud: tuple[np.ndarray, Sequence[float]] | None = None) -> None:
+        """Mark and clear the local costmap at the robot's map ``pose`` (see
+        :meth:`LayeredCostmap.update`)."""
+        self.local_costmap.update(pose, scan=scan, cloud=cloud)
+        self.combined.refresh()
+
+    def clear_costmaps(self) -> None:
+        """/move_base/clear_costmaps."""
+        self.global_costmap.clear()
+        self.local_costmap.clear()
+        self.combined.refresh()
+
+    def _clearance(self) -> float:
+        cm = self.global_costmap
+        r = cm.inscribed_radius if self.mode.fuzzy else cm.circumscribed_radius
+        return r + self.config.clearance_margin
+
+    def _planner(self) -> GlobalPlanner:
+        scale = self.config.fuzzy_cost_scale if self.mode.fuzzy else self.config.cost_scale
+        planner = GlobalPlanner(self.combined.planning_costs(self._clearance()),
+                                self.grid.resolution, self.combined.origin, cost_scale=scale)
+        planner.footprint = self._fp_forward
+        return planner
+
+    def make_plan(self, start: Sequence[float], goal: Sequence[float],
+                  tolerance: float = 0.0) -> Plan:
+        """/move_base/make_plan (nav_msgs/GetPlan): a plan on the global costmap with the local
+        marks and the mode's clearance; empty with a reason when there is none. A start inside
+        an obstacle's inflation is planned out of (the robot may be there after localization
+        error); a NaN pose or bad tolerance: :class:`PlanningError`."""
+        planner = self._planner()
+        s = _pose(start, "start")
+        r, c = planner.cell(s[0], s[1])
+        if planner.inside(r, c) and planner.blocked[r, c]:
+            planner = self._unblocked_start(planner, s)
+        return planner.make_plan(s, goal, tolerance)
+
+    def _unblocked_start(self, planner: GlobalPlanner, start: Pose) -> GlobalPlanner:
+        """A planner whose costs let the robot out of the inflation it stands in (not out of
+        LETHAL cells: cells within the inscribed radius of the start are lowered to 252)."""
+        costs = np.array(planner.costs)
+        res = self.grid.resolution
+        rad = self.global_costmap.inscribed_radius
+        r0, c0 = planner.cell(start[0], start[1])
+        n = math.ceil(rad / res)
+        rr, cc = np.mgrid[r0 - n:r0 + n + 1, c0 - n:c0 + n + 1]
+        keep = (np.hypot(rr - r0, cc - c0) * res <= rad) & (rr >= 0) & (cc >= 0) \
+            & (rr < costs.shape[0]) & (cc < costs.shape[1])
+        rr, cc = rr[keep], cc[keep]
+        sel = costs[rr, cc] == INSCRIBED
+        costs[rr[sel], cc[sel]] = 252
+        out = GlobalPlanner(costs, res, planner.origin, cost_scale=planner.cost_scale)
+        out.footprint = planner.footprint
+        return out
+
+    # -- goals -----------------------------------------------------------------------------------
+    def send_goal(self, target: Sequence[float], poses: Sequence[Sequence[float]] = (),
+                  execution_mode: int = 0, now: float = 0.0) -> None:
+        """/move_base: a new goal (map frame). ``poses``: a path to follow to the target
+        (``execution_mode`` 1 point by point, 0 free). An active goal is PREEMPTED. A NaN or
+        off-map pose, or an unknown execution_mode: :class:`NavigationError`, nothing changed."""
+        points = [_pose(p, f"path pose {i}") for i, p in enumerate(poses)]
+        points.append(_pose(target, "target pose"))
+        g = self.grid
+        for x, y, _ in points:
+            if not (g.origin[0] <= x < g.origin[0] + g.width * g.resolution
+                    and g.origin[1] <= y < g.origin[1] + g.height * g.resolution):
+                raise NavigationError(f"the goal ({x:.2f}, {y:.2f}) is off the map: give a pose "
+                                      f"on the map")
+        if execution_mode not in (0, 1):
+            raise NavigationError(f"execution_mode {execution_mode!r} is not known; 1 point by "
+                                  f"point, 0 free")
+        if self.state in (GoalState.PENDING, GoalState.ACTIVE):
+            self._finish(GoalState.PREEMPTED, "preempted by a new goal", now)
+        self._reset_goal_state()
+        self.goal_id += 1
+        self.target = points[-1]
+        self._waypoints = points
+        self._point_by_point = execution_mode == 1
+        self._need_plan = True
+        self.replans = self.early_replans = 0
+        self.state = GoalState.PENDING
+        self.reason = ""
+
+    def cancel(self, now: float) -> None:
+        """Cancel the active goal (PREEMPTED); the next commands are zero."""
+        if self.state in (GoalState.PENDING, GoalState.ACTIVE):
+            self._finish(GoalState.PREEMPTED, "cancelled", now)
+
+    def _finish(self, state: GoalState, reason: str, now: float) -> NavCommand:
+        self.state = state
+        self.reason = reason
+        self.results.append(GoalResult(self.goal_id, state, reason, now))
+        self.controller.set_plan([])
+        self.controller.v = self.controller.w = 0.0
+        self.path = []
+        return NavCommand(0.0, 0.0, state, Status.IDLE, reason)
+
+    def _plan(self, pose: Pose) -> str:
+        """Plan from ``pose`` through the remaining waypoints; '' or why there is no plan."""
+        goals = self._waypoints[:1] if self._point_by_point else self._waypoints
+        poses: list[Pose] = []
+        ends: list[int] = []
+        start = pose
+        try:
+            for goal in goals:
+                plan = self.make_plan(start, goal, self.config.goal_tolerance)
+                if not plan.ok:
+                    return plan.reason
+                poses.extend(plan.poses if not poses else plan.poses[1:])
+                ends.append(len(poses) - 1)
+                start = poses[-1]
+        except PlanningError as exc:
+            return str(exc)
+        self.plans += 1
+        self._leg_ends = ends
+        self.path = poses
+        self._reverse = self._drive_reversed(pose, poses)
+        self.controller.footprint = self._fp_reverse if self._reverse else self._fp_forward
+        self.controller.set_costmap(self.combined.costs, self.grid.resolution,
+                                    self.combined.origin)
+        if self._reverse:
+            self.controller.set_plan([(x, y, wrap(a + math.pi)) for x, y, a in poses])
+        else:
+            self.controller.set_plan(poses)
+        return ""
+
+    def _drive_reversed(self, pose: Pose, poses: list[Pose]) -> bool:
+        d = NavDir(self.mode.nav_dir)
+        if d is NavDir.BACKWARD:
+            return True
+        if d is not NavDir.FOLLOW_PATH:
+            return False
+        x, y, yaw = pose
+        ahead = [p for p in poses if math.hypot(p[0] - x, p[1] - y) >= 1.0]
+        px, py = (ahead[0][0], ahead[0][1]) if ahead else (poses[-1][0], poses[-1][1])
+        if math.hypot(px - x, py - y) < 1e-6:
+            return False
+        return abs(wrap(math.atan2(py - y, px - x) - yaw)) > math.pi / 2
+
+    def _passed_waypoints(self) -> int:
+        """Free mode: how many waypoints the robot has passed on the current path."""
+        index = self.controller._index
+        return sum(1 for end in self._leg_ends[:-1] if end <= index)
+
+    def _replan(self, pose: Pose, now: float) -> str:
+        if not self._point_by_point:
+            del self._waypoints[:self._passed_waypoints()]
+        why = self._plan(pose)
+        self._blocked_since = None
+        self._progress_ref = (now, pose)
+        return why
+
+    # -- the control step ------------------------------------------------------------------------
+    def tick(self, now: float, pose: Sequence[float]) -> NavCommand:
+        """One control step (20 Hz) at the robot's map ``pose``: the twist and the state."""
+        p = _pose(pose, "robot pose")
+        self.feedback_pose = p
+        if self.state not in (GoalState.PENDING, GoalState.ACTIVE):
+            state = self.state or GoalState.PENDING
+            return NavCommand(0.0, 0.0, state, Status.IDLE, self.reason)
+        if self._need_plan:
+            self._need_plan = False
+            self.state = GoalState.ACTIVE
+            why = self._plan(p)
+            if why:
+                return self._finish(GoalState.ABORTED, f"no path: {why}", now)
+            self._progress_ref = (now, p)
+        if self.combined.version != self._seen_version:
+            self._seen_version = self.combined.version
+            self.controller.set_costmap(self.combined.costs, self.grid.resolution,
+                                        self.combined.origin)
+            if self.mode.avoids_early and now - self._last_early >= self.config.replan_interval \
+                    and self._path_ahead_blocked():
+                self._last_early = now
+                self.early_replans += 1
+                why = self._replan(p, now)
+                if why:
+                    return self._finish(GoalState.ABORTED, f"no path around the obstacle: "
+                                                           f"{why}", now)
+        command = self._compute(p)
+        self._update_remaining(p)
+        if command.status is Status.SUCCEEDED:
+            return self._reached(p, now)
+        if command.status is Status.BLOCKED:
+            return self._blocked(p, now, command)
+        self._blocked_since = None
+        self.reason = ""
+        stuck = self._stuck(p, now)
+        if stuck:
+            return self._finish(GoalState.ABORTED, stuck, now)
+        return NavCommand(command.linear, command.angular, GoalState.ACTIVE, command.status)
+
+    def _compute(self, p: Pose) -> NavCommand:
+        if self._reverse:
+            cmd = self.controller.compute((p[0], p[1], wrap(p[2] + math.pi)))
+            return NavCommand(-cmd.linear, cmd.angular, GoalState.ACTIVE, cmd.status, cmd.reason)
+        cmd = self.controller.compute(p)
+        return NavCommand(cmd.linear, cmd.angular, GoalState.ACTIVE, cmd.status, cmd.reason)
+
+    def _reached(self, p: Pose, now: float) -> NavCommand:
+        if self._point_by_point and len(self._waypoints) > 1:
+            self._waypoints.pop(0)
+            why = self._plan(p)
+            if why:
+                return self._finish(GoalState.ABORTED, f"no path: {why}", now)
+            self._progress_ref = (now, p)
+            return NavCommand(0.0, 0.0, GoalState.ACTIVE, Status.SUCCEEDED,
+                              "waypoint reached")
+        return self._finish(GoalState.SUCCEEDED, "goal reached", now)
+
+    def _blocked(self, p: Pose, now: float, command: NavCommand) -> NavCommand:
+        if self._blocked_since is None:
+            self._blocked_since = now
+        self._progress_ref = (now, p)  # waiting for an obstacle is not being stuck
+        if now - self._blocked_since >= self.mode.avoids_after(self.config.blocked_patience):
+            self.replans += 1
+            if self.replans > self.config.max_replans:
+                return self._finish(GoalState.ABORTED, f"blocked: still no way after "
+                                                       f"{self.config.max_replans} replans", now)
+            why = self._replan(p, now)
+            if why:
+                return self._finish(GoalState.ABORTED, f"no path around the obstacle: {why}",
+                                    now)
+        self.reason = "waiting: an obstacle blocks the path"
+        return NavCommand(command.linear, command.angular, GoalState.ACTIVE, Status.BLOCKED,
+                          self.reason)
+
+    def _stuck(self, p: Pose, now: float) -> str:
+        ref = self._progress_ref
+        if ref is None:
+            self._progress_ref = (now, p)
+            return ""
+        t0, q = ref
+        if math.hypot(p[0] - q[0], p[1] - q[1]) >= self.config.progress_distance or \
+                abs(wrap(p[2] - q[2])) >= self.config.progress_angle:
+            self._progress_ref = (now, p)
+            return ""
+        if now - t0 >= self.config.stuck_timeout:
+            return f"stuck: no progress for {self.config.stuck_timeout:g} s"
+        return ""
+
+    def _path_ahead_blocked(self) -> bool:
+        """Whether the rest of the plan crosses an INSCRIBED or LETHAL cell now."""
+        if not self.path:
+            return False
+        rest = np.asarray(self.path[self.controller._index:])
+        if not len(rest):
+            return False
+        costs, res, (ox, oy) = self.combined.costs, self.grid.resolution, self.combined.origin
+        rows = np.floor((rest[:, 1] - oy) / res).astype(int)
+        cols = np.floor((rest[:, 0] - ox) / res).astype(int)
+        ok = (rows >= 0) & (cols >= 0) & (rows < costs.shape[0]) & (cols < costs.shape[1])
+        return bool((costs[rows[ok], cols[ok]] >= INSCRIBED).any())
+
+    def _update_remaining(self, p: Pose) -> None:
+        if not self.path:
+            self.distance_remaining = 0.0
+            return
+        rest = np.asarray(self.path[self.controller._index:])[:, :2]
+        if not len(rest):
+            self.distance_remaining = 0.0
+            return
+        along = float(np.hypot(*np.diff(rest, axis=0).T).sum()) if len(rest) > 1 else 0.0
+        self.distance_remaining = math.hypot(rest[0, 0] - p[0], rest[0, 1] - p[1]) + along

@@ -1,0 +1,418 @@
+"""The task state machine behind exec_task and robot_status (ROS-free, on any clock).
+
+:meth:`TaskMachine.request` answers an ExecTask request; :meth:`TaskMachine.tick` (every
+``config.period``, 20 Hz) reads the chassis, runs the current action and returns the twist to
+command (None: nothing to command). Every change of the status goes through a
+:class:`~lowerbase.tasks.status.StatusTracker` (robot_status, only on change). docs/tasks.md
+has the whole table: transitions, what faults do, which requests are refused when.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from lowerbase.navigation.steps import CANCEL, EXCUTE, PAUSE, RESUM, SUCCEEDED, Step, StepController
+from lowerbase.tasks.model import (
+    AUTO_TASK_ID,
+    FINAL_STATES,
+    ActionState,
+    ActionType,
+    Pose,
+    RobotState,
+    Status,
+    TaskExect,
+    TaskRequest,
+    TaskResponse,
+    TaskState,
+    TaskType,
+)
+from lowerbase.tasks.plan import Action, TaskConfig, TaskRefused, dock_steps, plan
+from lowerbase.tasks.status import Chassis, StatusTracker, robot_state
+from lowerbase.world.places import Places
+
+log = logging.getLogger(__name__)
+Twist = tuple[float, float]
+ESTOP_MSG = "the emergency stop is on: release it, then continue (3)"
+
+
+class NavFeedback(Protocol):
+    """What a navigation tick returns (the Navigator's NavCommand)."""
+
+    linear: float
+    angular: float
+    state: Any  #: a goal state with a ``name``: PENDING ACTIVE SUCCEEDED ABORTED PREEMPTED
+    status: str
+    reason: str
+
+
+class Navigation(Protocol):
+    """What the task machine needs of navigation."""
+
+    def send_goal(self, target: Pose, poses: Sequence[Pose], now: float) -> None: ...
+
+    def cancel(self, now: float) -> None: ...
+
+    def tick(self, now: float, pose: Pose) -> NavFeedback: ...
+
+
+def blocked(fb: NavFeedback) -> bool:
+    """Whether navigation reports its path blocked (it waits or replans: a warning)."""
+    return "block" in f"{fb.status} {fb.reason}".lower()
+
+
+@dataclass
+class Task:
+    request: TaskRequest
+    actions: list[Action]
+    dest: str
+    state: TaskState = TaskState.EXECUTING
+    index: int = 0
+    action_state: ActionState = ActionState.EXECUTING
+    msg: str = ""
+    wait_id: int = 0
+    elapsed: float = 0.0  #: [s] into a timed action
+    contact_wait: float | None = None  #: [s] docked, waiting for the charger this long
+    lost: bool = False  #: navigation held while localization is lost
+
+    @property
+    def action(self) -> Action:
+        return self.actions[min(self.index, len(self.actions) - 1)]
+
+    @property
+    def active(self) -> bool:
+        return self.state not in FINAL_STATES
+
+
+class TaskMachine:
+    def __init__(self, nav: Navigation, places: Places, config: TaskConfig | None = None, *,
+                 on_status: Callable[[Status], None] | None = None) -> None:
+        self.nav = nav
+        self.places = places
+        self.config = config or TaskConfig()
+        self.steps = StepController(period=self.config.period, settle=0.2)
+        self.task: Task | None = None
+        self.chassis = Chassis(initialized=False)
+        self.docked = False  #: on the charger (a dock-in finished, no dock-out since)
+        self.tracker = StatusTracker(on_status)
+        self.now = 0.0
+        self._last_tick: float | None = None
+        self._auto_tried = False
+        self._wait_ids = 0
+        self._refresh()
+
+    # -- views ----------------------------------------------------------------------------------
+    @property
+    def active(self) -> bool:
+        return self.task is not None and self.task.active
+
+    def robot_state(self) -> RobotState:
+        t = self.task if self.active else None
+        return robot_state(self.chassis, t.request.task_type if t else None,
+                           t is not None and t.action_state == ActionState.WARNING)
+
+    def status(self) -> Status:
+        ch, t, rs = self.chassis, self.task, self.robot_state()
+        note = ch.abnormal()
+        if not note and ch.critical_battery:
+            note = f"battery critical ({ch.soc:.0f} %)"
+        elif not note and ch.low_battery:
+            note = f"battery low ({ch.soc:.0f} %)"
+        elif not note and not ch.localized:
+            note = "localization lost"
+        if t is None:
+            return Status(robot_state=rs, msg=note)
+        kind = ActionType.WAITING if t.state == TaskState.WAITING else t.action.kind
+        return Status(task_id=t.request.task_id, task_type=t.request.task_type,
+                      task_state=t.state, action_type=kind, action_state=t.action_state,
+                      robot_state=rs, wait_id=t.wait_id, dest=t.dest, msg=t.msg or note)
+
+    def _refresh(self) -> None:
+        self.tracker.update(self.status(), self.now)
+
+    # -- requests -------------------------------------------------------------------------------
+    def request(self, req: TaskRequest, now: float) -> TaskResponse:
+        """Answer an ExecTask request (refusals: success False and why in ``message``)."""
+        self.now = now
+        try:
+            message, ok = self._handle(req), True
+        except TaskRefused as exc:
+            message, ok = str(exc), False
+            log.info("exec_task refused: %s", message)
+        self._refresh()
+        return TaskResponse(ok, message, int(self.robot_state()))
+
+    def _handle(self, req: TaskRequest) -> str:
+        verbs = {2: "pause", 3: "continue", 4: "cancel", 6: "wait"}
+        if req.task_exect == TaskExect.EXECUTE:
+            return self._execute(req)
+        if req.task_exect not in verbs:
+            raise TaskRefused(f"unknown task_exect {req.task_exect}: 1 execute, 2 pause, "
+                              "3 continue, 4 cancel, 6 wait for interruption")
+        t = self.task
+        if t is None or not t.active:
+            raise TaskRefused(f"no task is running: nothing to {verbs[req.task_exect]}")
+        tid = t.request.task_id
+        if req.task_id != tid:
+            raise TaskRefused(f"task {req.task_id} is not the running task: that is {tid}")
+        charging = t.action.kind == ActionType.CHARGING
+        if req.task_exect == TaskExect.CANCEL:
+            self._stop(t, TaskState.CANCELLED, ActionState.CANCELLED, "cancelled by request")
+            return f"task {tid} cancelled"
+        if req.task_exect == TaskExect.CONTINUE:
+            if t.state == TaskState.EXECUTING:
+                raise TaskRefused(f"task {tid} is not paused: nothing to continue")
+            why = self.chassis.abnormal()
+            if why:
+                raise TaskRefused(f"{why}: clear it first, then continue")
+            self._resume(t)
+            return f"task {tid} continues"
+        if charging:
+            raise TaskRefused(f"task {tid} is charging, which cannot be paused: cancel it (4) "
+                              "or send a new task")
+        if t.state != TaskState.EXECUTING:
+            raise TaskRefused(f"task {tid} is {t.state.name.lower()} already: continue (3) or "
+                              "cancel (4) it")
+        if req.task_exect == TaskExect.PAUSE:
+            self._halt(t, TaskState.PAUSED, "paused by request")
+            return f"task {tid} paused"
+        self._wait_ids += 1
+        t.wait_id = self._wait_ids
+        self._halt(t, TaskState.WAITING, "waiting for interruption: continue (3) to go on")
+        t.action_state = ActionState.EXECUTING
+        return f"task {tid} waits (wait_id {t.wait_id})"
+
+    def _execute(self, req: TaskRequest, own: bool = False) -> str:
+        ch = self.chassis
+        if not ch.initialized:
+            raise TaskRefused("the chassis is not initialized: wait until driver_base has "
+                              "configured the lower computer")
+        if ch.abnormal():
+            raise TaskRefused(f"{ch.abnormal()}: clear it, then send the task again")
+        t = self.task
+        if t is not None and t.active and t.action.kind != ActionType.CHARGING:
+            tid = t.request.task_id
+            if tid == req.task_id:
+                raise TaskRefused(f"task {tid} is already running")
+            raise TaskRefused(f"task {tid} is {t.state.name.lower()}: cancel it (4) first")
+        if ch.critical_battery and req.task_type != TaskType.CHARGING:
+            raise TaskRefused(f"the battery is critical ({ch.soc:.0f} %): send a charging "
+                              "task (task_type 3) first")
+        if own:
+            req_checked = TaskRequest(req.task_exect, 1, req.task_type)
+            actions, dest = plan(req_checked, self.places, self.config)
+        else:
+            actions, dest = plan(req, self.places, self.config)
+        if self.docked:
+            if req.task_type == TaskType.CHARGING:
+                actions = [a for a in actions if a.kind in (ActionType.CHARGING,
+                                                            ActionType.DOCK_OUT)]
+            else:
+                actions.insert(0, Action(ActionType.DOCK_OUT))
+        if t is not None and t.active:  # charging: ended by the new task
+            soc = f" at {ch.soc:.0f} %" if ch.soc is not None else ""
+            t.state, t.action_state = TaskState.COMPLETED, ActionState.COMPLETED
+            t.msg = f"charging ended{soc} for task {req.task_id}"
+            self._refresh()
+        self.task = Task(req, actions, dest)
+        self._start(self.task)
+        return f"task {req.task_id} accepted: {TaskType(req.task_type).name.lower()} to {dest}"
+
+    # -- actions --------------------------------------------------------------------------------
+    def _start(self, t: Task) -> None:
+        a, ch = t.action, self.chassis
+        t.action_state, t.elapsed, t.contact_wait, t.lost = ActionState.EXECUTING, 0.0, None, \
+            False
+        if a.kind == ActionType.NAVIGATION:
+            assert a.target is not None
+            if ch.localized and ch.pose is not None:
+                self.nav.send_goal(a.target, a.poses, self.now)
+            else:
+                self._lose(t)
+        elif a.kind in (ActionType.DOCK_IN, ActionType.DOCK_OUT):
+            charger = self.places.charger
+            assert charger is not None
+            if a.kind == ActionType.DOCK_IN:
+                if ch.pose is None:
+                    return self._fail(t, "docking: no localized pose to dock from")
+                moves = dock_steps(ch.pose, charger.pose)
+            else:
+                back = ((charger.approach[0] - charger.pose[0]) ** 2
+                        + (charger.approach[1] - charger.pose[1]) ** 2) ** 0.5
+                moves = [(1, -back)]
+            speeds = {1: self.config.dock_speed, 2: 0.3}
+            if not moves:
+                if a.kind == ActionType.DOCK_OUT:
+                    self.docked = False
+                    return self._next(t)
+                self.docked, t.contact_wait = True, 0.0
+                return None
+            refused = self.steps.goal(EXCUTE, [Step(m, d, speeds[m]) for m, d in moves])
+            if refused is not None:
+                self._fail(t, f"docking: {refused.message}")
+        return None
+
+    def _next(self, t: Task) -> None:
+        t.index += 1
+        if t.index >= len(t.actions):
+            t.index = len(t.actions) - 1
+            t.state, t.action_state, t.msg = TaskState.COMPLETED, ActionState.COMPLETED, "done"
+            log.info("task %d completed", t.request.task_id)
+            return
+        self._start(t)
+
+    def _fail(self, t: Task, why: str) -> None:
+        self._stop(t, TaskState.FAILED, ActionState.FAILED, why)
+        log.warning("task %d failed: %s", t.request.task_id, why)
+
+    def _stop(self, t: Task, state: TaskState, action_state: ActionState, msg: str) -> None:
+        if t.action.kind == ActionType.NAVIGATION:
+            self.nav.cancel(self.now)
+        elif t.action.kind in (ActionType.DOCK_IN, ActionType.DOCK_OUT):
+            self.steps.goal(CANCEL)
+        t.state, t.action_state, t.msg = state, action_state, msg
+
+    def _halt(self, t: Task, state: TaskState, msg: str) -> None:
+        if t.action.kind == ActionType.NAVIGATION and not t.lost:
+            self.nav.cancel(self.now)
+        elif t.action.kind in (ActionType.DOCK_IN, ActionType.DOCK_OUT):
+            self.steps.goal(PAUSE)
+        t.state, t.action_state, t.msg = state, ActionState.PAUSED, msg
+
+    def _resume(self, t: Task) -> None:
+        t.state, t.action_state, t.msg = TaskState.EXECUTING, ActionState.EXECUTING, ""
+        if t.action.kind == ActionType.NAVIGATION:
+            ch = self.chassis
+            if ch.localized and ch.pose is not None:
+                t.lost = False
+                assert t.action.target is not None
+                self.nav.send_goal(t.action.target, t.action.poses, self.now)
+            else:
+                self._lose(t)
+        elif t.action.kind in (ActionType.DOCK_IN, ActionType.DOCK_OUT):
+            self.steps.goal(RESUM)
+
+    def _lose(self, t: Task) -> None:
+        if not t.lost and t.action.kind == ActionType.NAVIGATION:
+            t.lost = True
+            t.action_state, t.msg = ActionState.WARNING, \
+                "localization lost: navigation waits for it to return"
+
+    # -- ticking --------------------------------------------------------------------------------
+    def tick(self, now: float, chassis: Chassis) -> Twist | None:
+        """One period: watch the chassis, run the action; the twist to command or None."""
+        dt = 0.0 if self._last_tick is None else max(now - self._last_tick, 0.0)
+        self.now, self._last_tick, self.chassis = now, now, chassis
+        twist: Twist | None = None
+        t = self.task
+        if t is not None and t.active:
+            self._watch(t, chassis)
+        if t is not None and t.active:
+            twist = self._run(t, chassis, dt)
+        self._refresh()  # a task that ended here is published before an automatic charge
+        if not chassis.low_battery:
+            self._auto_tried = False
+        elif not self.active and self._auto_charge_due():
+            self._auto_tried = True
+            try:
+                self._execute(TaskRequest(TaskExect.EXECUTE, AUTO_TASK_ID, TaskType.CHARGING),
+                              own=True)
+                assert self.task is not None
+                self.task.msg = "battery low: charging"
+                log.info("battery low (%s %%): going to charge", chassis.soc)
+            except TaskRefused as exc:
+                log.warning("battery low, but cannot go and charge: %s", exc)
+        self._refresh()
+        return twist
+
+    def _auto_charge_due(self) -> bool:
+        return (self.config.auto_charge and not self._auto_tried and not self.docked
+                and self.places.charger is not None)
+
+    def _watch(self, t: Task, ch: Chassis) -> None:
+        if t.action.kind == ActionType.CHARGING:
+            return  # on the charger: nothing moves; e-stop and faults only show in robot_state
+        if ch.link_lost or ch.fault:
+            return self._fail(t, f"{ch.abnormal()}: clear it and send the task again")
+        if ch.e_stopped:
+            if t.state == TaskState.EXECUTING:
+                self._halt(t, TaskState.PAUSED, ESTOP_MSG)
+            return None
+        if t.state == TaskState.PAUSED and t.msg == ESTOP_MSG:
+            t.msg = "the emergency stop was released: continue (3) to go on"
+        if ch.critical_battery and t.request.task_type != TaskType.CHARGING:
+            return self._fail(t, f"battery critical ({ch.soc:.0f} %): the task is abandoned")
+        if t.state != TaskState.EXECUTING or t.action.kind != ActionType.NAVIGATION:
+            return None
+        if not ch.localized or ch.pose is None:
+            if not t.lost:
+                self.nav.cancel(self.now)
+                self._lose(t)
+        elif t.lost:
+            t.lost, t.action_state, t.msg = False, ActionState.EXECUTING, ""
+            assert t.action.target is not None
+            self.nav.send_goal(t.action.target, t.action.poses, self.now)
+        return None
+
+    def _run(self, t: Task, ch: Chassis, dt: float) -> Twist | None:
+        kind = t.action.kind
+        if kind in (ActionType.DOCK_IN, ActionType.DOCK_OUT):
+            return self._run_dock(t, ch, dt)
+        if t.state != TaskState.EXECUTING:
+            return (0.0, 0.0) if kind == ActionType.NAVIGATION else None
+        if kind == ActionType.NAVIGATION:
+            if t.lost or ch.pose is None:
+                return (0.0, 0.0)
+            fb = self.nav.tick(self.now, ch.pose)
+            state = getattr(fb.state, "name", str(fb.state))
+            if state == "SUCCEEDED":
+                self._next(t)
+                return (0.0, 0.0)
+            if state in ("ABORTED", "PREEMPTED"):
+                self._fail(t, f"navigation {state.lower()}: {fb.reason or fb.status}")
+                return (0.0, 0.0)
+            if blocked(fb):
+                t.action_state, t.msg = ActionState.WARNING, f"path blocked: {fb.reason}"
+            elif t.action_state == ActionState.WARNING:
+                t.action_state, t.msg = ActionState.EXECUTING, ""
+            return (fb.linear, fb.angular)
+        if kind == ActionType.TRANSPORT:
+            t.elapsed += dt
+            if t.elapsed + 1e-9 >= t.action.duration:
+                self._next(t)
+            return None
+        if kind == ActionType.CHARGING:
+            if not ch.charging:
+                self._fail(t, "the charger contact opened while charging")
+            elif ch.soc is not None and ch.soc >= self.config.full_soc:
+                t.msg = f"charged to {ch.soc:.0f} %: undocking"
+                self._next(t)
+        return None
+
+    def _run_dock(self, t: Task, ch: Chassis, dt: float) -> Twist | None:
+        if t.contact_wait is not None:  # docked: the BMS must see the charger
+            if ch.charging:
+                self._next(t)
+            elif t.contact_wait >= self.config.dock_timeout:
+                self._fail(t, f"docked, but no charger contact within "
+                           f"{self.config.dock_timeout:g} s: check the charger place")
+            elif t.state == TaskState.EXECUTING:
+                t.contact_wait += dt
+            return None
+        if ch.odom is None:
+            return (0.0, 0.0)
+        twist = self.steps.tick(ch.odom)
+        res = self.steps.result
+        if res is None or not self.steps.steps:
+            return twist
+        self.steps.steps = []
+        if res.result != SUCCEEDED:
+            self._fail(t, f"docking: {res.message}")
+        elif t.action.kind == ActionType.DOCK_IN:
+            self.docked, t.contact_wait = True, 0.0
+        else:
+            self.docked = False
+            self._next(t)
+        return twist

@@ -1,0 +1,222 @@
+"""The navigation node's actionlib servers: /move_base, /cmd_vel_control, /navigation_mode.
+
+Each is an ``actionlib.SimpleActionServer`` (Debian's python3-actionlib) whose goal thread only
+starts work on the :class:`~lowerbase.navigation.node.NavigationNode`'s controllers and then
+follows them tick by tick (it waits on the node's ``ticked`` condition, notified every control
+period): feedback every period, the result when the controller says so.
+
+- /move_base (woosh_msgs/MoveBaseAction): SUCCEEDED at the goal; ABORTED with the reason in the
+  status text (no path, stuck, a bad goal); PREEMPTED on cancel or a newer goal (actionlib's
+  simple-server policy). Feedback: ``base_position`` (the robot in the map frame).
+- /cmd_vel_control (woosh_msgs/StepControlAction): ``mode`` EXCUTE starts a list, PAUSE/RESUM
+  act on the running one, CANCEL ends it. A new goal supersedes the goal handle that was
+  following the list (that handle ends PREEMPTED); a PAUSE/RESUM goal follows the list to its
+  end and carries its result. An actionlib cancel brakes and ends the list (result -2). A
+  refused goal (empty list, NaN, out of range, LATERAL/DIAGONALIZE, or PAUSE/RESUM/CANCEL with
+  nothing running) is ABORTED with ``result`` -1 and the reason as the status text; it also
+  brakes a list that was running, so the robot stands still.
+- /navigation_mode (woosh_msgs/NavigationModeAction): SUCCEEDED with ``result`` 1, or ABORTED
+  with ``result`` 0 and the reason.
+
+A step list and a move_base goal never drive at once: an accepted EXCUTE cancels the move_base
+goal (PREEMPTED), a move_base goal cancels a running step list (result -2).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+from lowerbase.errors import LowerbaseError, WorldError
+from lowerbase.navigation.steps import CANCEL, CANCELLED, EXCUTE, MODE_NAMES, REJECTED, Step
+
+log = logging.getLogger(__name__)
+
+#: the goal thread re-checks at least this often even without a tick [s]
+WAKE = 0.5
+
+
+class ActionServers:
+    """The three servers around one node (rospy already initialised)."""
+
+    def __init__(self, node: Any) -> None:
+        import actionlib  # type: ignore[import-untyped]
+        from woosh_msgs.msg import MoveBaseAction, NavigationModeAction, StepControlAction
+
+        self.node = node
+        self.step_generation = 0  #: +1 per accepted EXCUTE (which list a goal follows)
+        name = node.rospy.get_name()
+        self.move_base = actionlib.SimpleActionServer(name, MoveBaseAction, self._move_base,
+                                                      auto_start=False)
+        self.steps = actionlib.SimpleActionServer("cmd_vel_control", StepControlAction,
+                                                  self._step_control, auto_start=False)
+        self.mode = actionlib.SimpleActionServer("navigation_mode", NavigationModeAction,
+                                                 self._navigation_mode, auto_start=False)
+
+    def start(self) -> None:
+        for server in (self.move_base, self.steps, self.mode):
+            server.start()
+
+    def shutdown(self) -> None:
+        for server in (self.move_base, self.steps, self.mode):
+            if server.is_active():
+                server.set_aborted(text="the navigation node is shutting down")
+
+    def _wait_tick(self, seen: int) -> int:
+        """Wait for a control tick after ``seen``; the node's current tick count."""
+        node = self.node
+        with node.ticked:
+            if node.tick_count == seen and not node.stop.is_set():
+                node.ticked.wait(WAKE)
+            return int(node.tick_count)
+
+    # -- /move_base --------------------------------------------------------------------------
+    def _move_base(self, goal: Any) -> None:
+        from woosh_msgs.msg import MoveBaseFeedback
+
+        from lowerbase.navigation.navigator import GoalState
+
+        node, io, server = self.node, self.node.io, self.move_base
+        frame = node.setup.map_frame
+        try:
+            target = io.stamped_pose(goal.target_pose, "target_pose", (frame,))
+            poses = [io.stamped_pose(p, f"poses[{i}]", (frame,))
+                     for i, p in enumerate(goal.poses)]
+            with node.lock:
+                if node.steps.active:
+                    node.steps.goal(CANCEL)
+                node.last_command = None
+                node.navigator.send_goal(target, poses, int(goal.execution_mode),
+                                         time.monotonic())
+        except LowerbaseError as exc:
+            log.warning("move_base goal refused: %s", exc)
+            server.set_aborted(text=str(exc))
+            return
+        log.info("move_base: goal (%.2f, %.2f, %.2f), %d path poses", *target, len(poses))
+        seen = node.tick_count
+        while True:
+            seen = self._wait_tick(seen)
+            if node.stop.is_set():
+                server.set_aborted(text="the navigation node is shutting down")
+                return
+            with node.lock:
+                pose = node.map_pose()
+                if server.is_preempt_requested():
+                    node.navigator.cancel(time.monotonic())
+                    why = "a newer goal" if server.is_new_goal_available() else "cancelled"
+                    server.set_preempted(text=f"preempted: {why}")
+                    return
+                state, reason = node.navigator.state, node.navigator.reason
+            if pose is not None:
+                fb = MoveBaseFeedback(base_position=io.pose_stamped(pose, node.rospy.Time.now(),
+                                                                    frame))
+                server.publish_feedback(fb)
+            if state == GoalState.SUCCEEDED:
+                server.set_succeeded(text="goal reached")
+                return
+            if state == GoalState.ABORTED:
+                server.set_aborted(text=reason)
+                return
+            if state == GoalState.PREEMPTED:
+                server.set_preempted(text=reason)
+                return
+
+    # -- /cmd_vel_control ----------------------------------------------------------------------
+    def _step_control(self, goal: Any) -> None:
+        from woosh_msgs.msg import StepControlResult
+
+        node, server = self.node, self.steps
+        mode = int(goal.mode)
+        steps = [Step(int(s.executeMode), float(s.data), float(s.speed), float(s.angle))
+                 for s in goal.stepControl]
+        with node.lock:
+            ctrl = node.steps
+            if mode != EXCUTE and mode in MODE_NAMES and not ctrl.active:
+                refused = f"{MODE_NAMES[mode]}: no step list is running"
+                first = 0
+            else:
+                rejection = ctrl.goal(mode, steps, bool(goal.useAvoid))
+                refused = rejection.message if rejection is not None else ""
+                first = rejection.execute_mode if rejection is not None else 0
+                if refused and ctrl.active:
+                    ctrl.goal(CANCEL)  # a refused goal leaves the robot standing
+            if not refused and mode == EXCUTE:
+                self.step_generation += 1
+                if node.navigator_active():
+                    node.navigator.cancel(time.monotonic())
+            generation = self.step_generation
+        if refused:
+            log.warning("cmd_vel_control goal refused: %s", refused)
+            server.set_aborted(StepControlResult(result=REJECTED, executeMode=first,
+                                                 percent=0.0), text=refused)
+            return
+        if mode == CANCEL:
+            res = ctrl.result
+            server.set_succeeded(StepControlResult(result=CANCELLED,
+                                                   executeMode=res.execute_mode if res else 0,
+                                                   percent=res.percent if res else 0.0),
+                                 text="step list cancelled")
+            return
+        self._follow_steps(generation)
+
+    def _follow_steps(self, generation: int) -> None:
+        from woosh_msgs.msg import StepControlFeedback, StepControlResult
+
+        node, server = self.node, self.steps
+        seen = node.tick_count
+        while True:
+            seen = self._wait_tick(seen)
+            with node.lock:
+                ctrl = node.steps
+                superseded = generation != self.step_generation
+                if node.stop.is_set():
+                    ctrl.goal(CANCEL)
+                    server.set_aborted(text="the navigation node is shutting down")
+                    return
+                if server.is_preempt_requested():
+                    if server.is_new_goal_available() or superseded:
+                        server.set_preempted(StepControlResult(
+                            result=0, executeMode=ctrl._mode(), percent=ctrl._percent()),
+                            text="superseded by a newer StepControl goal")
+                        return
+                    ctrl.goal(CANCEL)  # an actionlib cancel: brake and end the list
+                res, fb = ctrl.result, ctrl.feedback
+            if superseded or (res is None and fb is None and not ctrl.active):
+                server.set_aborted(StepControlResult(result=0), text="the step list was "
+                                   "replaced or ended elsewhere")
+                return
+            if res is not None:
+                out = StepControlResult(result=res.result, executeMode=res.execute_mode,
+                                        percent=res.percent)
+                if res.result == CANCELLED:
+                    server.set_preempted(out, text=res.message)
+                else:
+                    server.set_succeeded(out, text=res.message)
+                return
+            if fb is not None:
+                server.publish_feedback(StepControlFeedback(
+                    feedback=fb.feedback, executeMode=fb.execute_mode, percent=fb.percent))
+
+    # -- /navigation_mode ----------------------------------------------------------------------
+    def _navigation_mode(self, goal: Any) -> None:
+        from woosh_msgs.msg import NavigationModeResult
+
+        from lowerbase.navigation.modes import NavigationModeGoal
+
+        node, server = self.node, self.mode
+        try:
+            request = NavigationModeGoal(
+                navigation_mode=int(goal.navigation_mode),
+                waiting_timeout=float(goal.waiting_timeout), max_speed=float(goal.max_speed),
+                id=int(goal.id), permitted_passage=bool(goal.permitted_passage),
+                capacity=int(goal.capacity), nav_dir=int(goal.nav_dir))
+            with node.lock:
+                ok, message = node.navigator.set_mode(request)
+        except (LowerbaseError, WorldError, ValueError) as exc:
+            ok, message = False, str(exc)
+        if ok:
+            server.set_succeeded(NavigationModeResult(result=1), text=message)
+        else:
+            log.warning("navigation_mode refused: %s", message)
+            server.set_aborted(NavigationModeResult(result=0), text=message)

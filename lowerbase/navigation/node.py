@@ -1,0 +1,440 @@
+"""Navigation as a ROS1 node (``lowerbase navigation``): move_base, step control, modes.
+
+A thin rospy/actionlib layer over the ROS-free core, as ``lowerbase.world.node``:
+:class:`NavigationSetup` (checked before rospy starts) holds the map and the costmap
+parameters; :class:`NavigationNode` feeds the :class:`~lowerbase.navigation.navigator.Navigator`
+and the :class:`~lowerbase.navigation.steps.StepController` from /scan, the camera's
+cloud_without_planes, /odom, TF map -> odom (the world node's localization) and
+/driver_base/parameter, and sends their twists to /base_cmd_vel at 20 Hz while either is
+active. The action servers are in :mod:`lowerbase.navigation.actions`.
+
+Threads: the main loop (one control tick per period, costmap publishing), rospy's callback
+threads (subscribers, services) and actionlib's goal threads share one lock. Bad input (a NaN
+pose, a malformed cloud, a bad polygon) is a failed service/action result or a counted, logged
+drop, never an exception out of a callback.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from lowerbase.errors import ConfigError, LowerbaseError, WorldError
+from lowerbase.navigation.controller import Limits
+from lowerbase.navigation.costmap import camera_cloud
+from lowerbase.navigation.steps import StepController
+from lowerbase.world.camera import CameraConfig
+from lowerbase.world.grid import OccupancyGrid
+from lowerbase.world.lidar import LaserScan
+from lowerbase.world.localization.poses import compose
+
+log = logging.getLogger(__name__)
+
+NODE_NAME = "move_base"
+Pose = tuple[float, float, float]
+#: commands are sent this many periods after both controllers went idle (zeros: a clean stop)
+STOP_TAIL = 5
+
+
+@dataclass
+class NavigationSetup:
+    """Everything the node needs, checked without ROS (see ``lowerbase.cli.navigation``)."""
+
+    grid: OccupancyGrid
+    camera: CameraConfig | None = None
+    navigator: Any = None  #: a NavigatorConfig (None: move_base's defaults, docs/navigation.md)
+    map_frame: str = "map"
+    odom_frame: str = "odom"
+    base_frame: str = "base_link"
+    rate_hz: float = 20.0  #: control rate (/base_cmd_vel while active) [Hz]
+    costmap_rate_hz: float = 2.0  #: the local costmap's publishing rate [Hz]
+
+    def __post_init__(self) -> None:
+        for name in ("rate_hz", "costmap_rate_hz"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0 < value <= 100):
+                raise ConfigError(f"{name} = {value!r}: expected a rate in (0, 100] Hz")
+
+
+def import_ros() -> tuple[Any, Any]:
+    """(rospy, lowerbase.navigation.ros_msgs); RosUnavailableError in one line if missing."""
+    from lowerbase.driver.node import ROS_HINT
+    from lowerbase.errors import RosUnavailableError
+
+    try:
+        import actionlib  # type: ignore[import-untyped]  # noqa: F401
+        import rospy
+
+        from lowerbase.navigation import ros_msgs
+    except ImportError as exc:
+        raise RosUnavailableError(f"ROS is not installed ({exc}): {ROS_HINT}") from None
+    return rospy, ros_msgs
+
+
+def make_navigator(setup: NavigationSetup) -> Any:
+    from lowerbase.navigation.navigator import Navigator
+
+    return Navigator(setup.grid, setup.navigator)
+
+
+class NavigationNode:
+    """Subscribers, publishers, services and the control loop around one Navigator."""
+
+    def __init__(self, setup: NavigationSetup) -> None:
+        self.rospy, self.io = import_ros()
+        self.setup = setup
+        self.lock = threading.RLock()
+        self.ticked = threading.Condition(self.lock)  #: notified after every control tick
+        self.stop = threading.Event()
+        self.navigator = make_navigator(setup)
+        self.steps = StepController(period=1.0 / setup.rate_hz)
+        self.limits = Limits()
+        self.odom: Pose | None = None
+        self.map_to_odom: Pose | None = None
+        self.scan: LaserScan | None = None
+        self.cloud: tuple[np.ndarray, tuple[float, float, float]] | None = None
+        self.last_command: Any = None  #: the Navigator's NavCommand of the last tick
+        self.tick_count = 0
+        self.stats: dict[str, int] = {"bad_scan": 0, "bad_cloud": 0, "bad_odom": 0,
+                                      "bad_footprint": 0, "bad_parameter": 0, "no_pose": 0,
+                                      "cmd_vel": 0, "plans": 0}
+        self._tail = 0
+        self._new_scan = False
+        self._pubs: dict[str, Any] = {}
+        self._subs: list[Any] = []
+        self._services: list[Any] = []
+        self._servers: Any = None
+        self._tf_buffer: Any = None
+        self._published_global: Any = None
+        self._ready_printed = False
+        self._plans_published = 0
+
+    # -- set-up --------------------------------------------------------------------------------
+    def advertise(self) -> None:
+        rospy, io = self.rospy, self.io
+        import tf2_ros
+        from geometry_msgs.msg import Polygon
+        from nav_msgs.msg import Odometry
+        from nav_msgs.srv import GetPlan
+        from sensor_msgs.msg import LaserScan as ScanMsg
+        from sensor_msgs.msg import PointCloud2
+        from std_srvs.srv import Empty, SetBool  # type: ignore[import-untyped]
+        from woosh_msgs.msg import Parameter
+
+        from lowerbase.navigation.actions import ActionServers
+
+        self._tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
+        self._tf_listener = tf2_ros.TransformListener(self._tf_buffer)
+        pub = rospy.Publisher
+        self._pubs = {
+            "cmd_vel": pub("base_cmd_vel", io.Twist, queue_size=5),
+            "global": pub("~global_costmap/costmap", io.GridMsg, queue_size=1, latch=True),
+            "local": pub("~local_costmap/costmap", io.GridMsg, queue_size=1),
+            "plan": pub("~NavfnROS/plan", io.Path, queue_size=1, latch=True),
+        }
+        sub = rospy.Subscriber
+        self._subs = [
+            sub("scan", ScanMsg, self._on_scan, queue_size=2),
+            sub("odom", Odometry, self._on_odom, queue_size=10),
+            sub("driver_base/parameter", Parameter, self._on_parameter, queue_size=2),
+            sub("~local_costmap/set_footprint", Polygon,
+                lambda m: self._on_footprint(m, "local"), queue_size=2),
+            sub("~global_costmap/set_footprint", Polygon,
+                lambda m: self._on_footprint(m, "global"), queue_size=2),
+        ]
+        if self.setup.camera is not None:
+            self._subs.append(sub(f"{self.setup.camera.name}/depth/cloud_without_planes",
+                                  PointCloud2, self._on_cloud, queue_size=1, buff_size=2 ** 24))
+        self._services = [rospy.Service("~make_plan", GetPlan, self._make_plan),
+                          rospy.Service("~enable_costmaps", SetBool, self._enable),
+                          rospy.Service("~clear_costmaps", Empty, self._clear)]
+        self._servers = ActionServers(self)
+        self._servers.start()
+
+    # -- ROS -> navigation ---------------------------------------------------------------------
+    def _count_bad(self, key: str, exc: Exception) -> None:
+        self.stats[key] += 1
+        if self.stats[key] in (1, 10, 100) or self.stats[key] % 1000 == 0:
+            log.warning("%s (dropped; %d so far)", exc, self.stats[key])
+
+    def _on_odom(self, msg: Any) -> None:
+        try:
+            pose = self.io.pose_of(msg.pose.pose, "/odom")
+        except WorldError as exc:
+            self._count_bad("bad_odom", exc)
+            return
+        with self.lock:
+            self.odom = pose
+
+    def _on_scan(self, msg: Any) -> None:
+        try:
+            scan = self.io.scan_of(msg)
+            if scan.frame_id.lstrip("/") != self.setup.base_frame:
+                raise WorldError(f"/scan must be in {self.setup.base_frame!r} (the merged "
+                                 f"scan), got {scan.frame_id!r}")
+        except WorldError as exc:
+            self._count_bad("bad_scan", exc)
+            return
+        with self.lock:
+            self.scan, self._new_scan = scan, True
+
+    def _on_cloud(self, msg: Any) -> None:
+        camera = self.setup.camera
+        assert camera is not None
+        try:
+            if msg.header.frame_id.lstrip("/") != camera.optical_frame_id:
+                raise WorldError(f"cloud_without_planes must be in {camera.optical_frame_id!r},"
+                                 f" got {msg.header.frame_id!r}")
+            cloud = camera_cloud(self.io.cloud_points(msg), camera)
+        except WorldError as exc:
+            self._count_bad("bad_cloud", exc)
+            return
+        with self.lock:
+            self.cloud = cloud
+
+    def _on_parameter(self, msg: Any) -> None:
+        try:
+            limits = Limits.from_parameters({"maxLinear": float(msg.maxLinear),
+                                             "maxAngular": float(msg.maxAngular)})
+        except LowerbaseError as exc:
+            self._count_bad("bad_parameter", exc)
+            return
+        with self.lock:
+            self.limits = limits
+            self.steps.limits = limits
+            self.navigator.set_limits(limits)
+
+    def _on_footprint(self, msg: Any, which: str) -> None:
+        """The seed's set_footprint topics: each changes its own costmap; the global one is
+        also the footprint the planner and the controller check (Navigator.set_footprint's
+        steps, for one costmap)."""
+        try:
+            points = self.io.polygon_points(msg)
+            with self.lock:
+                nav = self.navigator
+                getattr(nav, f"{which}_costmap").set_footprint(points)
+                if which == "global":
+                    nav.combined.invalidate_static()
+                    nav._footprints()
+                    nav.controller.footprint = nav._fp_reverse if nav._reverse \
+                        else nav._fp_forward
+                nav.combined.refresh()
+        except WorldError as exc:
+            self._count_bad("bad_footprint", exc)
+            return
+        log.info("%s costmap footprint set: %d points", which, len(points))
+
+    def _make_plan(self, req: Any) -> Any:
+        """nav_msgs/GetPlan; an empty path when there is none (the reason goes to the log: the
+        response has no message field). An empty start frame means the robot's pose."""
+        from nav_msgs.srv import GetPlanResponse
+
+        io, frame = self.io, self.setup.map_frame
+        stamp = self.rospy.Time.now()
+        try:
+            goal = io.stamped_pose(req.goal, "make_plan goal", (frame,))
+            if req.start.header.frame_id == "":
+                start = self.map_pose()
+                if start is None:
+                    raise WorldError("make_plan: the start has no frame_id and the robot's "
+                                     "pose is unknown (no /odom or map -> odom yet)")
+            else:
+                start = io.stamped_pose(req.start, "make_plan start", (frame,))
+            with self.lock:
+                plan = self.navigator.make_plan(start, goal, float(req.tolerance))
+        except LowerbaseError as exc:
+            log.warning("make_plan refused: %s", exc)
+            return GetPlanResponse(plan=io.path_msg([], stamp, frame))
+        if not plan.ok:
+            log.warning("make_plan: no path from (%.2f, %.2f) to (%.2f, %.2f): %s",
+                        start[0], start[1], goal[0], goal[1], plan.reason)
+        path = io.path_msg(plan.poses, stamp, frame)
+        self.stats["plans"] += 1
+        self._pubs["plan"].publish(path)
+        return GetPlanResponse(plan=path)
+
+    def _enable(self, req: Any) -> Any:
+        from std_srvs.srv import SetBoolResponse
+
+        with self.lock:
+            answers = [getattr(self.navigator, f"{w}_costmap").enable(bool(req.data))
+                       for w in ("global", "local")]
+            self.navigator.combined.refresh()
+        ok = all(a[0] for a in answers)
+        return SetBoolResponse(success=ok, message=answers[1][1])
+
+    def _clear(self, req: Any) -> Any:
+        from std_srvs.srv import EmptyResponse
+
+        with self.lock:
+            self.navigator.clear_costmaps()
+        log.info("costmaps cleared")
+        return EmptyResponse()
+
+    # -- the robot's pose ----------------------------------------------------------------------
+    def _lookup_map_to_odom(self) -> None:
+        import tf2_ros
+
+        s = self.setup
+        try:
+            t = self._tf_buffer.lookup_transform(s.map_frame, s.odom_frame, self.rospy.Time(0))
+        except (tf2_ros.LookupException, tf2_ros.ConnectivityException,
+                tf2_ros.ExtrapolationException):  # no localization (yet)
+            return
+        tr, q = t.transform.translation, t.transform.rotation
+        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+        if all(math.isfinite(v) for v in (tr.x, tr.y, yaw)):
+            with self.lock:
+                self.map_to_odom = (float(tr.x), float(tr.y), yaw)
+
+    def map_pose(self) -> Pose | None:
+        """The robot in the map frame: TF map -> odom (localization) composed with /odom."""
+        with self.lock:
+            if self.odom is None or self.map_to_odom is None:
+                return None
+            return compose(self.map_to_odom, self.odom)
+
+    # -- the loop ------------------------------------------------------------------------------
+    def tick(self) -> None:
+        """One control period: sensors into the costmaps, one twist if anything is active."""
+        self._lookup_map_to_odom()
+        now = time.monotonic()
+        with self.lock:
+            pose = self.map_pose()
+            if pose is not None and self._new_scan:
+                self._new_scan = False
+                try:
+                    self.navigator.update_sensors(pose, self.scan, self.cloud)
+                except WorldError as exc:
+                    self._count_bad("bad_scan", exc)
+            command: tuple[float, float] | None = None
+            if self.steps.active:
+                command = self.steps.tick(self.odom) if self.odom is not None else (0.0, 0.0)
+            elif self.navigator_active():
+                if pose is None:
+                    self.stats["no_pose"] += 1
+                    command = (0.0, 0.0)
+                else:
+                    cmd = self.navigator.tick(now, pose)
+                    self.last_command = cmd
+                    command = (cmd.linear, cmd.angular)
+                    if self.navigator.plans != self._plans_published:
+                        self._plans_published = self.navigator.plans
+                        self._pubs["plan"].publish(self.io.path_msg(
+                            self.navigator.path, self.rospy.Time.now(), self.setup.map_frame))
+            if command is not None:
+                self._tail = STOP_TAIL
+            elif self._tail > 0:  # both idle: a few zeros, then silence (others may command)
+                self._tail -= 1
+                command = (0.0, 0.0)
+            if command is not None:
+                self._pubs["cmd_vel"].publish(self.io.twist(*command))
+                self.stats["cmd_vel"] += 1
+            self.tick_count += 1
+            self.ticked.notify_all()
+        self._ready_line(pose)
+
+    def navigator_active(self) -> bool:
+        from lowerbase.navigation.navigator import GoalState
+
+        return self.navigator.state in (GoalState.PENDING, GoalState.ACTIVE)
+
+    def _ready_line(self, pose: Pose | None) -> None:
+        if self._ready_printed or pose is None or self.scan is None:
+            return
+        self._ready_printed = True
+        print(f"lowerbase navigation: ready; robot at ({pose[0]:.2f}, {pose[1]:.2f}, "
+              f"{pose[2]:.2f}) on the map", flush=True)
+
+    def publish_costmaps(self, publish_local: bool) -> None:
+        io, frame = self.io, self.setup.map_frame
+        stamp = self.rospy.Time.now()
+        with self.lock:
+            gc, lc = self.navigator.global_costmap, self.navigator.local_costmap
+            costs = gc.costs
+            if costs is not self._published_global:
+                self._published_global = costs
+                self._pubs["global"].publish(io.costmap_msg(costs, gc.resolution, gc.origin,
+                                                            stamp, frame))
+            if publish_local:
+                self._pubs["local"].publish(io.costmap_msg(lc.costs, lc.resolution, lc.origin,
+                                                           stamp, frame))
+
+    def spin(self) -> None:
+        rospy = self.rospy
+        rospy.on_shutdown(self.stop.set)
+        period = 1.0 / self.setup.rate_hz
+        every = max(1, round(self.setup.rate_hz / self.setup.costmap_rate_hz))
+        due = time.monotonic()
+        k = 0
+        while not self.stop.is_set() and not rospy.is_shutdown():
+            self.stop.wait(max(due - time.monotonic(), 0.0))
+            if self.stop.is_set():
+                break
+            self.tick()
+            if k % every == 0:
+                self.publish_costmaps(True)
+            k += 1
+            due += period
+            if time.monotonic() - due > 1.0:
+                due = time.monotonic()
+
+    def shutdown(self) -> None:
+        self.stop.set()
+        with self.lock:
+            self.ticked.notify_all()
+        if self._servers is not None:
+            self._servers.shutdown()
+        if self._pubs and (self.steps.active or self.navigator_active()):
+            self._pubs["cmd_vel"].publish(self.io.twist(0.0, 0.0))
+        for sub in self._subs:
+            sub.unregister()
+        for service in self._services:
+            service.shutdown()
+
+
+def run(setup: NavigationSetup, ros_args: Sequence[str], where: str) -> int:
+    """Start rospy on the master in ROS_MASTER_URI, build the node and spin."""
+    import os
+    import sys
+
+    from lowerbase.driver.node import _ToRosout
+    from lowerbase.driver.settings import loopback_address
+    from lowerbase.errors import TransportError
+
+    rospy, _ = import_ros()
+    import rosgraph
+
+    if not rosgraph.is_master_online():
+        raise TransportError(f"no ROS master at {rosgraph.get_master_uri()} (start roscore, or "
+                             "set ROS_MASTER_URI)")
+    address = loopback_address(os.environ, rosgraph.get_master_uri(), [*sys.argv, *ros_args])
+    if address is not None:
+        os.environ["ROS_IP"] = address
+    rospy.init_node(NODE_NAME, argv=[NODE_NAME, *ros_args], anonymous=False)
+    pkg_logger = logging.getLogger("lowerbase")
+    pkg_logger.addHandler(_ToRosout())
+    pkg_logger.propagate = False
+    node = NavigationNode(setup)
+    try:
+        node.advertise()
+        print(f"lowerbase navigation: {rospy.get_name()} on ROS master "
+              f"{rosgraph.get_master_uri()}{' (loopback only)' if address else ''}; {where}; "
+              "waiting for /odom, /scan and TF map -> odom", flush=True)
+        node.spin()
+    finally:
+        node.shutdown()
+        pkg_logger.removeHandler(pkg_logger.handlers[-1])
+        pkg_logger.propagate = True
+        stats = ", ".join(f"{k} {v}" for k, v in sorted(node.stats.items()))
+        print(f"lowerbase navigation: stopped; {stats}", file=sys.stderr, flush=True)
+        if not rospy.is_shutdown():
+            rospy.signal_shutdown("navigation stopped")
+    return 0

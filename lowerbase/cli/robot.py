@@ -1,0 +1,97 @@
+"""``lowerbase robot``: the whole virtual robot in one command.
+
+On the ROS master in ROS_MASTER_URI (or a ``rosmaster --core`` of its own when none answers
+there), in processes of their own: the world (map, lidars, camera, localization), the emulated
+lower computer on that map, driver_base on the bus, and the layers above it (navigation,
+tasks). One status line shows the parts; Ctrl-C stops them all, the top ones first. Each
+part's output goes to a log file of its own (``--log-dir``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from lowerbase.cli.args import positive_seconds
+
+
+def add_subparser(subparsers: Any) -> None:
+    from lowerbase.robot.plan import UPPER
+    from lowerbase.world.maps import DEFAULT_MAP
+
+    p = subparsers.add_parser(
+        "robot", help="start the whole virtual robot (lower computer, driver, world, "
+        "navigation, tasks) on a ROS master",
+        description=__doc__.split("\n\n", 1)[1] if __doc__ else None)
+    p.add_argument("--map", default=DEFAULT_MAP, metavar="NAME|FILE",
+                   help=f"a packaged map name or a map_server YAML file (default {DEFAULT_MAP})")
+    p.add_argument("--without", action="append", default=[], choices=UPPER, metavar="PART",
+                   help=f"leave out an upper layer ({', '.join(UPPER)}); repeatable")
+    p.add_argument("--log-dir", metavar="DIR",
+                   help="where each part's output goes (default: a new directory under /tmp)")
+    p.add_argument("--foxglove", nargs="?", const="127.0.0.1:8765", metavar="HOST:PORT",
+                   help="serve the chassis live to Foxglove (default 127.0.0.1:8765)")
+    p.add_argument("--duration", type=positive_seconds, metavar="S",
+                   help="stop after S seconds of wall time (default: until Ctrl-C)")
+    p.set_defaults(func=run)
+
+
+def _status(sup: Any, started: float, master: str) -> str:
+    parts = " ".join(f"{c.spec.name} {'up' if c.ready else 'starting'}" for c in sup.children)
+    return f"lowerbase robot: {parts} | master {master} | {time.monotonic() - started:.0f} s"
+
+
+def run(args: argparse.Namespace) -> int:
+    from lowerbase.bench.demo import StatusLine
+    from lowerbase.robot.master import master_answers, master_uri, own_master, wait_for_master
+    from lowerbase.robot.plan import UPPER, RobotOptions, robot_plan
+    from lowerbase.robot.supervisor import Supervisor
+    from lowerbase.world.maps import load_map
+
+    load_map(args.map)  # a wrong map is one line now, not a part ending later
+    log_dir = Path(args.log_dir) if args.log_dir else Path(
+        tempfile.mkdtemp(prefix="lowerbase-robot-"))
+    uri = master_uri()
+    sup = Supervisor(log_dir)
+    previous = {s: signal.signal(s, lambda *_: sup.request_stop())
+                for s in (signal.SIGINT, signal.SIGTERM)}
+    line = StatusLine(force=False)
+    started = time.monotonic()
+    ended = None
+    try:
+        if not master_answers(uri):
+            sup.start([own_master(uri)])
+            wait_for_master(uri)
+            print(f"lowerbase robot: started a ROS master at {uri}", flush=True)
+        parts = tuple(p for p in UPPER if p not in args.without)
+        sup.start(robot_plan(RobotOptions(map=args.map, parts=parts, foxglove=args.foxglove)),
+                  on_ready=lambda c: print(f"lowerbase robot: {c.spec.name} up", flush=True))
+        print(f"lowerbase robot: ready on ROS master {uri}; logs in {log_dir}; Ctrl-C stops",
+              flush=True)
+        deadline = None if args.duration is None else started + args.duration
+
+        def tick() -> None:
+            line.show(_status(sup, started, uri), time.monotonic())
+            if deadline is not None and time.monotonic() >= deadline:
+                sup.request_stop()
+
+        ended = sup.watch(on_tick=tick)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        line.done()
+        codes = sup.stop_all()
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    if ended is not None:
+        print(f"lowerbase robot: error: {ended.spec.name} ended (exit code "
+              f"{codes.get(ended.spec.name)}): {ended.last_line or 'no output'}; see "
+              f"{ended.log_path}", file=sys.stderr)
+        return 1
+    print(f"lowerbase robot: stopped; logs in {log_dir}", flush=True)
+    return 0

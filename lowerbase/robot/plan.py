@@ -1,0 +1,67 @@
+"""What ``lowerbase robot`` starts, in order: :func:`robot_plan`.
+
+The parts talk as they would on a robot: the emulated lower computer and driver_base over the
+default transport (udp_multicast on loopback, hop limit 0, a port of this run's own, so two
+robots on one host never meet); the world reads the emulator's ground truth over UDP on
+loopback (``emulate --truth-udp``); the ROS nodes meet on the master. The world starts first
+(it must be listening when the emulator starts sending its truth), then the emulator, then
+driver_base, then the nodes above it.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from lowerbase.robot.supervisor import ChildSpec
+from lowerbase.transport import free_loopback_port
+
+#: what a lowerbase ROS node prints once it is on the master
+ON_MASTER = "on ROS master"
+#: the upper layers, bottom to top: (subcommand, extra flags)
+UPPER = ("navigation", "tasks")
+
+
+@dataclass(frozen=True)
+class RobotOptions:
+    """``map``: a map name or file; ``parts``: the upper layers to start (a subset of
+    :data:`UPPER`); ``python``: the interpreter that runs ``-m lowerbase``."""
+
+    map: str
+    parts: tuple[str, ...] = UPPER
+    bus_port: int | None = None
+    truth_port: int | None = None
+    python: str = sys.executable
+    foxglove: str | None = None
+
+
+def _lowerbase(opts: RobotOptions, *args: str) -> list[str]:
+    return [opts.python, "-m", "lowerbase", *args]
+
+
+def bus_flags(port: int) -> list[str]:
+    from lowerbase.transport import DEFAULT_CHANNEL, DEFAULT_HOP_LIMIT
+
+    return ["-i", "udp_multicast", "-c", DEFAULT_CHANNEL, "--bus-kwargs", f"port={port}",
+            f"hop_limit={DEFAULT_HOP_LIMIT}"]
+
+
+def robot_plan(opts: RobotOptions) -> list[ChildSpec]:
+    """The children, in start order, with the text each prints once ready."""
+    bus = bus_flags(opts.bus_port or free_loopback_port())
+    truth = opts.truth_port or free_loopback_port()
+    map_ref = str(Path(opts.map).resolve()) if Path(opts.map).suffix else opts.map
+    emulate = ["emulate", *bus, "--truth-udp", f"127.0.0.1:{truth}", "--map", map_ref]
+    if opts.foxglove:
+        emulate += ["--foxglove", opts.foxglove]
+    specs = [
+        ChildSpec("world", _lowerbase(opts, "world", "--map", map_ref, "--truth-udp",
+                                      str(truth)), ON_MASTER),
+        ChildSpec("emulate", _lowerbase(opts, *emulate), "lower computer on"),
+        ChildSpec("driver", _lowerbase(opts, "driver", *bus), "link ready"),
+    ]
+    for part in UPPER:
+        if part in opts.parts:
+            specs.append(ChildSpec(part, _lowerbase(opts, part, "--map", map_ref), ON_MASTER))
+    return specs

@@ -1,0 +1,139 @@
+"""``lowerbase robot`` black-box, on a real ROS master: the parts come up, the chain from
+/base_cmd_vel through driver_base, the bus and the emulator to /odom and the world's /scan and
+/amcl_pose works, and Ctrl-C leaves no process behind. Only what a user sees is used: the
+command's output, ROS topics (the driver tests' probe node) and the process table."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from lowerbase.robot.master import master_answers
+from lowerbase.transport import free_loopback_port
+from tests.conftest import ROOT
+from tests.driver.conftest import require_ros, ros_master, woosh_msgs_build  # noqa: F401
+from tests.driver.test_node_ros import PROBE, Probe
+
+TOPICS = {"/odom": "nav_msgs/Odometry", "/scan": "sensor_msgs/LaserScan",
+          "/amcl_pose": "geometry_msgs/PoseWithCovarianceStamped"}
+
+
+class Robot:
+    def __init__(self, env: dict[str, str], log_dir: Path, *extra: str) -> None:
+        self.popen = subprocess.Popen(
+            [sys.executable, "-m", "lowerbase", "robot", "--map", "empty_room",
+             "--log-dir", str(log_dir), *extra],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
+            env={**os.environ, **env})
+        self.lines: list[str] = []
+
+    def wait_for(self, text: str, timeout: float = 120.0) -> None:
+        assert self.popen.stdout is not None
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            line = self.popen.stdout.readline()
+            if not line:
+                break
+            self.lines.append(line)
+            if text in line:
+                return
+        self.popen.kill()
+        raise AssertionError(f"{text!r} not printed: {self.lines} {self.popen.stderr.read()}")
+
+    def children(self) -> list[int]:
+        out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(self.popen.pid)],
+                             capture_output=True, text=True)
+        return [int(p) for p in out.stdout.split()]
+
+    def ctrl_c(self) -> tuple[int, str, str]:
+        self.popen.send_signal(signal.SIGINT)
+        out, err = self.popen.communicate(timeout=60)
+        return self.popen.returncode, out, err
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def _x(stats: dict[str, Any], topic: str) -> float:
+    return float(stats[topic]["msg"]["pose"]["pose"]["position"]["x"])
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_robot_on_a_running_master_drives_and_stops_cleanly(
+        ros_master: Any, tmp_path: Path) -> None:  # noqa: F811
+    env = {k: v for k, v in ros_master.env.items() if k != "ROS_IP"}
+    robot = Robot(env, tmp_path / "logs", "--without", "navigation", "--without", "tasks")
+    probe = None
+    try:
+        robot.wait_for("ready on ROS master")
+        parts = robot.children()
+        assert len(parts) == 3  # world, emulate, driver: the master was already there
+        script = tmp_path / "probe.py"
+        script.write_text(PROBE)
+        probe = Probe(script, ros_master.env, TOPICS)
+        start = probe.wait_for(lambda s: all(s[t]["count"] >= 1 for t in TOPICS), 60.0,
+                               "odom, scan and amcl_pose")
+        probe.ask(op="publish", topic="/base_cmd_vel", type="geometry_msgs/Twist",
+                  fields={"linear": {"x": 0.3}, "angular": {"z": 0.0}}, rate=20, duration=2.0)
+        moved = probe.wait_for(lambda s: _x(s, "/odom") > _x(start, "/odom") + 0.3, 20.0,
+                               "/odom moving forward")
+        # the world saw the same motion: localization follows the robot across the room
+        probe.wait_for(lambda s: _x(s, "/amcl_pose") > _x(start, "/amcl_pose") + 0.25, 20.0,
+                       "/amcl_pose following")
+        assert moved["/scan"]["msg"]["header"]["frame_id"] == "base_link"
+    finally:
+        if probe is not None:
+            probe.close()
+        code, out, err = robot.ctrl_c()
+    assert code == 0, err
+    assert "lowerbase robot: stopped" in out and "Traceback" not in err
+    assert not any(_alive(pid) for pid in parts)
+    assert {p.name for p in (tmp_path / "logs").iterdir()} == {
+        "world.log", "emulate.log", "driver.log"}
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_robot_starts_its_own_master_when_none_answers_and_takes_it_down(
+        woosh_msgs_build: Path, tmp_path: Path) -> None:  # noqa: F811
+    require_ros(("rospy", "rosgraph"))
+    uri = f"http://127.0.0.1:{free_loopback_port(socket.SOCK_STREAM)}"
+    env = {"ROS_MASTER_URI": uri, "ROS_HOME": str(tmp_path / "ros"),
+           "ROS_LOG_DIR": str(tmp_path / "ros" / "log")}
+    robot = Robot(env, tmp_path / "logs", "--without", "navigation", "--without", "tasks")
+    try:
+        robot.wait_for(f"started a ROS master at {uri}")
+        robot.wait_for("ready on ROS master")
+        assert master_answers(uri)
+    finally:
+        code, _, err = robot.ctrl_c()
+    assert code == 0, err
+    assert not master_answers(uri)
+
+
+def test_errors_before_anything_starts_are_one_line(tmp_path: Path) -> None:
+    env = {**os.environ, "ROS_MASTER_URI": "http://192.0.2.1:11311"}  # TEST-NET: no master
+    for argv, text in (
+            (["--map", "nowhere"], "nowhere"),
+            (["--map", "empty_room", "--log-dir", str(tmp_path)],
+             "no ROS master answers at http://192.0.2.1:11311")):
+        out = subprocess.run([sys.executable, "-m", "lowerbase", "robot", *argv], env=env,
+                             capture_output=True, text=True, cwd=ROOT, timeout=60)
+        assert out.returncode == 1, out.stderr
+        lines = out.stderr.strip().splitlines()
+        assert len(lines) == 1 and text in lines[0] and lines[0].startswith(
+            "lowerbase robot: error:"), out.stderr

@@ -1,0 +1,102 @@
+"""The supervisor of ``lowerbase robot`` on small stand-in children (python one-liners): start
+order, readiness, a part ending, Ctrl-C and a part that ignores it."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+from lowerbase.robot.supervisor import ChildSpec, RobotError, Supervisor
+
+
+def script(body: str, name: str = "part", ready: str | None = "ready",
+           timeout: float = 20.0) -> ChildSpec:
+    return ChildSpec(name, [sys.executable, "-u", "-c", body], ready, timeout)
+
+
+SERVE = ("import time\nprint('booting'); print('{name} ready', flush=True)\n"
+         "open('{marker}', 'a').write('{name}\\n')\n"
+         "time.sleep(600)\n")
+
+
+def serving(name: str, marker: Path) -> ChildSpec:
+    return script(SERVE.format(name=name, marker=marker), name)
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def test_children_start_in_order_each_once_ready_and_stop_in_reverse(tmp_path: Path) -> None:
+    marker = tmp_path / "order"
+    sup = Supervisor(tmp_path / "logs")
+    seen: list[str] = []
+    try:
+        sup.start([serving("a", marker), serving("b", marker), serving("c", marker)],
+                  on_ready=lambda child: seen.append(child.spec.name))
+        assert seen == ["a", "b", "c"]
+        assert all(c.ready and c.poll() is None for c in sup.children)
+        # each was ready (had printed) before the next one was started
+        assert marker.read_text().split() == ["a", "b", "c"]
+    finally:
+        codes = sup.stop_all()
+    assert list(codes) == ["c", "b", "a"]
+    assert not any(alive(c.popen.pid) for c in sup.children)
+    log = (tmp_path / "logs" / "b.log").read_text()
+    assert "booting" in log and "b ready" in log
+
+
+def test_a_part_that_ends_while_starting_is_named_with_its_last_line_and_log(
+        tmp_path: Path) -> None:
+    sup = Supervisor(tmp_path)
+    with pytest.raises(RobotError) as err:
+        sup.start([script("print('no map called nowhere; try --map warehouse'); "
+                          "raise SystemExit(1)", "world")])
+    sup.stop_all()
+    text = str(err.value)
+    assert "world ended while starting (exit code 1)" in text
+    assert "no map called nowhere" in text and str(tmp_path / "world.log") in text
+    assert "\n" not in text
+
+
+def test_a_silent_part_times_out(tmp_path: Path) -> None:
+    sup = Supervisor(tmp_path)
+    with pytest.raises(RobotError, match=r"quiet not ready after 0\.5 s"):
+        sup.start([script("import time; time.sleep(600)", "quiet", timeout=0.5)])
+    sup.stop_all()
+    assert sup.children[0].poll() is not None
+
+
+def test_watch_returns_the_part_that_ended_and_the_others_are_stopped(tmp_path: Path) -> None:
+    sup = Supervisor(tmp_path)
+    sup.start([serving("keeps", tmp_path / "m"),
+               script("print('ready', flush=True); import time; time.sleep(0.3); "
+                      "print('lost the bus'); raise SystemExit(3)", "dies")])
+    ended = sup.watch(every=0.05)
+    codes = sup.stop_all()
+    assert ended is not None and ended.spec.name == "dies"
+    assert codes["dies"] == 3 and ended.last_line == "lost the bus"
+    assert codes["keeps"] != 0 and sup.children[0].poll() is not None
+
+
+def test_request_stop_ends_watch_and_a_part_ignoring_ctrl_c_is_killed(tmp_path: Path) -> None:
+    sup = Supervisor(tmp_path)
+    stubborn = ("import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); "
+                "print('ready', flush=True); time.sleep(600)")
+    sup.start([script(stubborn, "stubborn")])
+    sup.request_stop()
+    assert sup.watch(every=0.05) is None
+    assert sup.children[0].stop(grace=0.5) == -9
+
+
+def test_a_command_that_does_not_exist_is_one_line(tmp_path: Path) -> None:
+    sup = Supervisor(tmp_path)
+    with pytest.raises(RobotError, match="ghost: cannot start /no/such/binary"):
+        sup.start([ChildSpec("ghost", ["/no/such/binary"])])

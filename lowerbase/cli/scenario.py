@@ -164,6 +164,8 @@ def execute(scenario: Any, out: Path, *, mode: str = "simulated", record: str | 
     def attach(harness: Any) -> None:
         if mcap_rec is not None:
             mcap_rec.attach(harness.driver, harness.now, harness.truth)
+            if getattr(harness, "world", None) is not None:  # /map, /scan, /amcl_pose, ...
+                mcap_rec.attach_world(harness.world)
 
     try:
         with log_to_file(out / "run.log", echo=debug):

@@ -20,6 +20,8 @@ import math
 import struct
 from collections.abc import Sequence
 
+import numpy as np
+
 _HEADER = struct.Struct("<III")  #: seq, stamp sec, stamp nsec (then frame_id)
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
@@ -117,3 +119,73 @@ def tf_planar(ns: int, frame_id: str, child_frame_id: str,
     half = 0.5 * yaw
     return _ONE_TRANSFORM + header(0, ns, frame_id) + string(child_frame_id) + \
         _TRANSFORM.pack(x, y, 0.0, 0.0, 0.0, math.sin(half), math.cos(half))
+
+
+# -- the world's messages (lowerbase.recording.world) -------------------------------------------
+
+_SCAN = struct.Struct("<7f")  #: angle_min, angle_max, increment, time_increment, scan_time,
+#                               range_min, range_max
+_POSE = struct.Struct("<7d")  #: position 3, orientation 4
+_COV = struct.Struct("<36d")
+_MAP_INFO = struct.Struct("<IIfII7d")  #: load time sec, nsec, resolution, width, height, origin
+
+
+def _planar_pose(pose: Sequence[float]) -> bytes:
+    x, y, yaw = pose
+    half = 0.5 * yaw
+    return _POSE.pack(x, y, 0.0, 0.0, 0.0, math.sin(half), math.cos(half))
+
+
+def laser_scan(seq: int, ns: int, frame_id: str, angles: Sequence[float],
+               ranges: np.ndarray) -> bytes:
+    """sensor_msgs/LaserScan without intensities (``messages.laser_scan_msg``): ``angles`` =
+    (angle_min, angle_max, angle_increment, time_increment, scan_time, range_min, range_max),
+    ``ranges`` packed as little-endian float32."""
+    data = np.ascontiguousarray(ranges, dtype="<f4")
+    return header(seq, ns, frame_id) + _SCAN.pack(*angles) + _U32.pack(data.size) + \
+        data.tobytes() + _U32.pack(0)
+
+
+def occupancy_grid(seq: int, ns: int, frame_id: str, load_ns: int, resolution: float,
+                   origin: Sequence[float], data: np.ndarray) -> bytes:
+    """nav_msgs/OccupancyGrid (``messages.occupancy_grid_msg``): ``data`` (height, width)
+    int8, row 0 first (nav_msgs' row-major order), ``origin`` a planar (x, y, yaw)."""
+    cells = np.ascontiguousarray(data, dtype=np.int8)
+    height, width = cells.shape
+    x, y, yaw = origin
+    half = 0.5 * yaw
+    return header(seq, ns, frame_id) + _MAP_INFO.pack(
+        load_ns // _NS, load_ns % _NS, resolution, width, height,
+        x, y, 0.0, 0.0, 0.0, math.sin(half), math.cos(half)) + _U32.pack(cells.size) + \
+        cells.tobytes()
+
+
+def pose_with_covariance(seq: int, ns: int, frame_id: str, pose: Sequence[float],
+                         covariance: Sequence[float]) -> bytes:
+    """geometry_msgs/PoseWithCovarianceStamped of a planar pose, the 36 covariance values as
+    given (``messages.pose_with_covariance_msg``)."""
+    return header(seq, ns, frame_id) + _planar_pose(pose) + _COV.pack(*covariance)
+
+
+def pose_stamped(seq: int, ns: int, frame_id: str, pose: Sequence[float]) -> bytes:
+    """geometry_msgs/PoseStamped of a planar pose (``messages.pose_stamped_msg``)."""
+    return header(seq, ns, frame_id) + _planar_pose(pose)
+
+
+def path(seq: int, ns: int, frame_id: str, poses: Sequence[Sequence[float]]) -> bytes:
+    """nav_msgs/Path of planar poses, each a PoseStamped with the path's stamp and frame and
+    seq 0 (as move_base's planners fill it; ``messages.path_msg``)."""
+    inner = header(0, ns, frame_id)
+    return header(seq, ns, frame_id) + _U32.pack(len(poses)) + b"".join(
+        inner + _planar_pose(p) for p in poses)
+
+
+def image(seq: int, ns: int, frame_id: str, encoding: str, array: np.ndarray) -> bytes:
+    """sensor_msgs/Image of a 16UC1 (h, w) or rgb8 (h, w, 3) array, little-endian rows
+    (``messages.image_msg``)."""
+    dtype = "<u2" if encoding == "16UC1" else np.uint8
+    data = np.ascontiguousarray(array, dtype=dtype)
+    h, w = int(data.shape[0]), int(data.shape[1])
+    step = data.nbytes // h if h else 0
+    return header(seq, ns, frame_id) + _U32.pack(h) + _U32.pack(w) + string(encoding) + \
+        b"\x00" + _U32.pack(step) + _U32.pack(data.nbytes) + data.tobytes()

@@ -139,3 +139,64 @@ def can_frame_msg(types: Ros1Types, head: Any, frame_id: int, data: bytes) -> An
     return types.message("can_msgs/Frame", header=head, id=frame_id,
                          is_rtr=False, is_extended=frame_id > 0x7FF, is_error=False,
                          dlc=min(len(data), 8), data=payload)
+
+
+# -- the world's messages: the reference of fastser's world packers -----------------------------
+
+def _planar_pose(types: Ros1Types, pose: Sequence[float]) -> Any:
+    return types.message("geometry_msgs/Pose", position=types.message(
+        "geometry_msgs/Point", x=float(pose[0]), y=float(pose[1]), z=0.0),
+        orientation=quaternion_from_yaw(types, pose[2]))
+
+
+def laser_scan_msg(types: Ros1Types, head: Any, angles: Sequence[float],
+                   ranges: np.ndarray) -> Any:
+    """sensor_msgs/LaserScan as ``lowerbase.world.ros_msgs.laser_scan`` fills it (no
+    intensities); ``angles`` as ``fastser.laser_scan``'s."""
+    names = ("angle_min", "angle_max", "angle_increment", "time_increment", "scan_time",
+             "range_min", "range_max")
+    return types.message("sensor_msgs/LaserScan", header=head,
+                         **{k: float(v) for k, v in zip(names, angles, strict=True)},
+                         ranges=np.asarray(ranges, dtype=np.float32),
+                         intensities=np.zeros(0, dtype=np.float32))
+
+
+def occupancy_grid_msg(types: Ros1Types, head: Any, load_time: Any, resolution: float,
+                       origin: Sequence[float], data: np.ndarray) -> Any:
+    """nav_msgs/OccupancyGrid as ``lowerbase.world.ros_msgs.grid_msg`` fills it."""
+    cells = np.asarray(data, dtype=np.int8)
+    info = types.message("nav_msgs/MapMetaData", map_load_time=load_time,
+                         resolution=float(resolution), width=int(cells.shape[1]),
+                         height=int(cells.shape[0]), origin=_planar_pose(types, origin))
+    return types.message("nav_msgs/OccupancyGrid", header=head, info=info,
+                         data=cells.ravel())
+
+
+def pose_with_covariance_msg(types: Ros1Types, head: Any, pose: Sequence[float],
+                             covariance: Sequence[float]) -> Any:
+    """geometry_msgs/PoseWithCovarianceStamped (``ros_msgs.pose_with_covariance``)."""
+    return types.message("geometry_msgs/PoseWithCovarianceStamped", header=head,
+                         pose=types.message("geometry_msgs/PoseWithCovariance",
+                                            pose=_planar_pose(types, pose),
+                                            covariance=np.asarray(covariance, dtype=float)))
+
+
+def pose_stamped_msg(types: Ros1Types, head: Any, pose: Sequence[float]) -> Any:
+    return types.message("geometry_msgs/PoseStamped", header=head,
+                         pose=_planar_pose(types, pose))
+
+
+def path_msg(types: Ros1Types, head: Any, poses: Sequence[Sequence[float]]) -> Any:
+    """nav_msgs/Path: each pose a PoseStamped with the path's stamp and frame, seq 0."""
+    inner = types.message("std_msgs/Header", seq=0, stamp=head.stamp, frame_id=head.frame_id)
+    return types.message("nav_msgs/Path", header=head,
+                         poses=[pose_stamped_msg(types, inner, p) for p in poses])
+
+
+def image_msg(types: Ros1Types, head: Any, encoding: str, array: np.ndarray) -> Any:
+    """sensor_msgs/Image as ``ros_msgs.image`` fills it (16UC1 or rgb8, little-endian)."""
+    data = np.ascontiguousarray(array, dtype="<u2" if encoding == "16UC1" else np.uint8)
+    h, w = int(data.shape[0]), int(data.shape[1])
+    return types.message("sensor_msgs/Image", header=head, height=h, width=w,
+                         encoding=encoding, is_bigendian=0, step=data.nbytes // h if h else 0,
+                         data=np.frombuffer(data.tobytes(), dtype=np.uint8))

@@ -158,8 +158,9 @@ def test_set_footprint_topics_change_the_global_costmap(chain: dict[str, Any]) -
     expected_big, edge = _inscribed_cells(bigger, 0.1)
     assert expected_big.sum() > expected.sum()
     assert np.array_equal(marked(msg)[~edge], expected_big[~edge])
-    # the planner keeps the bigger robot off the wall: a goal 0.5 m from it has no path now
-    near = (grid.width * grid.resolution - 0.2 - 0.55, 4.0, 0.0)
+    # the planner keeps the bigger robot off the east wall (its face at x = 9.8): a goal 0.5 m
+    # from it, along it, has no path now (inscribed radius 0.55 m), and has one again below
+    near = (9.32, 4.0, math.pi / 2)
     assert make_plan(client, START, near, 0.0)["plan"]["poses"] == []
     # a bad polygon (two points) is dropped and changes nothing; the default comes back
     count = client.ask(op="last", topic=GLOBAL)["count"]

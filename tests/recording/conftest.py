@@ -108,3 +108,25 @@ def _ros_io_listener(loop: SimLoop, out: Recorded) -> Any:
 @pytest.fixture(scope="package")
 def recorded(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
     return record_drive(tmp_path_factory.mktemp("mcap") / "drive.mcap")
+
+
+def record_world(path: Path, duration: float = 2.0) -> dict[str, int]:
+    """The library's warehouse_localization, its first ``duration`` s, recorded to MCAP with
+    the world's topics (what `lowerbase scenario run` writes); the message counts."""
+    import dataclasses
+
+    from lowerbase.bench.runner import SimHarness, run_scenario
+    from lowerbase.bench.scenario import library, load_scenario
+
+    sc = dataclasses.replace(load_scenario(library()["warehouse_localization"]),
+                             duration=duration, expectations=())
+    rec = McapRecorder(path)
+    harness = SimHarness(sc, tap=rec)
+    rec.attach(harness.driver, harness.now, harness.truth)
+    rec.attach_world(harness.world)
+    try:
+        run_scenario(sc, harness)
+    finally:
+        harness.close()
+        rec.close()
+    return dict(rec.counts)

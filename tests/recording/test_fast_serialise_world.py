@@ -111,7 +111,8 @@ def test_poses_and_path(types: Ros1Types) -> None:
                                                     ("16UC1", (0, 4), np.uint16)])
 def test_image(types: Ros1Types, encoding: str, shape: tuple[int, ...], dtype: type) -> None:
     cls = _genpy(types, "sensor_msgs/Image")
-    array: np.ndarray = np.random.default_rng(3).integers(0, np.iinfo(dtype).max, shape).astype(dtype)
+    array: np.ndarray = np.random.default_rng(3).integers(
+        0, np.iinfo(dtype).max, shape).astype(dtype)
     fast = fs.image(9, 123_000_000_456, "camera_1_depth_optical_frame", encoding, array)
     head = _header(types, 9, 123_000_000_456, "camera_1_depth_optical_frame")
     assert fast == types.serialize(m.image_msg(types, head, encoding, array))

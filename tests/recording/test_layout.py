@@ -16,7 +16,7 @@ import pytest
 from lowerbase.protocol.codec import default_codec
 from lowerbase.recording.publisher import DECODED_PREFIX
 from lowerbase.recording.ros1_types import ros1_types
-from tests.recording.conftest import record_drive
+from tests.recording.conftest import record_drive, record_world
 
 RPY = {"roll", "pitch", "yaw"}
 
@@ -54,16 +54,20 @@ def _panels(tree: Any) -> Iterator[str]:
 
 @pytest.fixture(scope="module")
 def published(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
-    """topic -> ROS1 type or 'json', of a real recorded drive."""
+    """topic -> ROS1 type or 'json', of a real recorded drive and a world run."""
     from mcap.reader import make_reader
 
-    path = Path(tmp_path_factory.mktemp("layout")) / "run.mcap"
-    record_drive(path)
-    with path.open("rb") as f:
-        summary = make_reader(f).get_summary()
-    assert summary is not None
-    return {ch.topic: (summary.schemas[ch.schema_id].name if ch.message_encoding == "ros1"
-                       else "json") for ch in summary.channels.values()}
+    out: dict[str, str] = {}
+    for name, record in (("run", record_drive), ("world", record_world)):
+        path = Path(tmp_path_factory.mktemp("layout")) / f"{name}.mcap"
+        record(path)
+        with path.open("rb") as f:
+            summary = make_reader(f).get_summary()
+        assert summary is not None
+        out.update({ch.topic: (summary.schemas[ch.schema_id].name
+                               if ch.message_encoding == "ros1" else "json")
+                    for ch in summary.channels.values()})
+    return out
 
 
 def _check_ros1(type_name: str, fields: list[str], path: str) -> None:
@@ -110,6 +114,10 @@ def test_layout_panels_and_topics(published: dict[str, str]) -> None:
     # what the panels are for: odometry against the truth, battery, status bits
     assert {"/odom", "/ground_truth/odom", "/battery", "/status_code",
             DECODED_PREFIX + "SystemStatus"} <= named
+    # and the world: the map, the scan, the estimate against the true pose, in frame map
+    assert {"/map", "/scan", "/amcl_pose", "/ground_truth/pose"} <= named
+    assert configs["3D!map"]["followTf"] == "base_link"
+    assert configs["3D!map"]["transforms"]["frame:map"]["visible"]
 
 
 def test_checker_refuses_what_a_run_does_not_publish(published: dict[str, str]) -> None:
@@ -118,4 +126,4 @@ def test_checker_refuses_what_a_run_does_not_publish(published: dict[str, str]) 
         _check_ros1(published["/odom"], ["pose", "pose", "positon", "x"], "/odom.typo")
     with pytest.raises(AssertionError):
         _check_ros1(published["/battery"], ["batteryPercentage", "@rpy", "yaw"], "/battery")
-    assert "/scan" not in published  # the layout may name it only once a run publishes it
+    assert "/move_base/NavfnROS/plan" not in published  # hence not in the layout

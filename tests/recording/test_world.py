@@ -211,3 +211,32 @@ def test_to_bag_read_with_rosbag(world_run: WorldRun, tmp_path: Path) -> None:
                               equal_nan=True)
     assert np.array_equal(np.asarray(grid_msg.data, dtype=np.int8).reshape(
         grid_msg.info.height, grid_msg.info.width), load_map("warehouse").data)
+
+
+def test_camera_depth_and_the_plan_hook(tmp_path: Path) -> None:
+    """A world with its camera: each rendered frame's depth image, bit for bit; and the
+    navigation hook `world_topics.plan` writes nav_msgs/Path in map."""
+    from lowerbase.recording.mcap_writer import McapRecorder
+    from lowerbase.world.sim import WorldConfig, WorldSim
+
+    world = WorldSim(WorldConfig(map="empty_room", localization="truth", camera=True))
+    frames: list[Any] = []
+    path = tmp_path / "cam.mcap"
+    with McapRecorder(path) as rec:
+        rec.attach_world(world)
+        for _ in range(3):
+            world.run(0.07)
+            frames.append(world.frame)
+        rec.world_topics.plan(1.5, [(1.0, 2.0, 0.0), (3.0, 2.5, 1.0)])
+    got = read(path)
+    depth = [d for _, d in got["/camera_1/depth/image_raw"]]
+    assert len(depth) >= 3 and all(f is not None for f in frames)
+    by_stamp = {to_ns(d.header.stamp.sec + d.header.stamp.nanosec * 1e-9): d for d in depth}
+    for f in frames:
+        d = by_stamp[to_ns(f.stamp)]
+        assert (d.encoding, d.height, d.width) == ("16UC1", *f.depth.shape)
+        assert bytes(d.data) == f.depth.astype("<u2").tobytes()
+    (m, plan), = got["/move_base/NavfnROS/plan"]
+    assert m.log_time == 1_500_000_000 and plan.header.frame_id == "map"
+    assert [(p.pose.position.x, p.pose.position.y) for p in plan.poses] == [(1.0, 2.0),
+                                                                           (3.0, 2.5)]

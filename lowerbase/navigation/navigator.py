@@ -97,6 +97,7 @@ class NavigatorConfig:
     yaw_tolerance: float = math.radians(2.0)
     blocked_patience: float = 1.0  #: BLOCKED this long before replanning (modes 0, 1)
     max_replans: int = 5  #: replans while blocked per goal before ABORTED
+    max_early_replans: int = 20  #: replans as new obstacles come into view, per goal
     stuck_timeout: float = 10.0  #: no progress this long (not waiting): ABORTED
     progress_distance: float = 0.05  #: moving this far counts as progress
     progress_angle: float = math.radians(5.0)  #: turning this far counts as progress
@@ -118,9 +119,11 @@ class NavigatorConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise NavigationError(f"navigator {name} = {v!r} is invalid; allowed: >= 0")
-        if not isinstance(self.max_replans, int) or self.max_replans < 0:
-            raise NavigationError(f"navigator max_replans = {self.max_replans!r} is invalid; "
-                                  f"allowed: an integer >= 0")
+        for name in ("max_replans", "max_early_replans"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or v < 0:
+                raise NavigationError(f"navigator {name} = {v!r} is invalid; allowed: an "
+                                      f"integer >= 0")
 
 
 @dataclass(frozen=True)
@@ -423,6 +426,10 @@ class Navigator:
                     and self._path_ahead_blocked():
                 self._last_early = now
                 self.early_replans += 1
+                if self.early_replans > self.config.max_early_replans:
+                    return self._finish(GoalState.ABORTED, f"no way found: replanned "
+                                        f"{self.config.max_early_replans} times as obstacles "
+                                        f"came into view", now)
                 why = self._replan(p, now)
                 if why:
                     return self._finish(GoalState.ABORTED, f"no path around the obstacle: "
@@ -506,9 +513,11 @@ class Navigator:
         if not self.path:
             self.distance_remaining = 0.0
             return
+        gx, gy, _ = self.path[-1]
+        straight = math.hypot(gx - p[0], gy - p[1])
         rest = np.asarray(self.path[self.controller._index:])[:, :2]
-        if not len(rest):
-            self.distance_remaining = 0.0
+        if not len(rest) or straight <= self.controller.config.approach_distance:
+            self.distance_remaining = straight  # the final approach goes straight at it
             return
         along = float(np.hypot(*np.diff(rest, axis=0).T).sum()) if len(rest) > 1 else 0.0
         self.distance_remaining = math.hypot(rest[0, 0] - p[0], rest[0, 1] - p[1]) + along

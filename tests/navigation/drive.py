@@ -3,10 +3,14 @@ real chain: driver core -> bus frames -> emulator), for the navigation tests."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from lowerbase.navigation.controller import Command, PathController, Status
-from lowerbase.world.sim import WorldSim
+from lowerbase.navigation.navigator import Navigator, NavigatorConfig
+from lowerbase.navigation.sim import NavSim
+from lowerbase.world.obstacles import Box, obstacles_from_dicts
+from lowerbase.world.sim import WorldConfig, WorldSim
 
 
 @dataclass
@@ -43,3 +47,24 @@ def follow(sim: WorldSim, ctl: PathController, timeout: float, settle: float = 1
             sim.step()
             run.contacts += sim.contact is not None
     return run
+
+
+# -- the Navigator on a WorldSim (tests/navigation/test_navigator*.py) ------------------------
+
+def nav_world(map_name: str, start: tuple[float, float, float] | str,
+              obstacles: list[dict[str, object]] | None = None, localization: str = "truth",
+              config: NavigatorConfig | None = None) -> NavSim:
+    """A NavSim on ``map_name`` with the driver up and odometry running."""
+    world = WorldSim(WorldConfig(map=map_name, start=start, localization=localization,
+                                 obstacles=obstacles_from_dicts(obstacles or [])))
+    world.run(1.0)
+    return NavSim(world, Navigator(world.grid, config))
+
+
+def box(name: str, x: float, y: float, size: float = 0.6) -> Box:
+    return Box(name, (x, y), (size, size))
+
+
+def distance_to(path: list[tuple[float, float, float]], x: float, y: float) -> float:
+    """The nearest the robot's centre came to (x, y)."""
+    return min(math.hypot(p[0] - x, p[1] - y) for p in path)

@@ -234,6 +234,62 @@ def test_step_control_straight_half_a_metre_on_the_truth(chain: dict[str, Any]) 
     assert client.ask(op="result", name="/cmd_vel_control", timeout=60.0)["state"] == SUCCEEDED
 
 
+def standing(client: NavClient) -> tuple[float, float, float]:
+    """The true pose once two fresh readings agree within 0.5 mm (the robot has stopped)."""
+    last = truth(client)
+    for _ in range(100):
+        now = truth(client)
+        if math.hypot(now[0] - last[0], now[1] - last[1]) < 5e-4:
+            return now
+        last = now
+    raise AssertionError("the robot did not stop")
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_step_control_pause_resume_and_cancel(chain: dict[str, Any]) -> None:
+    client: NavClient = chain["client"]
+    x0, y0, yaw0 = standing(client)
+    client.ask(op="send", name="/cmd_vel_control", type=STEP,
+               goal=step_goal(1, [(1, 0.6, 0.0)]))
+    client.wait_last("/amcl_pose", lambda m: (client.ask(op="feedback", name="/cmd_vel_control")
+                                              ["last"] or {}).get("percent", 0) > 20,
+                     30.0, "20 % of the step")
+    client.ask(op="send", name="/cmd_vel_control", type=STEP, goal=step_goal(2, []))
+    client.wait_last("/amcl_pose", lambda m: (client.ask(op="feedback", name="/cmd_vel_control")
+                                              ["last"] or {}).get("feedback") == 2,
+                     30.0, "paused feedback")
+    x1, y1, _ = standing(client)
+    along = (x1 - x0) * math.cos(yaw0) + (y1 - y0) * math.sin(yaw0)
+    assert 0.1 < along < 0.5
+    client.ask(op="send", name="/cmd_vel_control", type=STEP, goal=step_goal(3, []))
+    res = client.ask(op="result", name="/cmd_vel_control", timeout=60.0)
+    assert res["state"] == SUCCEEDED and res["result"]["result"] == 1, res
+    x2, y2, _ = standing(client)
+    assert math.hypot(x2 - x0 - 0.6 * math.cos(yaw0), y2 - y0 - 0.6 * math.sin(yaw0)) < 0.01
+    # an actionlib cancel brakes and ends the list: PREEMPTED, result -2
+    client.ask(op="send", name="/cmd_vel_control", type=STEP,
+               goal=step_goal(1, [(1, -0.6, 0.0)]))
+    client.wait_last("/amcl_pose", lambda m: (client.ask(op="feedback", name="/cmd_vel_control")
+                                              ["last"] or {}).get("percent", 0) > 20,
+                     30.0, "20 % of the way back")
+    client.ask(op="cancel", name="/cmd_vel_control")
+    res = client.ask(op="result", name="/cmd_vel_control", timeout=30.0)
+    assert res["state"] == PREEMPTED and res["result"]["result"] == -2, res
+    x3, y3, _ = standing(client)
+    back = (x2 - x3) * math.cos(yaw0) + (y2 - y3) * math.sin(yaw0)
+    assert 0.1 < back < 0.55
+    # PAUSE with nothing running: refused
+    client.ask(op="send", name="/cmd_vel_control", type=STEP, goal=step_goal(2, []))
+    res = client.ask(op="result", name="/cmd_vel_control", timeout=30.0)
+    assert res["state"] == ABORTED and "no step list is running" in res["text"], res
+    # back to the start for the other tests
+    client.ask(op="send", name="/cmd_vel_control", type=STEP,
+               goal=step_goal(1, [(1, -(x3 - x0) * math.cos(yaw0) - (y3 - y0) * math.sin(yaw0),
+                                   0.0)]))
+    assert client.ask(op="result", name="/cmd_vel_control", timeout=60.0)["state"] == SUCCEEDED
+
+
 @pytest.mark.ros
 @pytest.mark.process
 @pytest.mark.parametrize(("steps", "why"), [

@@ -17,6 +17,12 @@ process's CPU time per simulated second without a publisher, with the live serve
 client (nothing is built: no channel is subscribed), and with a client (a child process on
 loopback speaking the WebSocket protocol) subscribed to every channel.
 
+A world run (the library's warehouse_localization, its first WORLD_SIM s: the lane drive
+with amcl): CPU per simulated second without a recorder and the extra of the default MCAP
+with the world's channels (/map, /scan at 25 Hz, /amcl_pose, map -> odom, the truth on the
+map). Most of that extra is ray casting: the world casts only the scans amcl uses, the
+recorder casts every other tick itself (lowerbase.recording.world).
+
 ``python -m benchmarks.bench_recording [--quick]`` prints the rows.
 """
 
@@ -68,7 +74,60 @@ def run(quick: bool = False) -> list[Row]:
                 if key == "all":
                     size = path.stat().st_size
     base = best["none"] / sim
-    return [*_mcap_rows(best, base, size, sim), *_live_rows(repeat)]
+    return [*_mcap_rows(best, base, size, sim), *_world_rows(repeat), *_live_rows(repeat)]
+
+
+WORLD_SIM = 10.0  #: simulated s of warehouse_localization
+
+
+def _world(path: Path | None) -> tuple[float, int]:
+    """(CPU s, scans the recorder cast) of WORLD_SIM s of warehouse_localization, recorded to
+    ``path`` with the world's channels (None: no recorder)."""
+    import dataclasses
+
+    from lowerbase.bench.runner import SimHarness, run_scenario
+    from lowerbase.bench.scenario import library, load_scenario
+    from lowerbase.recording.mcap_writer import McapRecorder
+
+    sc = dataclasses.replace(load_scenario(library()["warehouse_localization"]),
+                             duration=WORLD_SIM, expectations=())
+    t0 = time.process_time()
+    rec = McapRecorder(path) if path is not None else None
+    harness = SimHarness(sc, tap=rec)
+    feed = None
+    if rec is not None:
+        rec.attach(harness.driver, harness.now, harness.truth)
+        feed = rec.attach_world(harness.world)
+    try:
+        run_scenario(sc, harness)
+    finally:
+        harness.close()
+        if rec is not None:
+            rec.close()
+    return time.process_time() - t0, feed.own_scans if feed is not None else 0
+
+
+def _world_rows(repeat: int) -> list[Row]:
+    best: dict[str, float] = {}
+    size = own = 0
+    with tempfile.TemporaryDirectory(prefix="bench-recording-world-") as tmp:
+        path = Path(tmp) / "world.mcap"
+        for _ in range(repeat):
+            for key, where in (("none", None), ("mcap", path)):
+                cpu, n = _world(where)
+                best[key] = min(best.get(key, float("inf")), cpu)
+                if where is not None:
+                    size, own = path.stat().st_size, n
+    base = best["none"] / WORLD_SIM
+    return [
+        Row("recording", "world run (warehouse_localization), no recorder", 1e3 * base,
+            "ms CPU per sim s", f"{WORLD_SIM:g} s simulated, amcl"),
+        Row("recording", "MCAP of a world run (default + /map /scan /amcl_pose ...)",
+            1e3 * (best["mcap"] / WORLD_SIM - base), "ms CPU per sim s",
+            f"extra; {own / WORLD_SIM:.0f} scans per sim s cast by the recorder"),
+        Row("recording", "MCAP file size of a world run", size / WORLD_SIM / 1e3,
+            "kB per sim s", "zstd chunks; /map once"),
+    ]
 
 
 def _mcap_rows(best: dict[str, float], base: float, size: int, sim: float) -> list[Row]:

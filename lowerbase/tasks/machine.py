@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from lowerbase.errors import LowerbaseError
 from lowerbase.navigation.steps import CANCEL, EXCUTE, PAUSE, RESUM, SUCCEEDED, Step, StepController
 from lowerbase.tasks.model import (
     AUTO_TASK_ID,
@@ -51,11 +52,16 @@ class NavFeedback(Protocol):
 class Navigation(Protocol):
     """What the task machine needs of navigation."""
 
-    def send_goal(self, target: Pose, poses: Sequence[Pose], now: float) -> None: ...
+    def send_goal(self, target: Pose, poses: Sequence[Pose] = (), execution_mode: int = 0,
+                  now: float = 0.0) -> None: ...
 
     def cancel(self, now: float) -> None: ...
 
     def tick(self, now: float, pose: Pose) -> NavFeedback: ...
+
+
+def _pct(soc: float | None) -> str:
+    return "" if soc is None else f" ({soc:.0f} %)"
 
 
 def blocked(fb: NavFeedback) -> bool:
@@ -117,9 +123,9 @@ class TaskMachine:
         ch, t, rs = self.chassis, self.task, self.robot_state()
         note = ch.abnormal()
         if not note and ch.critical_battery:
-            note = f"battery critical ({ch.soc:.0f} %)"
+            note = f"battery critical{_pct(ch.soc)}"
         elif not note and ch.low_battery:
-            note = f"battery low ({ch.soc:.0f} %)"
+            note = f"battery low{_pct(ch.soc)}"
         elif not note and not ch.localized:
             note = "localization lost"
         if t is None:
@@ -198,7 +204,7 @@ class TaskMachine:
                 raise TaskRefused(f"task {tid} is already running")
             raise TaskRefused(f"task {tid} is {t.state.name.lower()}: cancel it (4) first")
         if ch.critical_battery and req.task_type != TaskType.CHARGING:
-            raise TaskRefused(f"the battery is critical ({ch.soc:.0f} %): send a charging "
+            raise TaskRefused(f"the battery is critical{_pct(ch.soc)}: send a charging "
                               "task (task_type 3) first")
         if own:
             req_checked = TaskRequest(req.task_exect, 1, req.task_type)
@@ -211,13 +217,15 @@ class TaskMachine:
                                                             ActionType.DOCK_OUT)]
             else:
                 actions.insert(0, Action(ActionType.DOCK_OUT))
+        new = Task(req, actions, dest)
+        self._start(new)
+        if new.state == TaskState.FAILED:
+            raise TaskRefused(new.msg)
         if t is not None and t.active:  # charging: ended by the new task
-            soc = f" at {ch.soc:.0f} %" if ch.soc is not None else ""
             t.state, t.action_state = TaskState.COMPLETED, ActionState.COMPLETED
-            t.msg = f"charging ended{soc} for task {req.task_id}"
+            t.msg = f"charging ended{_pct(ch.soc)} for task {req.task_id}"
             self._refresh()
-        self.task = Task(req, actions, dest)
-        self._start(self.task)
+        self.task = new
         return f"task {req.task_id} accepted: {TaskType(req.task_type).name.lower()} to {dest}"
 
     # -- actions --------------------------------------------------------------------------------
@@ -228,7 +236,7 @@ class TaskMachine:
         if a.kind == ActionType.NAVIGATION:
             assert a.target is not None
             if ch.localized and ch.pose is not None:
-                self.nav.send_goal(a.target, a.poses, self.now)
+                self._send(t, a.target, a.poses)
             else:
                 self._lose(t)
         elif a.kind in (ActionType.DOCK_IN, ActionType.DOCK_OUT):
@@ -253,6 +261,12 @@ class TaskMachine:
             if refused is not None:
                 self._fail(t, f"docking: {refused.message}")
         return None
+
+    def _send(self, t: Task, target: Pose, poses: Sequence[Pose]) -> None:
+        try:
+            self.nav.send_goal(target, poses, now=self.now)
+        except LowerbaseError as exc:  # an off-map pose
+            self._fail(t, f"navigation refused the goal: {exc}")
 
     def _next(self, t: Task) -> None:
         t.index += 1
@@ -288,7 +302,7 @@ class TaskMachine:
             if ch.localized and ch.pose is not None:
                 t.lost = False
                 assert t.action.target is not None
-                self.nav.send_goal(t.action.target, t.action.poses, self.now)
+                self._send(t, t.action.target, t.action.poses)
             else:
                 self._lose(t)
         elif t.action.kind in (ActionType.DOCK_IN, ActionType.DOCK_OUT):
@@ -328,8 +342,9 @@ class TaskMachine:
         return twist
 
     def _auto_charge_due(self) -> bool:
+        ch = self.chassis  # tried once it can be accepted: not before the chassis is up
         return (self.config.auto_charge and not self._auto_tried and not self.docked
-                and self.places.charger is not None)
+                and self.places.charger is not None and ch.initialized and not ch.abnormal())
 
     def _watch(self, t: Task, ch: Chassis) -> None:
         if t.action.kind == ActionType.CHARGING:
@@ -343,7 +358,7 @@ class TaskMachine:
         if t.state == TaskState.PAUSED and t.msg == ESTOP_MSG:
             t.msg = "the emergency stop was released: continue (3) to go on"
         if ch.critical_battery and t.request.task_type != TaskType.CHARGING:
-            return self._fail(t, f"battery critical ({ch.soc:.0f} %): the task is abandoned")
+            return self._fail(t, f"battery critical{_pct(ch.soc)}: the task is abandoned")
         if t.state != TaskState.EXECUTING or t.action.kind != ActionType.NAVIGATION:
             return None
         if not ch.localized or ch.pose is None:
@@ -353,7 +368,7 @@ class TaskMachine:
         elif t.lost:
             t.lost, t.action_state, t.msg = False, ActionState.EXECUTING, ""
             assert t.action.target is not None
-            self.nav.send_goal(t.action.target, t.action.poses, self.now)
+            self._send(t, t.action.target, t.action.poses)
         return None
 
     def _run(self, t: Task, ch: Chassis, dt: float) -> Twist | None:

@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
+from lowerbase.navigation.navigator import NavigationError
 from lowerbase.tasks.machine import TaskMachine
 from lowerbase.tasks.model import Pose, TaskRequest, TaskResponse
 from lowerbase.tasks.plan import TaskConfig
@@ -46,7 +47,10 @@ class FakeNav:
         self.status = ""
         self.reason = ""
 
-    def send_goal(self, target: Pose, poses: Sequence[Pose], now: float) -> None:
+    def send_goal(self, target: Pose, poses: Sequence[Pose] = (), execution_mode: int = 0,
+                  now: float = 0.0) -> None:
+        if not -50 < target[0] < 50:
+            raise NavigationError(f"the goal ({target[0]:.2f}, {target[1]:.2f}) is off the map")
         self.goals.append((target, tuple(poses), now))
         self.goal = target
 

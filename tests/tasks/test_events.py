@@ -174,3 +174,23 @@ def test_robot_status_is_published_only_on_change() -> None:
     assert published == hist[-len(published):] and len(published) == 2  # executing, completed
     assert seq(b, "task_state") == [0, TS.EXECUTING, TS.COMPLETED]
     assert published[-1].time == int(b.machine.now)  # type: ignore[attr-defined]
+
+
+def test_battery_bits_without_a_bms_reading_yet() -> None:
+    b = Bench()
+    b.machine.config = type(b.machine.config)(auto_charge=False)
+    b.set(low_battery=True, soc=None)
+    b.soc = None  # type: ignore[assignment]
+    b.ch = b.ch.__class__(**{**b.ch.__dict__, "soc": None})
+    b.machine.tick(0.0, b.ch)
+    assert b.status.robot_state == RS.WARNING and b.status.msg == "battery low"
+
+
+def test_auto_charge_waits_for_the_chassis_to_come_up() -> None:
+    b = Bench()
+    b.set(initialized=False, low_battery=True, soc=18.0)
+    b.tick(10)
+    assert b.status.task_id == 0 and b.status.robot_state == RS.UNINITIALIZED
+    b.set(initialized=True)
+    b.tick()
+    assert b.status.task_id == AUTO_TASK_ID and b.status.task_state == TS.EXECUTING

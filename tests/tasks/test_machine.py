@@ -204,6 +204,7 @@ def test_refused_requests_by_state(setup: str, exect: int, tid: int, why: str) -
     (dict(task_type=PARK, poses=((4.0, math.nan, 0.0),)), "finite"),
     (dict(task_type=CHARGE, mark_no="S1"), "goes to the charger"),
     (dict(task_type=CHARGE, poses=((0.0, -2.0, 0.0),)), "is not charger at"),
+    (dict(task_type=PARK, poses=((99.0, 0.0, 0.0),)), "navigation refused the goal"),
 ])
 def test_refused_execute_requests(kw: dict, why: str) -> None:
     b = ready()

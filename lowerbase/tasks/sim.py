@@ -1,0 +1,165 @@
+"""The task machine on the whole emulated robot, on the simulated clock: :class:`TaskSim`.
+
+A :class:`TaskSim` runs a :class:`~lowerbase.tasks.machine.TaskMachine` on a
+:class:`~lowerbase.navigation.sim.NavSim` (navigator + WorldSim: emulator, driver core, map,
+lidars, localization). Every control period (20 Hz) it reads the chassis as driver_base sees it
+(:func:`chassis_from_driver`: link, e-stop, faults, the BMS frames) and the localization
+estimate, ticks the machine, and sends the machine's twist through the driver when navigation
+does not (the docking moves). The navigator itself is ticked by the NavSim.
+
+The charger: its contact closes when the robot truly stands on the map's charger pose (within
+``contact_tolerance`` / ``contact_yaw``) and opens when it leaves; closing it is the emulator's
+existing charger input (``mcu.bms.connect_charger``), so the BMS charges CC-CV and reports it in
+its frames, which is what the machine waits for.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+
+from lowerbase.bms.status import BmsStatus, ChargeMode
+from lowerbase.driver.core import DriverCore, LinkState
+from lowerbase.navigation.controller import Status as CtrlStatus
+from lowerbase.navigation.controller import wrap
+from lowerbase.navigation.navigator import GoalState, NavCommand
+from lowerbase.navigation.sim import NavSim
+from lowerbase.protocol.status_codes import StatusBit
+from lowerbase.tasks.machine import TaskMachine
+from lowerbase.tasks.model import Pose, Status, TaskRequest, TaskResponse
+from lowerbase.tasks.plan import TaskConfig
+from lowerbase.tasks.status import Chassis
+from lowerbase.world.grid import OccupancyGrid
+from lowerbase.world.places import Places, load_places
+from lowerbase.world.sim import WorldSim
+
+_FAULTS = (StatusBit.LEFT_MOTOR_FAULT, StatusBit.RIGHT_MOTOR_FAULT, StatusBit.BMS_PROTECTION)
+
+
+def chassis_from_driver(driver: DriverCore, pose: Pose | None, localized: bool = True
+                        ) -> Chassis:
+    """The chassis as driver_base's core shows it (``pose``: the localization estimate)."""
+    code = driver.status_code
+    snap = driver.bms.snapshot()
+    odom = None
+    if driver.odometry is not None:
+        x, y, yaw = driver.ekf.pose
+        odom = (float(x), float(y), float(yaw))
+    return Chassis(
+        initialized=driver.state in (LinkState.READY, LinkState.STANDBY)
+        or (driver.state == LinkState.LOST and odom is not None),
+        link_lost=driver.state == LinkState.LOST,
+        e_stopped=driver.e_stopped,
+        fault=", ".join(b.name.lower().replace("_", " ") for b in _FAULTS
+                        if code & b and b.name is not None),
+        soc=snap.soc if snap is not None else None,
+        low_battery=bool(code & StatusBit.LOW_BATTERY),
+        critical_battery=bool(code & StatusBit.CRITICAL_BATTERY),
+        charging=snap is not None and bool(snap.bms_status & BmsStatus.CHARGER_CONNECTED),
+        localized=localized and pose is not None,
+        pose=pose, odom=odom)
+
+
+class NavSimNavigation:
+    """The machine's Navigation on a NavSim: goals go to its Navigator; ``tick`` reports the
+    navigator's state and the last command the NavSim computed (the NavSim sends its twist)."""
+
+    def __init__(self, navsim: NavSim) -> None:
+        self.navsim = navsim
+
+    def send_goal(self, target: Pose, poses: Sequence[Pose] = (), execution_mode: int = 0,
+                  now: float = 0.0) -> None:
+        self.navsim.navigator.send_goal(target, poses, execution_mode, now)
+
+    def cancel(self, now: float) -> None:
+        self.navsim.navigator.cancel(now)
+
+    def tick(self, now: float, pose: Pose) -> NavCommand:
+        nav, last = self.navsim.navigator, self.navsim.last
+        if last is None or nav.state == GoalState.PENDING:
+            return NavCommand(0.0, 0.0, nav.state, CtrlStatus.IDLE, nav.reason)
+        return NavCommand(last.linear, last.angular, nav.state, last.status, nav.reason)
+
+
+class TaskSim:
+    """A TaskMachine on a NavSim (see the module docstring)."""
+
+    def __init__(self, navsim: NavSim, places: Places | None = None,
+                 config: TaskConfig | None = None, *,
+                 contact_tolerance: float = 0.05, contact_yaw: float = math.radians(5.0),
+                 on_status: Callable[[Status], None] | None = None) -> None:
+        self.navsim = navsim
+        world = navsim.world
+        if places is None:
+            ref = world.config.map
+            places = Places() if isinstance(ref, OccupancyGrid) else load_places(ref, world.grid)
+        self.places = places
+        self.machine = TaskMachine(NavSimNavigation(navsim), places, config,
+                                   on_status=on_status)
+        self.contact_tolerance = contact_tolerance
+        self.contact_yaw = contact_yaw
+        self.charger_closed = False
+        self.twist: tuple[float, float] | None = None
+
+    @property
+    def world(self) -> WorldSim:
+        return self.navsim.world
+
+    @property
+    def now(self) -> float:
+        return self.navsim.now
+
+    @property
+    def status(self) -> Status:
+        current = self.machine.tracker.current
+        assert current is not None
+        return current
+
+    def request(self, req: TaskRequest) -> TaskResponse:
+        return self.machine.request(req, self.now)
+
+    def on_charger(self) -> bool:
+        """The robot truly stands on the charger's contacts."""
+        c = self.places.charger
+        if c is None:
+            return False
+        x, y, yaw = self.world.true_pose()
+        return math.hypot(x - c.pose[0], y - c.pose[1]) <= self.contact_tolerance and \
+            abs(wrap(yaw - c.pose[2])) <= self.contact_yaw
+
+    def _charger(self) -> None:
+        bms = self.world.loop.mcu.bms
+        on = self.on_charger()
+        if on != self.charger_closed and bms is not None:
+            if on:
+                bms.connect_charger(ChargeMode.AUTO)
+            else:
+                bms.disconnect_charger()
+            self.charger_closed = on
+
+    def tick(self) -> None:
+        """One control period: charger contact, chassis, machine, twist, navigation, world."""
+        self._charger()
+        w = self.world
+        est = w.amcl_pose()
+        ch = chassis_from_driver(w.loop.driver, est, w.localizer.running)
+        self.twist = self.machine.tick(self.now, ch)
+        if self.twist is not None and not self._navigating():
+            w.loop.driver.set_twist(*self.twist)
+        self.navsim.tick()
+
+    def _navigating(self) -> bool:
+        return self.navsim.navigator.state in (GoalState.PENDING, GoalState.ACTIVE)
+
+    def run(self, seconds: float) -> None:
+        end = self.now + seconds
+        while self.now < end - 1e-9:
+            self.tick()
+
+    def run_until(self, condition: Callable[[TaskSim], bool], timeout: float) -> bool:
+        end = self.now + timeout
+        while self.now < end - 1e-9:
+            if condition(self):
+                return True
+            self.tick()
+        return condition(self)

@@ -42,11 +42,20 @@ ESTOP_MSG = "the emergency stop is on: release it, then continue (3)"
 class NavFeedback(Protocol):
     """What a navigation tick returns (the Navigator's NavCommand)."""
 
-    linear: float
-    angular: float
-    state: Any  #: a goal state with a ``name``: PENDING ACTIVE SUCCEEDED ABORTED PREEMPTED
-    status: str
-    reason: str
+    @property
+    def linear(self) -> float: ...
+
+    @property
+    def angular(self) -> float: ...
+
+    @property
+    def state(self) -> Any: ...  # a ``name``: PENDING ACTIVE SUCCEEDED ABORTED PREEMPTED
+
+    @property
+    def status(self) -> Any: ...
+
+    @property
+    def reason(self) -> str: ...
 
 
 class Navigation(Protocol):

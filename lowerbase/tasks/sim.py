@@ -76,9 +76,10 @@ class NavSimNavigation:
 
     def tick(self, now: float, pose: Pose) -> NavCommand:
         nav, last = self.navsim.navigator, self.navsim.last
-        if last is None or nav.state == GoalState.PENDING:
-            return NavCommand(0.0, 0.0, nav.state, CtrlStatus.IDLE, nav.reason)
-        return NavCommand(last.linear, last.angular, nav.state, last.status, nav.reason)
+        state = nav.state if nav.state is not None else GoalState.PENDING
+        if last is None or state == GoalState.PENDING:
+            return NavCommand(0.0, 0.0, state, CtrlStatus.IDLE, nav.reason)
+        return NavCommand(last.linear, last.angular, state, last.status, nav.reason)
 
 
 class TaskSim:

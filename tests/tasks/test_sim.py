@@ -88,7 +88,7 @@ def test_low_battery_sends_the_robot_to_charge_and_the_bms_charges() -> None:
     assert snap is not None and snap.current > 5.0  # CC: the charger's current into the pack
     assert ts.run_until(lambda s: s.status.task_state in FINAL, 400)
     assert ts.status.task_state == TS.COMPLETED, ts.status
-    assert ts.world.loop.mcu.bms.device.pack.soc >= 19.9  # type: ignore[union-attr]
+    assert ts.world.loop.mcu.bms.device.pack.soc >= 19.9
     x, y, _ = ts.world.true_pose()
     assert math.hypot(x - charger.approach[0], y - charger.approach[1]) < 0.05  # undocked
     assert not ts.charger_closed and ts.status.robot_state in (RS.IDLE, RS.WARNING)

@@ -3,8 +3,8 @@
 :class:`WorldTopics` writes the world node's topics (``lowerbase world``, docs/world.md) through
 a :class:`~lowerbase.recording.publisher.RunPublisher`'s sinks, packed by :mod:`.fastser`:
 
-* ``/map`` nav_msgs/OccupancyGrid (frame ``map``): once, when a run starts (what a latched
-  topic shows a late subscriber; the live view sends it again to each new subscriber);
+* ``/map`` nav_msgs/OccupancyGrid (frame ``map``): once, when a run starts; latched: a sink
+  that starts wanting it later (a live view subscribed since) gets it at the next scan tick;
 * ``/scan`` sensor_msgs/LaserScan (``base_link``): every scan tick of the lidar rig (25 Hz);
 * ``/amcl_pose`` geometry_msgs/PoseWithCovarianceStamped (``map``): each filter update;
 * ``/tf`` tf2_msgs/TFMessage map -> odom: with each scan once the localizer has an estimate;
@@ -56,12 +56,38 @@ class WorldTopics:
         self.pub = publisher
         self.map_frame = map_frame
         self.odom_frame = odom_frame or publisher.settings.odom_frame
+        self._map: tuple[int, Any] | None = None
+        self._map_seq = 0
+        self._map_to: set[int] = set()  #: sinks (ids) that wanted /map when it was last sent
 
     def map(self, t: float, grid: Any) -> None:
-        """/map: ``grid`` a ``lowerbase.world.grid.OccupancyGrid``, stamped and loaded at t."""
+        """/map: ``grid`` a ``lowerbase.world.grid.OccupancyGrid``, stamped and loaded at t.
+        Latched: :meth:`latch_map` sends it again to a sink that starts wanting it."""
         ns = to_ns(t)
-        self.pub.send(MAP_TOPIC, "nav_msgs/OccupancyGrid", lambda seq: fs.occupancy_grid(
-            seq, ns, self.map_frame, ns, grid.resolution, grid.origin, grid.data), ns)
+        self._map = (ns, grid)
+        pairs = self.pub._ros1(MAP_TOPIC, "nav_msgs/OccupancyGrid")
+        self._map_seq = self.pub._seq[MAP_TOPIC]
+        self._map_to = {id(s) for s, _ in pairs}
+        if pairs:
+            self.pub._emit(MAP_TOPIC, pairs, self._map_bytes(), ns)
+
+    def _map_bytes(self) -> bytes:
+        assert self._map is not None
+        ns, grid = self._map
+        return fs.occupancy_grid(self._map_seq, ns, self.map_frame, ns, grid.resolution,
+                                 grid.origin, grid.data)
+
+    def latch_map(self) -> None:
+        """The last /map again to each sink that did not want it when it was last sent (a
+        live view subscribed since): what a latched ROS topic does for a new subscriber."""
+        if self._map is None:
+            return
+        pairs = self.pub._open(MAP_TOPIC, lambda: self.pub.ros1_spec(
+            MAP_TOPIC, "nav_msgs/OccupancyGrid"))
+        new = [(s, h) for s, h in pairs if id(s) not in self._map_to]
+        self._map_to = {id(s) for s, _ in pairs}
+        if new:
+            self.pub._emit(MAP_TOPIC, new, self._map_bytes(), self._map[0])
 
     def wants_scan(self) -> bool:
         """Whether any sink takes /scan now (if not, it need not be cast)."""
@@ -147,6 +173,7 @@ class WorldFeed:
             self._finish()
             self._tick, self._scan = tick, None
             t, pose = tick
+            topics.latch_map()
             topics.truth_pose(t, pose)
             if w.map_to_odom is not None:
                 topics.map_to_odom(t, w.map_to_odom)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -240,3 +241,40 @@ def test_camera_depth_and_the_plan_hook(tmp_path: Path) -> None:
     assert m.log_time == 1_500_000_000 and plan.header.frame_id == "map"
     assert [(p.pose.position.x, p.pose.position.y) for p in plan.poses] == [(1.0, 2.0),
                                                                            (3.0, 2.5)]
+
+
+def test_live_view_gets_the_map_when_it_subscribes_later() -> None:
+    """/map is latched in the live view: a client subscribing after the start gets it (once),
+    cell for cell; a file sink is not sent it again."""
+    from lowerbase.recording.live import FoxgloveSink
+    from lowerbase.recording.publisher import RunPublisher
+    from lowerbase.world.sim import WorldConfig, WorldSim
+    from tests.recording.foxglove_client import FoxgloveClient
+
+    sink = FoxgloveSink("127.0.0.1", 0)
+    pub = RunPublisher([sink])
+    world = WorldSim(WorldConfig(map="empty_room", localization="truth"))
+    client = None
+    try:
+        pub.attach_world(world)
+        world.run(0.2)
+        assert pub.counts["/map"] == 0  # nobody wanted it yet
+        client = FoxgloveClient(sink.url)
+        client.pump_until(lambda: "/map" in client.channels)  # type: ignore[union-attr]
+        client.subscribe("/map")
+        deadline = time.monotonic() + 20.0  # the server registers it in its own thread
+        while not sink.subscribed("/map"):
+            assert time.monotonic() < deadline, "the subscription never arrived"
+            time.sleep(0.01)
+        world.run(0.2)
+        client.pump_until(lambda: bool(client.messages.get("/map")))  # type: ignore[union-attr]
+        world.run(0.5)
+    finally:
+        pub.close()
+    assert pub.counts["/map"] == 1
+    (_, data), = client.messages["/map"]
+    client.close()
+    msg = ros1_types().deserialize(data, "nav_msgs/OccupancyGrid")
+    grid = load_map("empty_room")
+    assert np.array_equal(np.asarray(msg.data, dtype=np.int8).reshape(grid.data.shape),
+                          grid.data)

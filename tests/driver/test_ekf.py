@@ -470,23 +470,6 @@ def test_consider_update_is_the_joseph_form_of_the_masked_gain(consider: tuple[i
         assert ekf.kf.P[i, i] == p0[i, i]
 
 
-def test_queued_gyro_samples_are_their_mean_fused_before_the_wheels() -> None:
-    queued, direct = _moving_filter(), _moving_filter()
-    t = queued.stamp
-    assert t is not None
-    assert queued.add_gyro(0.21, t + 0.01) is None
-    assert queued.add_gyro(0.23, t + 0.02) is None
-    assert queued.pending_gyro == 2
-    queued.update_wheels(0.5, 0.2, stamp=t + 0.02)
-    assert queued.pending_gyro == 0
-    direct.predict_to(t + 0.02)
-    direct.update_gyro(0.22, sigma=EkfNoise().gyro_noise / math.sqrt(2))
-    direct.update_wheels(0.5, 0.2)
-    np.testing.assert_allclose(queued.x, direct.x, rtol=1e-12, atol=1e-15)
-    np.testing.assert_allclose(queued.P, direct.P, rtol=1e-12, atol=1e-18)
-    assert queued.statistics["gyro.accepted"] == direct.statistics["gyro.accepted"]
-
-
 def test_queued_gyro_does_not_wait_for_wheels_forever() -> None:
     ekf = PlanarEkf(stamp=0.0)
     gates = [ekf.add_gyro(0.1, 0.01 * k) for k in range(1, 12)]

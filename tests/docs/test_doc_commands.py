@@ -76,6 +76,7 @@ CHECKS: dict[str, Check] = {
     "lowerbase emulate --map warehouse --truth-udp": Check("start", "Ctrl-C stops"),
     "lowerbase world --map warehouse": Check("skip", why=ROS),
     "lowerbase world --map empty_room --ground-truth --no-camera": Check("skip", why=ROS),
+    "lowerbase navigation --map warehouse": Check("skip", why=ROS),
     "lowerbase emulate --fleet 100": Check("start", "Ctrl-C stops"),
     "lowerbase driver --bus-kwargs port=43115": Check("skip", why=ROS),
     "lowerbase driver --robot legged": Check("skip", why=ROS),

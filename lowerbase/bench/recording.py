@@ -191,8 +191,12 @@ def _chain(first: tuple[float, int, bytes, bool],
 
 
 class TruthHook:
-    """``on_step`` hook of the MCU runner that hands the ground truth to :meth:`emit` at most
-    every ``period`` [s] of emulator time, with ``t`` [s] since the first boot."""
+    """``on_step`` hook of the MCU runner that hands the ground truth to :meth:`emit` once
+    every ``period`` [s] of emulator time on average, with ``t`` [s] since the first boot.
+
+    Samples are due on a grid of ``period`` from the first one, so a step that comes a little
+    late (a real-time loop's latency, K times longer on ``emulate --speed K``) does not push
+    every later sample back; a sample more than a period late restarts the grid (no burst)."""
 
     def __init__(self, period: float) -> None:
         self.period = period
@@ -203,9 +207,10 @@ class TruthHook:
         now = mcu.clock.now()
         if self._t0 is None:
             self._t0 = mcu.boot_time
-        if now < self._next:
+        if now < self._next - 1e-9:
             return
-        self._next = now + self.period - 1e-9
+        due = self._next + self.period
+        self._next = due if due > now else now + self.period
         self.emit(mcu, now - self._t0)
 
     def emit(self, mcu: Any, t: float) -> None:

@@ -60,6 +60,11 @@ def add_subparser(subparsers: Any) -> None:
                         help="run in real time (default)")
     timing.add_argument("--simulated", dest="simulated", action="store_true",
                         help="simulated clock, as fast as the CPU allows (needs --duration)")
+    p.add_argument("--speed", type=_speed_factor, default=1.0, metavar="K",
+                   help="real-time mode K times as fast as the wall clock (K > 0, default 1): "
+                   "the control loop, the frames' cycles, --duration, the fault times and the "
+                   "truth stream's t and 50 Hz all run on this sped-up time (lowerbase robot "
+                   "--sim-time)")
     bms = p.add_argument_group("battery and BMS")
     bms.add_argument("--no-bms", action="store_true", help="run without a BMS")
     bms.add_argument("--soc", type=float, default=80.0, metavar="PERCENT",
@@ -97,7 +102,6 @@ def add_subparser(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     import can
 
-    from lowerbase.clock import RealClock, SimClock
     from lowerbase.errors import ConfigError
     from lowerbase.firmware_model.faults import parse_fault
     from lowerbase.firmware_model.mcu import Mcu
@@ -111,9 +115,15 @@ def run(args: argparse.Namespace) -> int:
     if getattr(args, "robot", "wheeled") == "legged":
         from lowerbase.legged.emulate import run_legged
 
+        if getattr(args, "speed", 1.0) != 1.0:
+            raise ConfigError("--speed is for the wheeled robot; drop it with --robot legged")
+
         return run_legged(args)
     if args.simulated and args.duration is None:
         raise ConfigError("--simulated needs --duration (it runs as fast as the CPU allows)")
+    if args.simulated and getattr(args, "speed", 1.0) != 1.0:
+        raise ConfigError("--speed K paces real time K times faster; --simulated already runs "
+                          "as fast as the CPU allows: drop one of them")
     if args.truth_udp is not None:  # a bad address is refused before anything starts
         from lowerbase.world.truth_stream import parse_address
 
@@ -142,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
             bms.close()
         raise
     stop = threading.Event()
-    clock = SimClock() if args.simulated else RealClock(stop)
+    clock = make_clock(args, stop)
     feed = None
     try:
         if args.foxglove is not None:
@@ -186,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
         where = getattr(bus, "stream", None)
         target = where.name if where is not None else describe(config)
         print(f"lowerbase emulate: lower computer on {target} "
-              f"({'simulated' if args.simulated else 'real'} time, boot #{mcu.boot_counter}"
+              f"({_timing(args)}, boot #{mcu.boot_counter}"
               f"{', faults: ' + ', '.join(map(str, faults)) if faults else ''}); Ctrl-C stops",
               flush=True)
         periodic = [m for m in codec if m.is_periodic and "Lower" in m.senders
@@ -278,6 +288,34 @@ def _chain(hooks: list[Any]) -> Any:
     return each
 
 
+def make_clock(args: argparse.Namespace, stop: threading.Event) -> Any:
+    """The emulator's clock: simulated, real time, or real time x ``--speed``."""
+    from lowerbase.clock import RealClock, ScaledClock, SimClock
+
+    if args.simulated:
+        return SimClock()
+    speed = getattr(args, "speed", 1.0)
+    return RealClock(stop) if speed == 1.0 else ScaledClock(speed, stop)
+
+
+def _timing(args: argparse.Namespace) -> str:
+    if args.simulated:
+        return "simulated time"
+    speed = getattr(args, "speed", 1.0)
+    return "real time" if speed == 1.0 else f"{speed:g} x real time"
+
+
+def _speed_factor(text: str) -> float:
+    try:
+        k = float(text)
+    except ValueError:
+        k = 0.0
+    if not (0 < k < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a number > 0 (2: twice real time), not "
+                                         f"{text!r}")
+    return k
+
+
 def _chassis_count(text: str) -> int:
     try:
         n = int(text)
@@ -295,7 +333,6 @@ _NOT_WITH_FLEET = ("serial", "slcan", "params", "bms_tcp", "bms_rtu", "bms_exter
 
 def _run_fleet(args: argparse.Namespace, profile: Any, faults: list[Any]) -> int:
     """``--fleet N``: N chassis stepped together by runner.run_fleet, each on its own bus."""
-    from lowerbase.clock import RealClock, SimClock
     from lowerbase.errors import ConfigError
     from lowerbase.firmware_model.runner import close_fleet, fleet_bus_configs, open_fleet
     from lowerbase.firmware_model.runner import run_fleet as run_all
@@ -310,7 +347,7 @@ def _run_fleet(args: argparse.Namespace, profile: Any, faults: list[Any]) -> int
     config = config_from_args(args)
     configs = fleet_bus_configs(config, args.fleet)  # refuses what cannot host a fleet
     stop = threading.Event()
-    clock = SimClock() if args.simulated else RealClock(stop)
+    clock = make_clock(args, stop)
     fleet = open_fleet(profile, clock, config, args.fleet, bms=not args.no_bms, soc=args.soc,
                        charger=args.charger, faults=faults)
     try:
@@ -319,7 +356,7 @@ def _run_fleet(args: argparse.Namespace, profile: Any, faults: list[Any]) -> int
                  if "port" in first else f"channels {first['channel']}..{last['channel']}")
         print(f"lowerbase emulate: fleet of {args.fleet} lower computers on "
               f"{describe({k: v for k, v in config.items() if k != 'port'})}, {where} "
-              f"({'simulated' if args.simulated else 'real'} time); Ctrl-C stops", flush=True)
+              f"({_timing(args)}); Ctrl-C stops", flush=True)
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
         with contextlib.suppress(KeyboardInterrupt):
             run_all(fleet, clock, duration=args.duration, stop=stop)

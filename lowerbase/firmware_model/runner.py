@@ -3,6 +3,8 @@
 Real time: frames are handled as they arrive and the control loop keeps its period (the
 deadline advances by exactly one period per step, so periodic frames keep their cycle).
 Simulated time: each step drains what the bus holds, then the clock jumps one period.
+On a :class:`~lowerbase.clock.ScaledClock` (``emulate --speed K``) the real-time loop keeps the
+period in the clock's time: the bus waits are that span in wall seconds (K times shorter).
 
 :func:`run_fleet` steps N chassis on one clock in one process, each on its own bus (a
 udp_multicast port each, :func:`fleet_bus_configs`): one ``epoll`` wait per control period for
@@ -31,7 +33,7 @@ from typing import Any
 
 import can
 
-from lowerbase.clock import Clock, SimClock
+from lowerbase.clock import Clock, SimClock, real_seconds
 from lowerbase.errors import ConfigError
 from lowerbase.firmware_model.mcu import Mcu
 from lowerbase.firmware_model.profile import Profile
@@ -141,7 +143,9 @@ def run(
         else:
             while True:
                 remaining = deadline - clock.now()
-                msg = bus.recv(max(remaining, 0.0)) if remaining > 0 else bus.recv(0.0)
+                # the wait is in wall seconds: a ScaledClock (--speed K) runs K times as fast
+                msg = bus.recv(real_seconds(clock, remaining)) if remaining > 0 else \
+                    bus.recv(0.0)
                 if msg is None:
                     break
                 _receive(mcu, msg, peers)
@@ -251,7 +255,8 @@ def run_fleet(
                 receive(0.0)
             else:
                 while (remaining := deadline - clock.now()) > 0:
-                    receive(remaining if wait is None else min(remaining, wait))
+                    span = real_seconds(clock, remaining)
+                    receive(span if wait is None else min(span, wait))
                 receive(0.0)
             for chassis in fleet:
                 chassis.mcu.step()

@@ -393,7 +393,10 @@ class NavigationNode:
         if self._servers is not None:
             self._servers.shutdown()
         if self._pubs and (self.steps.active or self.navigator_active()):
-            self._pubs["cmd_vel"].publish(self.io.twist(0.0, 0.0))
+            try:  # a last zero twist; rospy may already have closed the topic
+                self._pubs["cmd_vel"].publish(self.io.twist(0.0, 0.0))
+            except self.rospy.ROSException as exc:
+                log.warning("no zero twist at shutdown: %s", exc)
         for sub in self._subs:
             sub.unregister()
         for service in self._services:

@@ -106,6 +106,9 @@ def add_subparser(subparsers: Any) -> None:
     p.add_argument("--ground-truth", action="store_true",
                    help="publish the true pose instead of the particle filter's (tests)")
     p.add_argument("--no-camera", action="store_true", help="no camera topics (saves CPU)")
+    p.add_argument("--publish-clock", action="store_true",
+                   help="be the simulator: publish /clock from the ground truth's time, for "
+                   "nodes with /use_sim_time true (lowerbase robot --sim-time)")
     p.add_argument("--profile", metavar="FILE",
                    help="robot profile TOML whose [sensors] to use (default: packaged)")
     p.add_argument("ros_args", nargs="*", metavar="NAME:=VALUE",
@@ -130,4 +133,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"lowerbase world: map {args.map}, robot starts at {parts.where}; waiting for the "
               f"ground truth on udp {host}:{truth.address[1]} (lowerbase emulate "
               f"--truth-udp)", flush=True)
-        return node.run(setup, truth, ros_args, f"udp {host}:{truth.address[1]}")
+        where = f"udp {host}:{truth.address[1]}"
+        if not getattr(args, "publish_clock", False):
+            return node.run(setup, truth, ros_args, where)
+        from lowerbase.world.sim_clock import ClockedTruth
+
+        clocked = ClockedTruth(truth)
+        try:
+            return node.run(setup, clocked, ros_args, f"{where}; publishing /clock from it")
+        finally:
+            clocked.close()

@@ -9,7 +9,8 @@ lidars and renders the camera at the truth's pose, runs the
 vendor's interface (docs/world.md, "ROS interface").
 
 Threads: the main loop (sensors, localization, TF) and rospy's callback threads (/odom,
-/initialpose, services) share one lock. Stamps are rospy's wall time; obstacles move on the
+/initialpose, services) share one lock. Stamps are rospy's time (sim time from /clock under
+/use_sim_time, e.g. ``--publish-clock``: :mod:`lowerbase.world.sim_clock`); obstacles move on the
 emulator's time (the truth sample's ``t``). Bad input (a NaN pose, a malformed map) is a failed
 service response or a logged drop, never an exception out of a callback.
 """
@@ -353,6 +354,9 @@ def run(setup: WorldSetup, truth: Any, ros_args: Sequence[str], truth_where: str
     if address is not None:
         os.environ["ROS_IP"] = address
     rospy.init_node(NODE_NAME, argv=[NODE_NAME, *ros_args], anonymous=False)
+    start_clock = getattr(truth, "start_ros", None)
+    if start_clock is not None:  # --publish-clock: /clock from the truth (world.sim_clock)
+        start_clock(rospy)
     pkg_logger = logging.getLogger("lowerbase")
     pkg_logger.addHandler(_ToRosout())
     pkg_logger.propagate = False

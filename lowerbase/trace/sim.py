@@ -65,6 +65,7 @@ class TraceSim:
         self._laser_every = max(1, round(laser_period / self.world.control_dt))
         self._steps = 0
         self._scan_stamp: float | None = None
+        self._bridge(laser=True)  # the bridges have published before any list arrives
 
     @property
     def now(self) -> float:
@@ -97,15 +98,18 @@ class TraceSim:
         self._steps += 1
         if self._steps % self._every:
             return
+        self._bridge(laser=self._steps % self._laser_every == 0)
+        self.trace.tick()
+        self.obstacle.tick()
+
+    def _bridge(self, laser: bool) -> None:
         pose = self.world.amcl_pose()
         if pose is not None:
             self.publish(POSE, pose_to_pb(pose, self.now))
-        scan = self.world.scan if self._steps % self._laser_every == 0 else None
+        scan = self.world.scan if laser else None
         if scan is not None and scan.stamp != self._scan_stamp:
             self._scan_stamp = scan.stamp
             self.publish(LASER, laser_to_pb(scan))
-        self.trace.tick()
-        self.obstacle.tick()
 
     def run(self, seconds: float) -> None:
         for _ in range(round(seconds / self.world.control_dt)):

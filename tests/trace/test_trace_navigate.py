@@ -1,0 +1,94 @@
+"""TraceNavigate's defined answers on the simulated chassis: the empty-list cancel, bad input,
+a list while one runs, the nearest starter, resuming from ``finished``, the 60 s default wait."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from lowerbase.trace import messages as m
+from lowerbase.trace.sim import ROUTE, SPEED, STATUS, TraceSim
+from tests.trace.routes import Y, route, trace_sim
+
+
+def _statuses(sim: TraceSim) -> list[int]:
+    return [s for _, s in sim.statuses(STATUS)]
+
+
+def test_empty_list_cancels_zero_speed_at_once_idle_once() -> None:
+    sim = trace_sim()
+    sim.publish(ROUTE, route([6.0, 11.0]))
+    sim.run(3.0)
+    assert sim.world.loop.mcu.truth.v > 0.3
+    t = sim.now
+    sim.publish(ROUTE, m.GTraceList(map=b"warehouse"))
+    zero = [s for ts, s in sim.published[SPEED] if ts == t]
+    assert zero and zero[-1].linear == zero[-1].angular == 0.0
+    sim.run(2.0)
+    assert abs(sim.world.loop.mcu.truth.v) < 1e-3
+    assert _statuses(sim) == [m.RUNNING, m.IDLE]
+    assert [ts for ts, _ in sim.published[SPEED] if ts > t] == []  # silent after
+
+
+@pytest.mark.parametrize("edit, why", [
+    (lambda r: setattr(r.lists[0].second, "x", r.lists[0].first.x), "length"),
+    (lambda r: setattr(r.lists[0].first, "y", math.nan), "finite"),
+    (lambda r: setattr(r.lists[0], "finished", 1.5), "0..1"),
+    (lambda r: setattr(r, "map", b"corridor_loop"), "map"),
+])
+def test_bad_lists_are_refused_with_idle_and_nothing_moves(edit: object, why: str,
+                                                           caplog: pytest.LogCaptureFixture
+                                                           ) -> None:
+    sim = trace_sim()
+    lst = route([6.0, 11.0])
+    edit(lst)  # type: ignore[operator]
+    sim.publish(ROUTE, lst)
+    sim.run(1.0)
+    assert _statuses(sim) == [m.IDLE] and sim.trace.stats["refused"] == 1
+    assert why in caplog.text
+    assert abs(sim.world.true_pose()[0] - 6.0) < 1e-3 and not sim.published[SPEED]
+
+
+def test_a_list_while_one_runs_is_refused_and_the_run_goes_on() -> None:
+    sim = trace_sim()
+    sim.publish(ROUTE, route([6.0, 9.0]))
+    sim.run(2.0)
+    sim.publish(ROUTE, route([6.0, 6.0 + 0.5], y=2.0))
+    assert sim.trace.stats["refused"] == 1
+    answer = sim.published[STATUS][-1][1]
+    assert answer.status == m.RUNNING and answer.lists[0].second.x == 9.0  # type: ignore
+    assert sim.run_until(lambda: sim.trace.status == m.IDLE, 30.0)
+    assert _statuses(sim)[-1] == m.FINISHED
+    assert abs(sim.world.true_pose()[0] - 9.0) < 0.05
+
+
+def test_starts_at_the_nearest_starter_and_drives_the_rest() -> None:
+    sim = trace_sim(start_x=11.2)
+    sim.publish(ROUTE, route([6.0, 8.5, 11.0, 13.0], starters=[0, 2]))
+    assert sim.run_until(lambda: sim.trace.status == m.IDLE, 30.0)
+    final = sim.published[STATUS][-1][1]
+    assert final.status == m.FINISHED  # type: ignore[attr-defined]
+    assert [s.finished for s in final.lists] == [0.0, 0.0, 1.0]  # type: ignore[attr-defined]
+    assert abs(sim.world.true_pose()[0] - 13.0) < 0.05
+
+
+def test_resumes_from_finished_and_speed_is_mm_per_s() -> None:
+    sim = trace_sim(start_x=8.5)
+    sim.publish(ROUTE, route([6.0, 11.0, 14.0], finished=[0.5, 0.0], speed=300))
+    sim.run(6.0)
+    assert sim.world.loop.mcu.truth.v == pytest.approx(0.3, abs=0.02)
+    assert sim.run_until(lambda: sim.trace.status == m.IDLE, 40.0)
+    final = sim.published[STATUS][-1][1]
+    assert [s.finished for s in final.lists] == [1.0, 1.0]  # type: ignore[attr-defined]
+
+
+def test_default_wait_is_60s_on_the_sim_clock() -> None:
+    sim = trace_sim(start_x=11.0, crate=True)
+    assert sim.params.blocked_timeout == 60.0 and sim.params.status_period == 5.0
+    sim.publish(ROUTE, route([11.0, 16.0]))
+    assert sim.run_until(lambda: sim.trace.status == m.BLOCKED, 90.0)
+    t_block = sim.published[STATUS][-1][0]
+    moving = [t for t, s in sim.published[SPEED] if abs(s.linear) > 1e-3]
+    assert t_block - moving[-1] == pytest.approx(60.0, abs=0.5)  # stopped, then 60 s
+    assert sim.world.true_pose()[1] == pytest.approx(Y, abs=0.03)

@@ -39,6 +39,10 @@ def add_subparser(subparsers: Any) -> None:
                    help="speed the suite commands (default 0.1 m/s)")
     p.add_argument("--no-motion", action="store_true",
                    help="skip the checks that turn the wheels")
+    p.add_argument("--robot", choices=("wheeled", "legged"), default="wheeled",
+                   help="legged: the quadruped's suite on its four leg buses (docs/conformance.md)")
+    p.add_argument("--zero-position", action="store_true",
+                   help="legged: also check the zero-position frame (re-zeroes FR hip)")
     p.set_defaults(func=run)
 
 
@@ -79,6 +83,10 @@ def run(args: argparse.Namespace) -> int:
     from lowerbase.errors import ConfigError
     from lowerbase.transport import config_from_args, describe, open_bus
 
+    if args.robot == "legged":
+        from lowerbase.bench.conformance.legged_cli import run_legged_conformance
+
+        return run_legged_conformance(args, _row)
     checks = select(registry(), args.only)
     if not checks:
         raise ConfigError(f"no check matches --only {','.join(args.only)} (see --list)")

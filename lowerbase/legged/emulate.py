@@ -11,8 +11,22 @@ import threading
 from lowerbase.errors import ConfigError
 
 #: options of the wheeled emulator that the legged one does not take
-NOT_WITH_LEGGED = ("serial", "slcan", "params", "fault", "fleet", "bms_tcp", "bms_rtu",
+NOT_WITH_LEGGED = ("serial", "slcan", "params", "fleet", "bms_tcp", "bms_rtu",
                    "bms_external", "truth", "truth_udp", "map", "foxglove")
+
+
+def _defects(faults: list[str]) -> tuple[str, ...]:
+    """The legged robot takes only ``--fault defect:NAME`` (lowerbase.legged.lower.DEFECTS)."""
+    from lowerbase.legged.lower import DEFECTS
+
+    names = []
+    for spec in faults:
+        kind, _, name = spec.partition(":")
+        if kind != "defect" or name not in DEFECTS:
+            raise ConfigError(f"--robot legged takes only --fault defect:NAME, NAME one of "
+                              f"{', '.join(DEFECTS)} (got {spec!r})")
+        names.append(name)
+    return tuple(names)
 
 
 def run_legged(args: argparse.Namespace) -> int:
@@ -29,6 +43,7 @@ def run_legged(args: argparse.Namespace) -> int:
         flag = given[0].replace("_", "-")
         raise ConfigError(f"--robot legged does not take --{flag} (four CAN buses, its own "
                           "pack); drop it")
+    defects = _defects(getattr(args, "fault", None) or [])
     if args.simulated and args.duration is None:
         raise ConfigError("--simulated needs --duration (it runs as fast as the CPU allows)")
     profile = load_legged_profile(args.profile)
@@ -49,7 +64,7 @@ def run_legged(args: argparse.Namespace) -> int:
         return out
 
     lower, buses = open_legged(profile, clock, config, bms=not args.no_bms, soc=args.soc,
-                               charger=args.charger,
+                               charger=args.charger, defects=defects,
                                wrap_send=printing if args.print_frames else None)
     try:
         if "port" in configs[0]:

@@ -26,14 +26,16 @@ SOC fell below ``power.critical_battery_soc``). MOTOR_READY clears them once the
 
 from __future__ import annotations
 
+import dataclasses
 import logging
+import math
 from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
 from lowerbase.bms.status import SwitchStatus
 from lowerbase.clock import Clock
-from lowerbase.errors import ProtocolError
+from lowerbase.errors import ConfigError, ProtocolError
 from lowerbase.legged.actuator import Actuator
 from lowerbase.legged.profile import LeggedProfile
 from lowerbase.legged.protocol import (
@@ -77,6 +79,15 @@ MOTOR_MODE_STATES = frozenset({S.MOTOR_COMMUTATION, S.MOTOR_ENABLED, S.IN_TEST_M
 #: states in which the body controller sends no actuator commands
 SILENT_STATES = frozenset({S.COMM_DISABLED, S.IN_TEST_MODE})
 _EXTRA_FAULTS = Fault.BODY_OVER_TEMPERATURE | Fault.BATTERY_PROTECTION
+#: deliberate firmware bugs (``lowerbase emulate --robot legged --fault defect:NAME``): each
+#: fails exactly its own checks of ``lowerbase conformance --robot legged`` (docs/conformance.md)
+DEFECTS: dict[str, str] = {
+    "no-velocity-timeout": "a stale BodyVelocityCommand stays in force (no command timeout)",
+    "slow-status": "LocomotionStatus at twice its cycle time (40 ms)",
+    "obey-outside-test-mode": "actuator commands from the upper side are obeyed and "
+                              "answered in every state, not only IN_TEST_MODE",
+    "no-exit-frames": "leaving motor mode sends no exit-motor-mode frames",
+}
 
 
 def _clamp(x: float, limit: float, low: float | None = None) -> float:
@@ -89,7 +100,8 @@ class LeggedLower:
     ``bms``: a :class:`~lowerbase.bms.adapter.McuBmsAdapter` (None: no battery frames)."""
 
     def __init__(self, profile: LeggedProfile, clock: Clock, send: Send, *, bms: Any = None,
-                 boot_counter: int = 1, codec: Codec | None = None) -> None:
+                 boot_counter: int = 1, codec: Codec | None = None,
+                 defects: tuple[str, ...] = ()) -> None:
         self.profile, self.clock, self.send, self.bms = profile, clock, send, bms
         self.codec = codec or legged_codec()
         self.dt = DT
@@ -120,6 +132,16 @@ class LeggedLower:
             "BasePosition": self._base_position, "BaseOrientation": self._orientation,
             "BodyTemperature": self._temperatures,
         }
+        self.defects = frozenset(defects)
+        unknown = self.defects - DEFECTS.keys()
+        if unknown:
+            raise ConfigError(f"unknown legged defect {sorted(unknown)[0]!r}; known: "
+                              f"{', '.join(DEFECTS)}")
+        if "no-velocity-timeout" in self.defects:  # defect hook (conformance)
+            self.body.p = dataclasses.replace(self.body.p, command_timeout=math.inf)
+        if "slow-status" in self.defects:  # defect hook (conformance)
+            self._periodic = [(m, every * 2 if m.name == "LocomotionStatus" else every)
+                              for m, every in self._periodic]
 
     # -- the upper side -----------------------------------------------------------------------
 
@@ -156,7 +178,8 @@ class LeggedLower:
         return body.request(target)
 
     def _actuator_command(self, bus: int, frame_id: int, data: bytes) -> None:
-        if self.body.state is not S.IN_TEST_MODE:
+        if self.body.state is not S.IN_TEST_MODE and \
+                "obey-outside-test-mode" not in self.defects:  # defect hook (conformance)
             self.stats["rx_actuator_command_refused"] += 1
             return
         try:
@@ -214,7 +237,8 @@ class LeggedLower:
         if state is not before:
             if state is S.MOTOR_COMMUTATION:
                 special = Special.ENTER_MOTOR_MODE
-            elif state not in MOTOR_MODE_STATES and before in MOTOR_MODE_STATES:
+            elif state not in MOTOR_MODE_STATES and before in MOTOR_MODE_STATES and \
+                    "no-exit-frames" not in self.defects:  # defect hook (conformance)
                 special = Special.EXIT_MOTOR_MODE
         if special is None and state in SILENT_STATES:
             return

@@ -140,13 +140,11 @@ def open_legged(
     profile: LeggedProfile, clock: Clock, config: dict[str, Any], *, bms: bool = True,
     soc: float = 80.0, charger: bool = False,
     wrap_send: Callable[[Callable[[int, int, bytes], None]], Callable[[int, int, bytes], None]]
-    | None = None,
+    | None = None, defects: tuple[str, ...] = (),
 ) -> tuple[LeggedLower, list[can.BusABC]]:
     """The lower computer with its own pack (unless ``bms`` is False) on its four buses
-    (:func:`leg_bus_configs`); ``wrap_send`` may wrap its send (e.g. to print frames)."""
-    from lowerbase.bms.adapter import McuBmsAdapter
-    from lowerbase.bms.device import BmsDevice
-    from lowerbase.bms.pack import BatteryPack
+    (:func:`leg_bus_configs`); ``wrap_send`` may wrap its send (e.g. to print frames);
+    ``defects``: names of :data:`~lowerbase.legged.lower.DEFECTS`."""
     from lowerbase.transport import open_bus
 
     if not 0 <= soc <= 100:
@@ -165,17 +163,24 @@ def open_legged(
     def send(k: int, frame_id: int, data: bytes) -> None:
         senders[k](frame_id, data)
 
-    adapter = None
-    if bms:
-        device = BmsDevice(BatteryPack(profile.battery, soc=soc))
-        if charger:
-            device.connect_charger()
-        adapter = McuBmsAdapter(device, low_soc=profile.power.low_battery_soc,
-                                critical_soc=profile.power.critical_battery_soc,
-                                temp_warning_c=profile.power.battery_temp_warning)
-    lower = LeggedLower(profile, clock, wrap_send(send) if wrap_send else send, bms=adapter)
+    lower = LeggedLower(profile, clock, wrap_send(send) if wrap_send else send,
+                        bms=legged_bms(profile, soc, charger) if bms else None, defects=defects)
     stats.append(lower)
     return lower, buses
+
+
+def legged_bms(profile: LeggedProfile, soc: float = 80.0, charger: bool = False) -> Any:
+    """The legged pack behind its BMS, as the lower computer polls it (a McuBmsAdapter)."""
+    from lowerbase.bms.adapter import McuBmsAdapter
+    from lowerbase.bms.device import BmsDevice
+    from lowerbase.bms.pack import BatteryPack
+
+    device = BmsDevice(BatteryPack(profile.battery, soc=soc))
+    if charger:
+        device.connect_charger()
+    return McuBmsAdapter(device, low_soc=profile.power.low_battery_soc,
+                         critical_soc=profile.power.critical_battery_soc,
+                         temp_warning_c=profile.power.battery_temp_warning)
 
 
 def close_buses(buses: Sequence[can.BusABC]) -> None:

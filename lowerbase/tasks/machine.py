@@ -69,6 +69,23 @@ class Navigation(Protocol):
     def tick(self, now: float, pose: Pose) -> NavFeedback: ...
 
 
+class StepMoves(Protocol):
+    """What the task machine needs of step control (the docking moves): a
+    :class:`~lowerbase.navigation.steps.StepController` in-process, or the /cmd_vel_control
+    action client (:class:`lowerbase.tasks.ros_clients.ActionSteps`). ``steps`` is the running
+    list (the machine empties it once it read ``result``); ``tick`` returns the twist to command,
+    or None when the moves drive themselves."""
+
+    steps: list[Step]
+
+    @property
+    def result(self) -> Any: ...  # a StepResult once the list ended, else None
+
+    def goal(self, mode: int, steps: Sequence[Step] = (), use_avoid: bool = False) -> Any: ...
+
+    def tick(self, odom: Sequence[float]) -> Twist | None: ...
+
+
 def _pct(soc: float | None) -> str:
     return "" if soc is None else f" ({soc:.0f} %)"
 
@@ -103,11 +120,13 @@ class Task:
 
 class TaskMachine:
     def __init__(self, nav: Navigation, places: Places, config: TaskConfig | None = None, *,
-                 on_status: Callable[[Status], None] | None = None) -> None:
+                 on_status: Callable[[Status], None] | None = None,
+                 steps: StepMoves | None = None) -> None:
         self.nav = nav
         self.places = places
         self.config = config or TaskConfig()
-        self.steps = StepController(period=self.config.period, settle=0.2)
+        self.steps: StepMoves = steps if steps is not None else StepController(
+            period=self.config.period, settle=0.2)
         self.task: Task | None = None
         self.chassis = Chassis(initialized=False)
         self.docked = False  #: on the charger (a dock-in finished, no dock-out since)

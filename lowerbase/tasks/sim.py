@@ -25,6 +25,7 @@ from lowerbase.navigation.controller import wrap
 from lowerbase.navigation.navigator import GoalState, NavCommand
 from lowerbase.navigation.sim import NavSim
 from lowerbase.protocol.status_codes import StatusBit
+from lowerbase.tasks.inputs import faults_of
 from lowerbase.tasks.machine import TaskMachine
 from lowerbase.tasks.model import Pose, Status, TaskRequest, TaskResponse
 from lowerbase.tasks.plan import TaskConfig
@@ -32,8 +33,6 @@ from lowerbase.tasks.status import Chassis
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.places import Places, load_places
 from lowerbase.world.sim import WorldSim
-
-_FAULTS = (StatusBit.LEFT_MOTOR_FAULT, StatusBit.RIGHT_MOTOR_FAULT, StatusBit.BMS_PROTECTION)
 
 
 def chassis_from_driver(driver: DriverCore, pose: Pose | None, localized: bool = True
@@ -50,8 +49,7 @@ def chassis_from_driver(driver: DriverCore, pose: Pose | None, localized: bool =
         or (driver.state == LinkState.LOST and odom is not None),
         link_lost=driver.state == LinkState.LOST,
         e_stopped=driver.e_stopped,
-        fault=", ".join(b.name.lower().replace("_", " ") for b in _FAULTS
-                        if code & b and b.name is not None),
+        fault=faults_of(code),
         soc=snap.soc if snap is not None else None,
         low_battery=bool(code & StatusBit.LOW_BATTERY),
         critical_battery=bool(code & StatusBit.CRITICAL_BATTERY),

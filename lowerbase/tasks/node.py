@@ -1,0 +1,260 @@
+"""Tasks as a ROS1 node (``lowerbase tasks``): the seed's exec_task and robot_status.
+
+A thin rospy layer over :class:`~lowerbase.tasks.machine.TaskMachine`:
+
+- serves ``exec_task`` (woosh_msgs/ExecTask) and publishes ``robot_status``
+  (woosh_msgs/RobotStatus, latched, only on change), the names of shared/seeds/000;
+- drives navigation as an actionlib client of /move_base (woosh_msgs/MoveBaseAction) and of
+  /cmd_vel_control (woosh_msgs/StepControlAction, the docking moves), both served by
+  ``lowerbase navigation`` (:mod:`lowerbase.tasks.ros_clients`); it never commands a twist;
+- reads the chassis from driver_base's topics and the world's localization
+  (:mod:`lowerbase.tasks.inputs`).
+
+The machine ticks at ``rate_hz`` on rospy's clock (rospy.Rate, rospy.get_time), so it runs on
+/clock under use_sim_time. Threads: the main loop, rospy's subscriber and service threads share
+one lock. A malformed message is a counted, logged drop; a bad request a failed response.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from lowerbase.errors import LowerbaseError, WorldError
+from lowerbase.tasks.inputs import ChassisInputs, finite_pose
+from lowerbase.tasks.model import Pose, Status, TaskRequest, TaskResponse
+from lowerbase.tasks.plan import TaskConfig
+from lowerbase.world.places import Places
+
+log = logging.getLogger(__name__)
+
+NODE_NAME = "tasks"
+
+
+@dataclass
+class TasksSetup:
+    """Everything the node needs, checked without ROS (see ``lowerbase.cli.tasks``)."""
+
+    places: Places
+    config: TaskConfig = field(default_factory=TaskConfig)
+    map_frame: str = "map"
+    pose_timeout: float = 1.0  #: [s] without movebase_pose2d: localization lost
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.pose_timeout) and self.pose_timeout > 0):
+            raise LowerbaseError(f"pose_timeout = {self.pose_timeout!r}: expected seconds > 0")
+
+
+def import_ros() -> Any:
+    """rospy; RosUnavailableError in one line if ROS (or actionlib) is missing."""
+    from lowerbase.driver.node import ROS_HINT
+    from lowerbase.errors import RosUnavailableError
+
+    try:
+        import actionlib  # type: ignore[import-untyped]  # noqa: F401
+        import rospy
+        from woosh_msgs.srv import ExecTask  # noqa: F401
+    except ImportError as exc:
+        raise RosUnavailableError(f"ROS is not installed ({exc}): {ROS_HINT}") from None
+    return rospy
+
+
+def request_of(msg: Any, frame: str = "map") -> TaskRequest:
+    """An ExecTask request as the machine's TaskRequest; WorldError on a pose in another
+    frame or with a bad orientation (a non-finite position is the machine's refusal)."""
+    from lowerbase.world.ros_msgs import yaw_of
+
+    poses: list[Pose] = []
+    for i, p in enumerate(msg.poses, 1):
+        got = p.header.frame_id.lstrip("/")
+        if got not in ("", frame):
+            raise WorldError(f"pose {i} is in frame {got!r}: send poses in {frame!r}")
+        yaw = yaw_of(p.pose.orientation, f"pose {i}")
+        poses.append((float(p.pose.position.x), float(p.pose.position.y), yaw))
+    custom = msg.custom
+    return TaskRequest(int(msg.task_exect), int(msg.task_id), int(msg.task_type),
+                       int(msg.direction), int(msg.task_type_no), str(msg.mark_no),
+                       tuple(poses), custom[0] if isinstance(custom, bytes) and custom
+                       else int(custom or 0))
+
+
+class TasksNode:
+    """The exec_task service, the robot_status publisher, the chassis subscribers and the loop
+    around one TaskMachine."""
+
+    def __init__(self, setup: TasksSetup) -> None:
+        from lowerbase.tasks.machine import TaskMachine
+        from lowerbase.tasks.ros_clients import ActionNavigation, ActionSteps
+
+        self.rospy = import_ros()
+        from woosh_msgs.msg import RobotStatus
+
+        self.setup = setup
+        self.lock = threading.RLock()
+        self.inputs = ChassisInputs(pose_timeout=setup.pose_timeout)
+        self.stats: dict[str, int] = {"requests": 0, "refused": 0, "published": 0,
+                                      "bad_request": 0, "bad_pose": 0, "bad_odom": 0}
+        self._status_pub = self.rospy.Publisher("robot_status", RobotStatus, queue_size=20,
+                                                latch=True)
+        self.nav = ActionNavigation("move_base", setup.map_frame)
+        self.steps = ActionSteps("cmd_vel_control")
+        self.machine = TaskMachine(self.nav, setup.places, setup.config,
+                                   on_status=self._publish, steps=self.steps)
+        self._subs: list[Any] = []
+        self._service: Any = None
+
+    def advertise(self) -> None:
+        rospy = self.rospy
+        from geometry_msgs.msg import Pose2D
+        from nav_msgs.msg import Odometry
+        from std_msgs.msg import String, UInt64
+        from woosh_msgs.msg import BMS, Battery
+        from woosh_msgs.srv import ExecTask
+
+        sub = rospy.Subscriber
+        self._subs = [
+            sub("driver_base/link_state", String, self._on_link, queue_size=5),
+            sub("status_code", UInt64, self._on_code, queue_size=5),
+            sub("/battery", Battery, self._on_battery, queue_size=2),
+            sub("driver_base/bms", BMS, self._on_bms, queue_size=2),
+            sub("/odom", Odometry, self._on_odom, queue_size=5),
+            sub("movebase_pose2d", Pose2D, self._on_pose, queue_size=5),
+        ]
+        self._service = rospy.Service("exec_task", ExecTask, self._exec_task)
+
+    # -- ROS -> machine ------------------------------------------------------------------------
+    def _count_bad(self, key: str, what: str) -> None:
+        self.stats[key] += 1
+        if self.stats[key] in (1, 10, 100) or self.stats[key] % 1000 == 0:
+            log.warning("%s (dropped; %d so far)", what, self.stats[key])
+
+    def _on_link(self, msg: Any) -> None:
+        with self.lock:
+            self.inputs.link_state = str(msg.data)
+
+    def _on_code(self, msg: Any) -> None:
+        with self.lock:
+            self.inputs.status_code = int(msg.data)
+
+    def _on_battery(self, msg: Any) -> None:
+        with self.lock:
+            self.inputs.soc = float(msg.batteryPercentage)
+
+    def _on_bms(self, msg: Any) -> None:
+        with self.lock:
+            self.inputs.bms_status = int(msg.BMSStatus)
+
+    def _on_odom(self, msg: Any) -> None:
+        from lowerbase.world.ros_msgs import pose_of
+
+        try:
+            pose = pose_of(msg.pose.pose, "/odom")
+        except WorldError as exc:
+            self._count_bad("bad_odom", str(exc))
+            return
+        with self.lock:
+            self.inputs.odom = pose
+
+    def _on_pose(self, msg: Any) -> None:
+        pose = finite_pose(msg.x, msg.y, msg.theta)
+        if pose is None:
+            self._count_bad("bad_pose", f"movebase_pose2d: not finite ({msg.x}, {msg.y}, "
+                            f"{msg.theta})")
+            return
+        with self.lock:
+            self.inputs.pose, self.inputs.pose_time = pose, self.rospy.get_time()
+
+    def _exec_task(self, msg: Any) -> Any:
+        from woosh_msgs.srv import ExecTaskResponse
+
+        self.stats["requests"] += 1
+        with self.lock:
+            try:
+                req = request_of(msg, self.setup.map_frame)
+            except WorldError as exc:
+                self.stats["bad_request"] += 1
+                res = TaskResponse(False, str(exc), int(self.machine.robot_state()))
+            else:
+                res = self.machine.request(req, self.rospy.get_time())
+        if not res.success:
+            self.stats["refused"] += 1
+        log.info("exec_task %s: %s", "accepted" if res.success else "refused", res.message)
+        return ExecTaskResponse(success=res.success, message=res.message,
+                                statusCode=res.status_code)
+
+    # -- machine -> ROS ------------------------------------------------------------------------
+    def _publish(self, status: Status) -> None:
+        from woosh_msgs.msg import RobotStatus
+
+        self._status_pub.publish(RobotStatus(**status.fields()))
+        self.stats["published"] += 1
+
+    def tick(self) -> None:
+        now = self.rospy.get_time()
+        with self.lock:
+            self.machine.tick(now, self.inputs.chassis(now))
+
+    def spin(self) -> None:
+        rospy = self.rospy
+        rate = rospy.Rate(1.0 / self.setup.config.period)
+        while not rospy.is_shutdown():
+            self.tick()
+            try:
+                rate.sleep()
+            except rospy.ROSInterruptException:
+                break
+            except rospy.ROSTimeMovedBackwardsException:  # /clock restarted
+                continue
+
+    def shutdown(self) -> None:
+        with self.lock:
+            if self.machine.active:
+                self.nav.cancel(self.rospy.get_time())
+        for sub in self._subs:
+            sub.unregister()
+        if self._service is not None:
+            self._service.shutdown()
+
+
+def run(setup: TasksSetup, ros_args: Sequence[str], where: str) -> int:
+    """Start rospy on the master in ROS_MASTER_URI, build the node and spin."""
+    import os
+    import sys
+
+    from lowerbase.driver.node import _ToRosout
+    from lowerbase.driver.settings import loopback_address
+    from lowerbase.errors import TransportError
+
+    rospy = import_ros()
+    import rosgraph
+
+    if not rosgraph.is_master_online():
+        raise TransportError(f"no ROS master at {rosgraph.get_master_uri()} (start roscore, or "
+                             "set ROS_MASTER_URI)")
+    address = loopback_address(os.environ, rosgraph.get_master_uri(), [*sys.argv, *ros_args])
+    if address is not None:
+        os.environ["ROS_IP"] = address
+    rospy.init_node(NODE_NAME, argv=[NODE_NAME, *ros_args], anonymous=False)
+    pkg_logger = logging.getLogger("lowerbase")
+    pkg_logger.addHandler(_ToRosout())
+    pkg_logger.propagate = False
+    node = TasksNode(setup)
+    try:
+        node.advertise()
+        print(f"lowerbase tasks: {rospy.get_name()} on ROS master {rosgraph.get_master_uri()}"
+              f"{' (loopback only)' if address else ''}; {where}; exec_task and robot_status "
+              "up; navigation through /move_base and /cmd_vel_control", flush=True)
+        node.spin()
+    finally:
+        node.shutdown()
+        pkg_logger.removeHandler(pkg_logger.handlers[-1])
+        pkg_logger.propagate = True
+        stats = ", ".join(f"{k} {v}" for k, v in sorted(node.stats.items()))
+        print(f"lowerbase tasks: stopped; {stats}", file=sys.stderr, flush=True)
+        if not rospy.is_shutdown():
+            rospy.signal_shutdown("tasks stopped")
+    return 0

@@ -124,6 +124,9 @@ CHECKS: dict[str, Check] = {
     "lowerbase conformance --only 'frame.Heartbeat.*,safety.*'": Check(
         "start", "frame.Heartbeat.", peer=True, why="stopped after its first check result"),
     "lowerbase conformance --list": Check("run", "frame.Heartbeat"),
+    "lowerbase conformance --robot legged -i socketcan -c can0,can1,can2,can3": Check(
+        "skip", why=SOCKETCAN),
+    "lowerbase conformance --robot legged --list": Check("run", "actuator.test_mode"),
     "lowerbase scenario run scenarios/watchdog.toml": Check(
         "run", "scenario watchdog: PASSED", (("scenarios/", f"{ROOT}/scenarios/"),),
         why="run in a scratch directory (the report goes to ./reports)"),

@@ -519,6 +519,15 @@ def test_require_ros_skips_with_a_reason_locally(monkeypatch: pytest.MonkeyPatch
 def test_require_ros_fails_under_ci(monkeypatch: pytest.MonkeyPatch) -> None:
     helper = _conftest()
     monkeypatch.setenv("CI", "true")
+    monkeypatch.delenv("LOWERBASE_WITHOUT_ROS", raising=False)
     with pytest.raises(pytest.fail.Exception, match="CI=true requires ROS"):
         helper.require_ros(("no_such_ros_module",))
     helper.require_ros(("json",))  # present: no-op
+
+
+def test_a_run_without_ros_on_purpose_skips_under_ci(monkeypatch: pytest.MonkeyPatch) -> None:
+    helper = _conftest()
+    monkeypatch.setenv("CI", "true")
+    monkeypatch.setenv("LOWERBASE_WITHOUT_ROS", "1")
+    with pytest.raises(pytest.skip.Exception, match="no_such_ros_module"):
+        helper.require_ros(("no_such_ros_module",))

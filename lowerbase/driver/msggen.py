@@ -1,7 +1,8 @@
 """Generate the vendor's ``woosh_msgs`` as an importable ROS1 Python package, without catkin.
 
-The same is done for every package in :data:`PACKAGES`: woosh_msgs and the legged robot's
-``lowerbase_legged_msgs`` (``lowerbase/legged/msg/lowerbase_legged_msgs/``, docs/legged.md),
+The same is done for every package in :data:`PACKAGES`: woosh_msgs, the legged robot's
+``lowerbase_legged_msgs`` (``lowerbase/legged/msg/lowerbase_legged_msgs/``, docs/legged.md) and
+the trace module's ``lowerbase_msgs`` (``lowerbase/trace/msg/lowerbase_msgs/``, docs/trace.md),
 generated side by side into one OUTDIR by one command. The definitions ship with lowerbase
 (``lowerbase/driver/msg/woosh_msgs/``). This module does what
 catkin's ``generate_messages()`` would: it expands each ``.action`` into its seven messages the
@@ -95,8 +96,15 @@ LEGGED = MsgPackage(
     ("std_msgs", "geometry_msgs", "sensor_msgs"),
     "The legged robot's messages and services (docs/legged.md)",
 )
+#: the trace navigation module's envelope: one serialized protobuf message (docs/trace.md)
+TRACE = MsgPackage(
+    "lowerbase_msgs",
+    Path(__file__).resolve().parents[1] / "trace" / "msg" / "lowerbase_msgs",
+    (),
+    "lowerbase's messages: the protobuf envelope of the trace navigation module",
+)
 #: everything ``python -m lowerbase.driver.msggen`` generates, in this order
-PACKAGES = (WOOSH, LEGGED)
+PACKAGES = (WOOSH, LEGGED, TRACE)
 
 _PACKAGE_XML = """<?xml version="1.0"?>
 <package format="2">
@@ -388,7 +396,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Command line: ``python -m lowerbase.driver.msggen [OUTDIR] [--pth SITE | --no-pth]``."""
     parser = argparse.ArgumentParser(
         prog="python -m lowerbase.driver.msggen",
-        description="Generate the ROS1 Python packages woosh_msgs and lowerbase_legged_msgs "
+        description="Generate the ROS1 Python packages woosh_msgs, lowerbase_legged_msgs and "
+        "lowerbase_msgs "
         "(genpy, no catkin) and make them importable in the active environment.",
     )
     parser.add_argument("outdir", nargs="?", help=f"output directory (default: {default_outdir()})")

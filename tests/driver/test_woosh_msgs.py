@@ -385,8 +385,8 @@ def test_cli_generates_and_writes_pth(tmp_path: Path, ros: None) -> None:
     assert (site / msggen.PTH_NAME).read_text().strip() == str(out.resolve())
     # a second run replaces the output cleanly and leaves no temporary directory behind
     assert msggen.main([str(out), "--no-pth"]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["lowerbase_legged_msgs", "share",
-                                                     "woosh_msgs"]
+    assert sorted(p.name for p in out.iterdir()) == ["lowerbase_legged_msgs", "lowerbase_msgs",
+                                                     "share", "woosh_msgs"]
 
 
 def test_cli_reports_a_bad_pth_dir(

@@ -280,7 +280,7 @@ class WorldSim(SteppedLoop):
             scan = self.rig.scan(self.scene_at(t), pose, t)
             self.scans += 1
         self._fed = odom
-        est = self.localizer.update(odom, scan)  # type: ignore[arg-type]
+        est = self.localizer.update(odom, scan, truth=pose)  # type: ignore[arg-type]
         if est is not None:
             self.estimate = est
 

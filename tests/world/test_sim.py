@@ -143,9 +143,9 @@ def test_the_localizer_gets_odom_at_the_scans_stamp() -> None:
     fed: list[tuple[float, tuple[float, float, float]]] = []
     update = w.localizer.update
 
-    def spy(odom, scan):  # type: ignore[no-untyped-def]
+    def spy(odom, scan, **kw):  # type: ignore[no-untyped-def]
         fed.append((scan.stamp, odom))
-        return update(odom, scan)
+        return update(odom, scan, **kw)
 
     w.localizer.update = spy  # type: ignore[method-assign]
 
@@ -168,3 +168,27 @@ def test_the_localizer_gets_odom_at_the_scans_stamp() -> None:
         assert odom[1] == pytest.approx(p0[1] + f * (p1[1] - p0[1]), abs=1e-12)
         assert wrap_scalar(odom[2] - (p0[2] + f * wrap_scalar(p1[2] - p0[2]))) == \
             pytest.approx(0.0, abs=1e-12)
+
+
+def test_ground_truth_mode_pairs_the_scans_odom_with_the_truth_at_the_scans_stamp() -> None:
+    """The truth mode's estimate is the truth at the scan's stamp, as the /odom it is paired
+    with (map -> odom = truth(t) odom(t)^-1). The truth when the scan is handled (up to a
+    wheel cycle after the stamp) turned map -> odom by w * dt on every update of a turn."""
+    w = started(WorldConfig(start=LANE, localization="truth"))
+    truth: dict[float, tuple[float, float, float]] = {}
+    fed: list[tuple[float, tuple[float, float, float]]] = []
+    update = w.localizer.update
+
+    def spy(odom, scan, **kw):  # type: ignore[no-untyped-def]
+        est = update(odom, scan, **kw)
+        if est is not None:
+            fed.append((scan.stamp, est.pose))
+        return est
+
+    w.localizer.update = spy  # type: ignore[method-assign]
+    w.drive(0.3, 0.6, 6.0, on_step=lambda s: truth.setdefault(round(s.now, 6), s.true_pose()))
+    assert len(fed) >= 5
+    for stamp, pose in fed:
+        t = truth[round(stamp, 6)]
+        assert math.hypot(pose[0] - t[0], pose[1] - t[1]) < 1e-9
+        assert abs(wrap_scalar(pose[2] - t[2])) < 1e-9

@@ -193,8 +193,12 @@ class Localizer:
         self._force = True
 
     # -- data ----------------------------------------------------------------------------------
-    def update(self, odom: Pose2D, scan: ScanLike) -> PoseEstimate | None:
-        """One scan with the odometry pose at its time; an estimate when the filter updated."""
+    def update(self, odom: Pose2D, scan: ScanLike, truth: Pose2D | None = None
+               ) -> PoseEstimate | None:
+        """One scan with the odometry pose at its time; an estimate when the filter updated.
+
+        ``truth``: the true pose at the scan's time, for the ground-truth mode (default: the
+        truth source now; a scan handled later than its stamp pairs it with later motion)."""
         if not self.running:
             self.stats.dropped_stopped += 1
             return None
@@ -206,7 +210,7 @@ class Localizer:
             return None
         odom = (float(odom[0]), float(odom[1]), float(odom[2]))
         if self.ground_truth:
-            return self._truth_update(odom, scan)
+            return self._truth_update(odom, scan, truth)
         ref = self._odom_ref
         if ref is not None and not self._force:
             moved = math.hypot(odom[0] - ref[0], odom[1] - ref[1])
@@ -232,9 +236,11 @@ class Localizer:
         return est
 
     # -- internals -----------------------------------------------------------------------------
-    def _truth_update(self, odom: Pose2D, scan: ScanLike) -> PoseEstimate | None:
+    def _truth_update(self, odom: Pose2D, scan: ScanLike, truth: Pose2D | None
+                      ) -> PoseEstimate | None:
         assert self._truth is not None
-        truth = self._truth()
+        if truth is None:
+            truth = self._truth()
         if not is_finite_pose(truth):
             self.stats.dropped_bad_input += 1
             log.warning("localization: the truth source gave %r; update dropped", truth)

@@ -132,7 +132,9 @@ class WorldNode:
             name = self.camera.config.name
             self._pubs.update({
                 "color": pub(f"/{name}/color/image_raw", io.Image, queue_size=2),
+                "color_info": pub(f"/{name}/color/camera_info", io.CameraInfo, queue_size=2),
                 "depth": pub(f"/{name}/depth/image_raw", io.Image, queue_size=2),
+                "depth_info": pub(f"/{name}/depth/camera_info", io.CameraInfo, queue_size=2),
                 "points": pub(f"/{name}/depth/points", io.PointCloud2, queue_size=2),
                 "no_planes": pub(f"/{name}/depth/cloud_without_planes", io.PointCloud2,
                                  queue_size=2)})
@@ -287,7 +289,9 @@ class WorldNode:
         f = self.camera.render(self.scene_at(t), pose, t)
         io, cfg = self.io, self.camera.config
         self._pubs["color"].publish(io.image(f.color, "rgb8", self.color_frame, stamp))
+        self._pubs["color_info"].publish(io.camera_info(cfg, self.color_frame, stamp))
         self._pubs["depth"].publish(io.image(f.depth, "16UC1", cfg.optical_frame_id, stamp))
+        self._pubs["depth_info"].publish(io.camera_info(cfg, cfg.optical_frame_id, stamp))
         self._pubs["points"].publish(io.cloud_xyz32(f.points, cfg.optical_frame_id, stamp))
         self._pubs["no_planes"].publish(io.cloud_xyz32(f.points_without_planes,
                                                        cfg.optical_frame_id, stamp))

@@ -1,7 +1,7 @@
 """Conversions between the world's ROS-free values and ROS1 messages (imports rospy's messages).
 
 Only :mod:`lowerbase.world.node` imports this, after checking that ROS is there. Messages out:
-LaserScan, Image (16UC1, rgb8), PointCloud2 (x, y, z float32, as
+LaserScan, Image (16UC1, rgb8), CameraInfo, PointCloud2 (x, y, z float32, as
 ``sensor_msgs.point_cloud2.create_cloud_xyz32`` lays it out, packed with numpy),
 OccupancyGrid, PoseWithCovarianceStamped, Pose2D, TransformStamped. Messages in (/odom,
 /initialpose, set_map) are checked here: a non-finite number, a quaternion that is not a
@@ -17,16 +17,17 @@ from typing import Any
 import numpy as np
 from geometry_msgs.msg import Pose2D, PoseWithCovarianceStamped, TransformStamped
 from nav_msgs.msg import OccupancyGrid as GridMsg
-from sensor_msgs.msg import Image, LaserScan, PointCloud2, PointField
+from sensor_msgs.msg import CameraInfo, Image, LaserScan, PointCloud2, PointField
 from std_msgs.msg import Header
 
 from lowerbase.errors import MapError, WorldError
+from lowerbase.world.camera import CameraConfig
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lidar import LaserScan as Scan
 
 Pose = tuple[float, float, float]
 
-__all__ = ["GridMsg", "Image", "LaserScan", "PointCloud2", "Pose2D",
+__all__ = ["CameraInfo", "GridMsg", "Image", "LaserScan", "PointCloud2", "Pose2D",
            "PoseWithCovarianceStamped", "TransformStamped"]
 
 
@@ -112,6 +113,18 @@ def image(array: np.ndarray, encoding: str, frame_id: str, stamp: Any) -> Image:
 _XYZ = [PointField(name="x", offset=0, datatype=PointField.FLOAT32, count=1),
         PointField(name="y", offset=4, datatype=PointField.FLOAT32, count=1),
         PointField(name="z", offset=8, datatype=PointField.FLOAT32, count=1)]
+
+
+def camera_info(config: CameraConfig, frame_id: str, stamp: Any) -> CameraInfo:
+    """The pinhole the camera renders with (:class:`~lowerbase.world.camera.DepthCamera`): K from
+    fx, fy, cx, cy, no distortion (plumb_bob, D = 0), R = I, P = [K | 0] (a monocular camera,
+    as realsense2_camera publishes each stream's own)."""
+    fx, fy, cx, cy = config.fx, config.fy, config.cx, config.cy
+    return CameraInfo(header=header(stamp, frame_id), height=config.height, width=config.width,
+                      distortion_model="plumb_bob", D=[0.0] * 5,
+                      K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+                      R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                      P=[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0])
 
 
 def cloud_xyz32(points: np.ndarray, frame_id: str, stamp: Any) -> PointCloud2:

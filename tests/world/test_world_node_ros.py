@@ -203,3 +203,82 @@ def test_camera_topics(world: dict[str, Any]) -> None:
     assert cloud["point_step"] == 12 and cloud["width"] > 0
     assert cloud["header"]["frame_id"] == "camera_1_depth_optical_frame"
     assert 0 < first("/camera_1/depth/cloud_without_planes")["width"] < cloud["width"]
+
+
+#: subscribes to a depth frame, its cloud and both camera_infos of one stamp; prints them as JSON
+CAMERA_SCRIPT = r'''
+import json, sys
+import numpy as np
+import rospy
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+rospy.init_node("camera_probe", anonymous=True)
+got = {}
+def keep(name):
+    def cb(msg):
+        got.setdefault(msg.header.stamp.to_nsec(), {})[name] = msg
+    return cb
+for name, topic, cls in (("depth", "depth/image_raw", Image),
+                         ("points", "depth/points", PointCloud2),
+                         ("depth_info", "depth/camera_info", CameraInfo),
+                         ("color_info", "color/camera_info", CameraInfo)):
+    rospy.Subscriber("/camera_1/" + topic, cls, keep(name), queue_size=5)
+deadline = rospy.Time.now() + rospy.Duration(30.0)
+while not rospy.is_shutdown() and rospy.Time.now() < deadline:
+    full = [s for s, m in list(got.items()) if len(m) == 4]
+    if full:
+        m = got[full[0]]
+        d, p = m["depth"], m["points"]
+        depth = np.frombuffer(d.data, np.uint16).reshape(d.height, d.width)
+        xyz = np.frombuffer(p.data, np.float32).reshape(-1, 3)
+        print(json.dumps({
+            "depth": depth.tolist(), "points": xyz.tolist(),
+            **{k: {"K": list(m[k].K), "P": list(m[k].P), "D": list(m[k].D), "R": list(m[k].R),
+                   "width": m[k].width, "height": m[k].height, "model": m[k].distortion_model,
+                   "frame_id": m[k].header.frame_id} for k in ("depth_info", "color_info")}}))
+        sys.exit(0)
+    rospy.sleep(0.05)
+sys.exit("no complete camera frame in 30 s")
+'''
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_camera_info_is_the_pinhole_the_frames_are_rendered_with(
+        world: dict[str, Any], tmp_path: Any) -> None:
+    """K against the rendering: every point of /depth/points projects through the published K
+    onto the centre of a pixel, whose /depth/image_raw value is the point's depth."""
+    import json
+    import sys
+
+    from lowerbase.world.sensors import sensors_from_profile_file
+
+    script = tmp_path / "camera_probe.py"
+    script.write_text(CAMERA_SCRIPT)
+    out = subprocess.run([sys.executable, str(script)], env={**os.environ, **world["env"]},
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr[-2000:]
+    got = json.loads(out.stdout)
+    cam = sensors_from_profile_file().camera
+    assert cam is not None
+    for name, frame in (("depth_info", "camera_1_depth_optical_frame"),
+                        ("color_info", "camera_1_color_optical_frame")):
+        info = got[name]
+        assert info["frame_id"] == frame and info["model"] == "plumb_bob"
+        assert (info["width"], info["height"]) == (cam.width, cam.height) == (640, 480)
+        assert info["K"] == pytest.approx([cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1])
+        assert info["P"] == pytest.approx([cam.fx, 0, cam.cx, 0, 0, cam.fy, cam.cy, 0, 0, 0, 1, 0])
+        assert info["D"] == [0.0] * 5 and info["R"] == [1, 0, 0, 0, 1, 0, 0, 0, 1]
+    k = np.asarray(got["depth_info"]["K"]).reshape(3, 3)
+    depth = np.asarray(got["depth"], float) / 1000.0  # [m]
+    xyz = np.asarray(got["points"], float)
+    assert len(xyz) > 1000
+    uvw = xyz @ k.T
+    u, v = uvw[:, 0] / uvw[:, 2], uvw[:, 1] / uvw[:, 2]
+    # on pixel centres (float32 points: a few 1e-4 px of rounding)
+    assert np.abs(u - np.round(u)).max() < 0.01 and np.abs(v - np.round(v)).max() < 0.01
+    col, row = np.round(u).astype(int), np.round(v).astype(int)
+    assert col.min() >= 0 and col.max() < 640 and row.min() >= 0 and row.max() < 480
+    # the depth image holds the same depth, to its 1 mm quantisation
+    assert np.abs(depth[row, col] - xyz[:, 2]).max() < 0.0015
+    # and every pixel with a depth has its point
+    assert np.count_nonzero(depth) == len(xyz)

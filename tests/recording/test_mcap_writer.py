@@ -3,9 +3,9 @@ SimLoop's own state, genpy's md5sums and the rospy node's message bytes."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
-import hashlib
 import os
 import subprocess
 import sys
@@ -180,7 +180,7 @@ def test_ros_free_run_writes_the_same_file(recorded: Recorded, tmp_path: Path) -
                    env={**os.environ, "PYTHONPATH": str(root)}, timeout=120)
     ours, theirs = out.read_bytes(), recorded.path.read_bytes()
     # a digest, not the bytes: pytest's diff of two large byte strings takes minutes
-    first = next((i for i, (a, b) in enumerate(zip(ours, theirs)) if a != b),
+    first = next((i for i, (a, b) in enumerate(zip(ours, theirs, strict=False)) if a != b),
                  min(len(ours), len(theirs)))
     assert hashlib.sha256(ours).hexdigest() == hashlib.sha256(theirs).hexdigest(), (
         f"sizes {len(ours)} and {len(theirs)}, first difference at byte {first}")

@@ -14,7 +14,8 @@ period): feedback every period, the result when the controller says so.
   end and carries its result. An actionlib cancel brakes and ends the list (result -2). A
   refused goal (empty list, NaN, out of range, LATERAL/DIAGONALIZE, or PAUSE/RESUM/CANCEL with
   nothing running) is ABORTED with ``result`` -1 and the reason as the status text; it also
-  brakes a list that was running, so the robot stands still.
+  brakes a list that was running, so the robot stands still. A step still more than 1 cm /
+  0.5 deg off after its corrections ends the list ABORTED with ``result`` -3 and the error.
 - /navigation_mode (woosh_msgs/NavigationModeAction): SUCCEEDED with ``result`` 1, or ABORTED
   with ``result`` 0 and the reason.
 
@@ -177,7 +178,7 @@ class ActionServers:
                 if server.is_preempt_requested():
                     if server.is_new_goal_available() or superseded:
                         server.set_preempted(StepControlResult(
-                            result=0, executeMode=ctrl._mode(), percent=ctrl._percent()),
+                            result=0, executeMode=ctrl.mode, percent=ctrl.percent),
                             text="superseded by a newer StepControl goal")
                         return
                     ctrl.goal(CANCEL)  # an actionlib cancel: brake and end the list
@@ -191,6 +192,8 @@ class ActionServers:
                                         percent=res.percent)
                 if res.result == CANCELLED:
                     server.set_preempted(out, text=res.message)
+                elif res.result < 0:  # FAILED: a step stayed off after its corrections
+                    server.set_aborted(out, text=res.message)
                 else:
                     server.set_succeeded(out, text=res.message)
                 return

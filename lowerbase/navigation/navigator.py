@@ -239,13 +239,22 @@ class Navigator:
             note = " (waiting_timeout < 0 in mode 3: precise avoidance)"
         return True, f"navigation mode {goal.effective_mode.name.lower()}{note}"
 
-    def set_footprint(self, points: Sequence[Sequence[float]]) -> None:
-        """A new footprint for both costmaps and the footprint checks (WorldError if bad)."""
-        self.global_costmap.set_footprint(points)
-        self.local_costmap.set_footprint(points)
-        self.combined.invalidate_static()
-        self._footprints()
-        self.controller.footprint = self._fp_reverse if self._reverse else self._fp_forward
+    def set_footprint(self, points: Sequence[Sequence[float]], which: str = "both") -> None:
+        """A new footprint (x, y[, z] in base_link) for ``which`` costmap, as the
+        /move_base/{global,local}_costmap/set_footprint topics: "global" also changes the
+        footprint the planner and the controller check; "local" only the local costmap's
+        inflation and footprint clearing; "both" all of it. A bad polygon raises one
+        WorldError line, an unknown ``which`` a NavigationError; nothing changes then."""
+        if which not in ("global", "local", "both"):
+            raise NavigationError(f"set_footprint: which = {which!r}; one of 'global', "
+                                  "'local', 'both'")
+        if which in ("global", "both"):
+            self.global_costmap.set_footprint(points)
+            self.combined.invalidate_static()
+            self._footprints()
+            self.controller.footprint = self._fp_reverse if self._reverse else self._fp_forward
+        if which in ("local", "both"):
+            self.local_costmap.set_footprint(points)
         self.combined.refresh()
 
     # -- sensors and plans -----------------------------------------------------------------------

@@ -213,19 +213,11 @@ class NavigationNode:
 
     def _on_footprint(self, msg: Any, which: str) -> None:
         """The seed's set_footprint topics: each changes its own costmap; the global one is
-        also the footprint the planner and the controller check (Navigator.set_footprint's
-        steps, for one costmap)."""
+        also the footprint the planner and the controller check (Navigator.set_footprint)."""
         try:
             points = self.io.polygon_points(msg)
             with self.lock:
-                nav = self.navigator
-                getattr(nav, f"{which}_costmap").set_footprint(points)
-                if which == "global":
-                    nav.combined.invalidate_static()
-                    nav._footprints()
-                    nav.controller.footprint = nav._fp_reverse if nav._reverse \
-                        else nav._fp_forward
-                nav.combined.refresh()
+                self.navigator.set_footprint(points, which)
         except WorldError as exc:
             self._count_bad("bad_footprint", exc)
             return
@@ -316,7 +308,8 @@ class NavigationNode:
                     self._count_bad("bad_scan", exc)
             command: tuple[float, float] | None = None
             if self.steps.active:
-                command = self.steps.tick(self.odom) if self.odom is not None else (0.0, 0.0)
+                command = self.steps.tick(self.odom, now) if self.odom is not None \
+                    else (0.0, 0.0)
             elif self.navigator_active():
                 if pose is None:
                     self.stats["no_pose"] += 1

@@ -12,9 +12,14 @@ ends it. Each step:
 - ``LATERAL`` and ``DIAGONALIZE`` are refused: a differential drive cannot move sideways.
 
 Speeds follow a trapezoid within the chassis' acceleration limits: the command brakes at
-``sqrt(2 a d)`` onto the end, so a step ends within 1 cm / 0.5 deg of its target on /odom;
-between steps the robot stands still for ``settle`` s. An empty list, a NaN or infinite value,
-a distance, angle or speed out of range, an unknown mode: rejected before any motion, with a
+``sqrt(2 a d)`` onto the end, planned from the remaining distance measured on /odom. Then the
+robot stops and the step waits until /odom stands still for ``settle`` s plus the measured
+latency (first command to first motion on /odom), measures what is left, and corrects it with a
+short move at creep speed whose length is counted on the commands sent (so late /odom or late
+commands do not change it), stop, settle, measure again, until within ``tolerance`` (3 mm) /
+``angle_tolerance`` (0.15 deg) or ``max_corrections`` (5) moves; a step still more than 1 cm /
+0.5 deg off then ends the list with ``result`` -3. An empty list, a NaN or infinite value, a
+distance, angle or speed out of range, an unknown mode: rejected before any motion, with a
 result saying why (``result`` -1). ``useAvoid`` with an ``obstacle_ahead`` check: the robot
 waits (zero command) while the check says the way is blocked and continues when it clears.
 """
@@ -25,6 +30,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from lowerbase.errors import ConfigError
 from lowerbase.navigation.controller import Limits, wrap
 
 # StepControl.action: mode
@@ -39,13 +45,21 @@ DEFAULT_ROTATION = 0.1  #: [rad/s]
 SUCCEEDED = 1
 REJECTED = -1
 CANCELLED = -2
+FAILED = -3  #: a step still off by more than 1 cm / 0.5 deg after max_corrections
 #: braking onto the end uses this share of the deceleration limit, and starts as if the robot
 #: were LAG seconds further on (command period, driver, motor lag)
 BRAKE = 0.5
 LAG = 0.15
+#: /odom "stands still" while it stays within these of where it stopped
+STILL_DISTANCE = 0.0003  #: [m]
+STILL_ANGLE = math.radians(0.02)  #: [rad]
+MAX_LATENCY = 2.0  #: [s] the measured latency is capped here
+# the phases of a step
+DRIVE, SETTLE, CORRECT = "drive", "settle", "correct"
 MODE_NAMES = {CANCEL: "CANCEL", EXCUTE: "EXCUTE", PAUSE: "PAUSE", RESUM: "RESUM"}
 
-ObstacleCheck = Callable[[tuple[float, float, float], float, float], bool]
+Pose = tuple[float, float, float]
+ObstacleCheck = Callable[[Pose, float, float], bool]
 
 
 @dataclass(frozen=True)
@@ -83,11 +97,30 @@ class StepController:
     """Runs step lists closed loop on /odom; :meth:`tick` once per control period."""
 
     def __init__(self, limits: Limits | None = None, *, period: float = 0.05,
-                 settle: float = 0.3, obstacle_ahead: ObstacleCheck | None = None) -> None:
+                 settle: float = 0.3, settle_timeout: float = 3.0, tolerance: float = 0.003,
+                 angle_tolerance: float = math.radians(0.15), max_corrections: int = 5,
+                 creep: float = 0.03, creep_rotation: float = 0.1,
+                 obstacle_ahead: ObstacleCheck | None = None) -> None:
         self.limits = limits or Limits()
         self.period = period
-        self.settle = settle
+        self.settle = settle  #: /odom still this long (plus the latency) ends a stop [s]
+        self.settle_timeout = settle_timeout  #: a stop measures after this at the latest [s]
+        self.tolerance = tolerance  #: a straight step ends this near its target on /odom [m]
+        self.angle_tolerance = angle_tolerance  #: the same for a rotation [rad]
+        self.max_corrections = max_corrections  #: creeping moves per step, at most
+        self.creep = creep  #: correction speed [m/s]
+        self.creep_rotation = creep_rotation  #: correction speed [rad/s]
         self.obstacle_ahead = obstacle_ahead
+        for name in ("period", "settle", "settle_timeout", "tolerance", "angle_tolerance",
+                     "creep", "creep_rotation"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ConfigError(f"StepController {name} = {value!r}: expected a number > 0")
+        if not (isinstance(max_corrections, int) and max_corrections >= 0):
+            raise ConfigError(f"StepController max_corrections = {max_corrections!r}: expected "
+                              "an integer >= 0")
+        self.latency = LAG  #: measured: first command -> first motion on /odom [s]
+        self.corrections = 0  #: corrections of the running step so far
         self.steps: list[Step] = []
         self.use_avoid = False
         self.paused = False
@@ -98,7 +131,14 @@ class StepController:
         self._start: tuple[float, float, float] | None = None
         self._turned = 0.0
         self._last_yaw = 0.0
-        self._hold = 0.0
+        self._phase = DRIVE
+        self._clock = 0.0
+        self._last_now: float | None = None
+        self._go: tuple[float, Pose] | None = None
+        self._still_at: tuple[float, Pose] = (0.0, (0.0, 0.0, 0.0))
+        self._settle_from = 0.0
+        self._creep_speed = 0.0
+        self._left = 0.0
 
     @property
     def active(self) -> bool:
@@ -114,7 +154,7 @@ class StepController:
             if why:
                 return StepResult(REJECTED, steps[0].execute_mode if steps else 0, 0.0, why)
             self.steps, self.use_avoid, self.paused = list(steps), bool(use_avoid), False
-            self.result, self._k, self._start, self._hold = None, 0, None, 0.0
+            self.result, self._k, self._start = None, 0, None
             return None
         if mode == PAUSE:
             self.paused = True
@@ -124,8 +164,7 @@ class StepController:
             return None
         if mode == CANCEL:
             if self.active:
-                self.result = StepResult(CANCELLED, self._mode(), self._percent(),
-                                         "cancelled")
+                self.result = StepResult(CANCELLED, self.mode, self.percent, "cancelled")
             return None
         return StepResult(REJECTED, 0, 0.0, f"unknown mode {mode}: one of "
                           + ", ".join(f"{k} {n}" for k, n in MODE_NAMES.items()))
@@ -156,70 +195,177 @@ class StepController:
         return ""
 
     # -- running --------------------------------------------------------------------------------
-    def tick(self, odom: Sequence[float]) -> tuple[float, float]:
-        """The twist for this period from the /odom pose (x, y, yaw)."""
+    def tick(self, odom: Sequence[float], now: float | None = None) -> tuple[float, float]:
+        """The twist for this period from the /odom pose (x, y, yaw) at time ``now`` [s] (None:
+        one ``period`` after the last tick)."""
         x, y, yaw = (float(v) for v in odom)
+        dt = self._advance(now)
         if not self.active:
-            return self._ramp(0.0, 0.0)
-        if self._hold > 0:  # standing still between steps
-            self._hold -= self.period
             return self._ramp(0.0, 0.0)
         step = self.steps[self._k]
         if self._start is None:
             self._start, self._turned, self._last_yaw = (x, y, yaw), 0.0, yaw
+            self._phase, self.corrections, self._go = DRIVE, 0, None
         self._turned += wrap(yaw - self._last_yaw)
         self._last_yaw = yaw
+        self._measure_latency((x, y, yaw))
+        remaining, progress = self._remaining(step, x, y)
+        self.feedback = StepFeedback(2 if self.paused else 1, step.execute_mode,
+                                     100.0 * min(max(progress, 0.0), 1.0))
+        if self.paused:
+            if self._phase != DRIVE:
+                self._to_settle((x, y, yaw))
+            return self._ramp(0.0, 0.0)
+        if self._phase == DRIVE:
+            if remaining <= self._tolerance(step):
+                self._to_settle((x, y, yaw))
+                return self._ramp(0.0, 0.0)
+            return self._drive(step, (x, y, yaw), remaining)
+        if self._phase == SETTLE:
+            if not self._still((x, y, yaw)):
+                return self._ramp(0.0, 0.0)
+            if abs(remaining) <= self._tolerance(step):
+                return self._next(step)
+            if self.corrections >= self.max_corrections:
+                limit = 0.01 if step.execute_mode == STRAIGHT else math.radians(0.5)
+                if abs(remaining) <= limit:
+                    return self._next(step)
+                unit = (1000.0, "mm") if step.execute_mode == STRAIGHT else \
+                    (math.degrees(1.0), "deg")
+                self.result = StepResult(FAILED, step.execute_mode, self.percent,
+                                         f"step {self._k + 1}: still {abs(remaining) * unit[0]:.1f}"
+                                         f" {unit[1]} off after {self.corrections} corrections")
+                return self._ramp(0.0, 0.0)
+            self._plan_correction(step, remaining)
+        return self._correct(step, (x, y, yaw), dt)
+
+    @property
+    def mode(self) -> int:
+        """executeMode of the running (or last) step; 0 without a list."""
+        return self.steps[min(self._k, len(self.steps) - 1)].execute_mode if self.steps else 0
+
+    @property
+    def percent(self) -> float:
+        """Percent of the whole list done."""
+        part = (self.feedback.percent / 100.0) if self.feedback is not None else 0.0
+        return 100.0 * (self._k + part) / max(len(self.steps), 1)
+
+    def _advance(self, now: float | None) -> float:
+        """Move the controller's clock to ``now``; the seconds since the last tick."""
+        if now is None or self._last_now is None:
+            dt = self.period
+        else:
+            dt = min(max(now - self._last_now, 0.0), 1.0)
+        self._last_now = now
+        self._clock += dt
+        return dt
+
+    def _remaining(self, step: Step, x: float, y: float) -> tuple[float, float]:
+        """(what is left of the step in its own direction [m or rad], share done)."""
+        assert self._start is not None
         sx, sy, syaw = self._start
         sign = 1.0 if step.data >= 0 else -1.0
         if step.execute_mode == STRAIGHT:
-            along = (x - sx) * math.cos(syaw) + (y - sy) * math.sin(syaw)
-            lateral = -(x - sx) * math.sin(syaw) + (y - sy) * math.cos(syaw)
-            remaining = abs(step.data) - sign * along
-            done = remaining <= 0.002
-            speed = step.speed or DEFAULT_SPEED
-            progress = sign * along / max(abs(step.data), 1e-9)
+            done = sign * ((x - sx) * math.cos(syaw) + (y - sy) * math.sin(syaw))
         else:
-            remaining = abs(step.data) - sign * self._turned
-            done = remaining <= math.radians(0.1)
-            speed = step.speed or DEFAULT_ROTATION
-            progress = sign * self._turned / max(abs(step.data), 1e-9)
-        self.feedback = StepFeedback(2 if self.paused else 1, step.execute_mode,
-                                     100.0 * min(max(progress, 0.0), 1.0))
-        if done:
-            self._k += 1
-            self._start = None
-            self._hold = self.settle
-            if self._k == len(self.steps):
-                self.result = StepResult(SUCCEEDED, step.execute_mode, 100.0, "done")
-            return self._ramp(0.0, 0.0)
-        if self.paused:
-            return self._ramp(0.0, 0.0)
+            done = sign * self._turned
+        return abs(step.data) - done, done / max(abs(step.data), 1e-9)
+
+    def _tolerance(self, step: Step) -> float:
+        return self.tolerance if step.execute_mode == STRAIGHT else self.angle_tolerance
+
+    def _blocked(self, step: Step, pose: Pose, v: float, w: float) -> bool:
+        if not (self.use_avoid and self.obstacle_ahead is not None
+                and self.obstacle_ahead(pose, v, w)):
+            return False
+        self.feedback = StepFeedback(3, step.execute_mode,
+                                     self.feedback.percent if self.feedback else 0.0)
+        return True
+
+    def _drive(self, step: Step, pose: Pose, remaining: float) -> tuple[float, float]:
+        """The trapezoid: cruise, then brake at sqrt(2 a d) onto the end."""
+        assert self._start is not None
+        sx, sy, syaw = self._start
+        x, y, yaw = pose
+        sign = 1.0 if step.data >= 0 else -1.0
+        if self.v == 0.0 and self.w == 0.0 and self._go is None:
+            self._go = (self._clock, pose)  # starting: time the first motion on /odom
         if step.execute_mode == STRAIGHT:
             ahead = max(remaining - abs(self.v) * LAG, 0.0)
-            v = sign * min(speed, max(math.sqrt(2.0 * self.limits.linear_decel * BRAKE * ahead),
-                                      0.01))
-            w = 2.0 * wrap(syaw - yaw) - 2.0 * lateral * sign
-            w = min(max(w, -0.3), 0.3)
-            if self.use_avoid and self.obstacle_ahead is not None and \
-                    self.obstacle_ahead((x, y, yaw), v, 0.0):
-                self.feedback = StepFeedback(3, step.execute_mode, self.feedback.percent)
+            v = sign * min(step.speed or DEFAULT_SPEED,
+                           max(math.sqrt(2.0 * self.limits.linear_decel * BRAKE * ahead), 0.01))
+            lateral = -(x - sx) * math.sin(syaw) + (y - sy) * math.cos(syaw)
+            w = min(max(2.0 * wrap(syaw - yaw) - 2.0 * lateral * sign, -0.3), 0.3)
+            if self._blocked(step, pose, v, 0.0):
                 return self._ramp(0.0, 0.0)
             return self._ramp(v, w)
         ahead = max(remaining - abs(self.w) * LAG, 0.0)
-        w = sign * min(speed, max(math.sqrt(2.0 * self.limits.angular_decel * BRAKE * ahead),
-                                  0.04))
-        if self.use_avoid and self.obstacle_ahead is not None and \
-                self.obstacle_ahead((x, y, yaw), 0.0, w):
-            self.feedback = StepFeedback(3, step.execute_mode, self.feedback.percent)
+        w = sign * min(step.speed or DEFAULT_ROTATION,
+                       max(math.sqrt(2.0 * self.limits.angular_decel * BRAKE * ahead), 0.04))
+        if self._blocked(step, pose, 0.0, w):
             return self._ramp(0.0, 0.0)
         return self._ramp(0.0, w)
 
-    def _mode(self) -> int:
-        return self.steps[min(self._k, len(self.steps) - 1)].execute_mode if self.steps else 0
+    def _to_settle(self, pose: Pose) -> None:
+        self._phase = SETTLE
+        self._still_at = (self._clock, pose)
+        self._settle_from = self._clock
 
-    def _percent(self) -> float:
-        part = (self.feedback.percent / 100.0) if self.feedback is not None else 0.0
-        return 100.0 * (self._k + part) / max(len(self.steps), 1)
+    def _still(self, pose: Pose) -> bool:
+        """Whether /odom has stood still for ``settle`` s plus the measured latency (or the
+        wait reached ``settle_timeout``)."""
+        t0, anchor = self._still_at
+        if math.hypot(pose[0] - anchor[0], pose[1] - anchor[1]) > STILL_DISTANCE or \
+                abs(wrap(pose[2] - anchor[2])) > STILL_ANGLE:
+            self._still_at = t0, anchor = self._clock, pose
+        return self._clock - t0 >= self.settle + self.latency - 1e-9 or \
+            self._clock - self._settle_from >= self.settle_timeout
+
+    def _measure_latency(self, pose: Pose) -> None:
+        """The time from a start (first command after standing) to the first motion on /odom:
+        command period, driver, motors and /odom's age together."""
+        if self._go is None:
+            return
+        t0, p0 = self._go
+        if math.hypot(pose[0] - p0[0], pose[1] - p0[1]) > STILL_DISTANCE or \
+                abs(wrap(pose[2] - p0[2])) > STILL_ANGLE:
+            self.latency = min(self._clock - t0, MAX_LATENCY)
+            self._go = None
+
+    def _plan_correction(self, step: Step, remaining: float) -> None:
+        """A short move of exactly ``remaining`` (negative: back) at creep speed: n periods
+        at the speed that covers it, counted on the commands sent (latency does not change
+        how far they drive)."""
+        self.corrections += 1
+        creep = self.creep if step.execute_mode == STRAIGHT else self.creep_rotation
+        n = max(1, math.ceil(abs(remaining) / (creep * self.period)))
+        self._creep_speed = math.copysign(abs(remaining) / (n * self.period), remaining)
+        self._left = abs(remaining)
+        self._phase = CORRECT
+        self._go = None
+
+    def _correct(self, step: Step, pose: Pose, dt: float) -> tuple[float, float]:
+        sign = 1.0 if step.data >= 0 else -1.0
+        straight = step.execute_mode == STRAIGHT
+        self._left -= abs(self.v if straight else self.w) * dt  # what the last command drove
+        speed = sign * self._creep_speed
+        if self._left <= abs(speed) * self.period / 2:
+            self._to_settle(pose)
+            return self._ramp(0.0, 0.0)
+        if self._blocked(step, pose, speed if straight else 0.0, 0.0 if straight else speed):
+            self._to_settle(pose)
+            self.corrections -= 1  # not a correction: a wait
+            return self._ramp(0.0, 0.0)
+        if abs(self.v) + abs(self.w) == 0.0 and self._go is None:
+            self._go = (self._clock, pose)
+        return self._ramp(speed, 0.0) if straight else self._ramp(0.0, speed)
+
+    def _next(self, step: Step) -> tuple[float, float]:
+        self._k += 1
+        self._start = None
+        if self._k == len(self.steps):
+            self.result = StepResult(SUCCEEDED, step.execute_mode, 100.0, "done")
+        return self._ramp(0.0, 0.0)
 
     def _ramp(self, v: float, w: float) -> tuple[float, float]:
         lim, dt = self.limits, self.period

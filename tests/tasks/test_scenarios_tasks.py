@@ -1,0 +1,102 @@
+"""Task scenarios (lowerbase/bench/scenario_tasks.py): the library passes on the whole emulated
+robot, a wrong expectation fails, move_base goals drive the navigator, bad files are one-line
+ConfigErrors."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from lowerbase.bench.scenario_tasks import (
+    library_tasks,
+    load_tasks_scenario,
+    report,
+    run_tasks_scenario,
+)
+from lowerbase.errors import ConfigError
+
+HEAD = """
+[scenario]
+duration = {duration}
+[world]
+map = "empty_room"
+[tasks]
+unload_time = 2.0
+"""
+
+
+def test_the_library_has_one_per_task_type_a_fault_and_a_shift() -> None:
+    assert set(library_tasks()) == {"transport", "picking", "parking", "charging",
+                                    "fault_during_task", "shift"}
+
+
+@pytest.mark.parametrize("name", sorted(library_tasks()))
+def test_every_task_scenario_passes(name: str) -> None:
+    result = run_tasks_scenario(load_tasks_scenario(library_tasks()[name]))
+    assert result.passed, report(result)
+    assert result.responses and result.responses[0][2]  # its first request was accepted
+
+
+def test_a_wrong_expectation_fails(tmp_path: Path) -> None:
+    p = tmp_path / "s.toml"
+    p.write_text(HEAD.format(duration=40.0) + """
+[[timeline]]
+at = 1.0
+action = "exec_task"
+task_id = 1
+task_type = 4
+direction = 2
+mark_no = "R1"
+[[expect]]
+kind = "task_duration"
+task_id = 1
+within = [0.0, 3.0]
+[[expect]]
+kind = "robot_status"
+task_id = 1
+sequence = ["executing", "failed"]
+[[expect]]
+kind = "robot_status"
+task_id = 2
+sequence = ["executing"]
+""")
+    result = run_tasks_scenario(load_tasks_scenario(p))
+    assert [ok for _, ok, _ in result.outcomes] == [False, False, False], report(result)
+    assert "took" in result.outcomes[0][2] and "never published" in result.outcomes[2][2]
+
+
+def test_move_base_goals_drive_the_navigator(tmp_path: Path) -> None:
+    p = tmp_path / "s.toml"
+    p.write_text(HEAD.format(duration=30.0) + """
+[[timeline]]
+at = 1.0
+action = "move_base"
+target = [7.0, 5.0, 0.0]
+""")
+    result = run_tasks_scenario(load_tasks_scenario(p))
+    x, y, _ = result.sim.world.true_pose()
+    assert math.hypot(x - 7.0, y - 5.0) < 0.15
+
+
+@pytest.mark.parametrize("body, text", [
+    ("", "needs [world] and [tasks]"),
+    ("[world]\nmap = 'empty_room'\n[tasks]\nspeed = 1\n", "unknown key 'speed'"),
+    ("[world]\nmap = 'empty_room'\n[tasks]\n[[timeline]]\nat = 1.0\naction = 'fly'\n",
+     "action must be"),
+    ("[world]\nmap = 'empty_room'\n[tasks]\n[[timeline]]\nat = 1.0\nfault = 'melt'\n",
+     "melt"),
+    ("[world]\nmap = 'empty_room'\n[tasks]\n[[timeline]]\nat = 1.0\naction = 'move_base'\n",
+     "move_base needs"),
+    ("[world]\nmap = 'empty_room'\n[tasks]\n[[expect]]\nkind = 'robot_status'\ntask_id = 1\n"
+     "sequence = ['flying']\n", "'flying' is not a task_state"),
+    ("[world]\nmap = 'empty_room'\n[tasks]\n[[timeline]]\nat = 1.0\naction = 'control'\n"
+     "command = 'Explode'\n", "command must be one of"),
+])
+def test_bad_files_are_one_line_errors(tmp_path: Path, body: str, text: str) -> None:
+    p = tmp_path / "bad.toml"
+    p.write_text("[scenario]\nduration = 10.0\n" + body)
+    with pytest.raises(ConfigError) as err:
+        load_tasks_scenario(p)
+    assert text in str(err.value) and "\n" not in str(err.value)

@@ -20,19 +20,23 @@ from lowerbase.navigation.controller import Limits
 from lowerbase.trace import messages as m
 from lowerbase.trace.base import TraceParams
 from lowerbase.trace.bridges import SpeedBridge, laser_to_pb, pose_to_pb
-from lowerbase.trace.obstacle_navigate import ObstacleNavigate
-from lowerbase.trace.trace_navigate import TraceNavigate
+from lowerbase.trace.modules import (
+    AVOID_ROUTE,
+    AVOID_STATUS,
+    INPUTS,
+    LASER,
+    POSE,
+    ROUTE,
+    SPEED,
+    STATUS,
+    TOPIC_TYPES,
+    TOPICS,
+    TraceModules,
+)
 from lowerbase.world.sim import WorldConfig, WorldSim
 
-ROUTE, STATUS = "msg_trace_navigate_route", "msg_trace_navigate_status"
-AVOID_ROUTE, AVOID_STATUS = "msg_obstacle_navigate_route", "msg_obstacle_navigate_status"
-LASER, POSE, SPEED = "msg_robot_laser_data", "msg_robot_global_pos", "msg_robot_speed_control"
-TOPICS = (ROUTE, STATUS, AVOID_ROUTE, AVOID_STATUS, LASER, POSE, SPEED)
-#: the message type on each topic
-TOPIC_TYPES: dict[str, type[Message]] = {
-    ROUTE: m.GTraceList, STATUS: m.GTraceList, AVOID_ROUTE: m.GTraceList,
-    AVOID_STATUS: m.GTraceList, LASER: m.GLaserScan, POSE: m.RobotPose2D,
-    SPEED: m.GRobotSpeedControl}
+__all__ = ["AVOID_ROUTE", "AVOID_STATUS", "LASER", "POSE", "ROUTE", "SPEED", "STATUS",
+           "TOPICS", "TOPIC_TYPES", "TraceSim"]
 
 Listener = Callable[[str, m.GTraceList], None]
 
@@ -53,13 +57,9 @@ class TraceSim:
         self.published: dict[str, list[tuple[float, Message]]] = defaultdict(list)
         self.listeners: list[Listener] = []
         self.speed_bridge = SpeedBridge(self.world.loop.driver)
-        self.trace = TraceNavigate(clock, lambda msg: self.publish(STATUS, msg),
-                                   lambda msg: self.publish(SPEED, msg), self.params,
-                                   limits=limits, footprint=self.world.config.footprint)
-        self.obstacle = ObstacleNavigate(clock, self.world.grid,
-                                         lambda msg: self.publish(AVOID_STATUS, msg),
-                                         lambda msg: self.publish(SPEED, msg), self.params,
-                                         limits=limits, footprint=self.world.config.footprint)
+        self.modules = TraceModules(clock, self.world.grid, self.publish, self.params,
+                                    limits=limits, footprint=self.world.config.footprint)
+        self.trace, self.obstacle = self.modules.trace, self.modules.obstacle
         self._every = max(1, round(self.params.period / self.world.control_dt))
         #: msg_robot_laser_data's period [s] (the rig's newest scan at that rate)
         self._laser_every = max(1, round(laser_period / self.world.control_dt))
@@ -73,22 +73,20 @@ class TraceSim:
 
     def publish(self, topic: str, msg: Message) -> None:
         """One message on a topic: through the wire format to whoever subscribes."""
-        type_name, data = m.encode(msg)
-        received = m.decode(type_name, data, TOPIC_TYPES[topic])
+        self.publish_raw(topic, *m.encode(msg))
+
+    def publish_raw(self, topic: str, type_name: str, data: bytes) -> None:
+        """An envelope (``type``, ``data``) as received from the wire: a bad one is dropped
+        and counted in ``modules.dropped``."""
+        received = self.modules.decode(topic, type_name, data)
+        if received is None:
+            return
         self.published[topic].append((self.now, received))
-        if topic == ROUTE:
-            self.trace.on_route(received)
-        elif topic == AVOID_ROUTE:
-            self.obstacle.on_route(received)
+        if topic in INPUTS:
+            self.modules.deliver(topic, received)
         elif topic == SPEED:
             self.speed_bridge(received)
-        elif topic == LASER:
-            self.trace.on_scan(received)
-            self.obstacle.on_scan(received)
-        elif topic == POSE:
-            self.trace.on_pose(received)
-            self.obstacle.on_pose(received)
-        elif topic in (STATUS, AVOID_STATUS):
+        else:
             for listener in list(self.listeners):
                 listener(topic, received)
 
@@ -99,8 +97,7 @@ class TraceSim:
         if self._steps % self._every:
             return
         self._bridge(laser=self._steps % self._laser_every == 0)
-        self.trace.tick()
-        self.obstacle.tick()
+        self.modules.tick()
 
     def _bridge(self, laser: bool) -> None:
         pose = self.world.amcl_pose()

@@ -1,0 +1,213 @@
+"""`lowerbase trace`, black-box, on the whole chain: a real rosmaster, `lowerbase emulate --map
+warehouse --truth-udp` with a crate on the route, `lowerbase driver`, `lowerbase world
+--ground-truth` (amcl once jumped during the detour in this corridor: docs/trace.md) and
+`lowerbase trace --blocked-timeout 3`, each a process of its own; examples/business_node.py
+drives it with the protobuf messages only. rosbag records the seed's topics and the bag is read
+back with rosbag's own decoder (the message definition in the bag, not ours)."""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import subprocess
+import sys
+import time
+import xmlrpc.client
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from lowerbase.trace import messages as m
+from lowerbase.trace.modules import AVOID_STATUS, POSE, ROUTE, SPEED, STATUS, TOPICS
+from tests.conftest import ROOT, Proc, bus_cli_args, free_udp_port
+from tests.driver.conftest import require_ros
+from tests.trace.test_ros_msgs import PROTOBUF_MD5
+from tests.trace.trace_ros import trace_build, trace_master  # noqa: F401
+
+BUSINESS = ROOT / "examples" / "business_node.py"
+CRATE = (8.6, 1.2)
+PLACE = ["--map", "warehouse", "--initial-pose", "6.0,1.2,0.0"]
+
+
+def _subscribed(uri: str, topic: str, prefix: str) -> bool:
+    _, _, (_, subs, _) = xmlrpc.client.ServerProxy(uri).getSystemState("/pytest")
+    return any(t == topic and any(n.startswith(prefix) for n in nodes) for t, nodes in subs)
+
+
+class Bag:
+    """``rosbag record`` of the seed's topics until :meth:`read`."""
+
+    def __init__(self, path: Path, master: Any) -> None:
+        self.path = path
+        self.proc = subprocess.Popen(
+            ["rosbag", "record", "-O", str(path), "__name:=traceros_bag",
+             *("/" + t for t in TOPICS)], env={**os.environ, **master.env},
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        end = time.monotonic() + 30.0
+        while not all(_subscribed(master.uri, "/" + t, "/traceros_bag") for t in TOPICS):
+            assert time.monotonic() < end and self.proc.poll() is None, "rosbag did not start"
+            time.sleep(0.05)
+
+    def read(self) -> list[tuple[str, float, Any, str, str]]:
+        """(topic, receipt time, the decoded protobuf, datatype, md5) of every message."""
+        import rosbag
+
+        self.proc.send_signal(2)
+        self.proc.wait(timeout=30)
+        out = []
+        with rosbag.Bag(str(self.path)) as bag:
+            types = {c.topic: (c.datatype, c.md5sum) for c in bag._get_connections()}
+            for topic, msg, t in bag.read_messages():
+                name = topic.lstrip("/")
+                out.append((name, t.to_sec(), m.decode(msg.type, bytes(msg.data),
+                                                       m.TYPES[msg.type]), *types[topic]))
+        return out
+
+
+def business(master: Any, *args: str, timeout: float = 150.0) -> list[str]:
+    """Run the example to its end; its report lines (asserting exit code 0)."""
+    done = subprocess.run([sys.executable, str(BUSINESS), *args], env={**os.environ,
+                          **master.env}, capture_output=True, text=True, timeout=timeout,
+                          cwd=ROOT)
+    assert done.returncode == 0, (done.stdout, done.stderr)
+    return [line.split(" ", 1)[1] for line in done.stdout.splitlines()
+            if line.startswith("business: msg_")]
+
+
+@pytest.fixture(scope="module")
+def chain(trace_master: Any, tmp_path_factory: pytest.TempPathFactory  # noqa: F811
+          ) -> Iterator[dict[str, Any]]:
+    require_ros(("rospy", "tf2_ros", "rosbag"))
+    if shutil.which("rosbag") is None:
+        pytest.skip("rosbag is not installed")
+    tmp = tmp_path_factory.mktemp("traceros_chain")
+    crate = tmp / "crate.toml"
+    crate.write_text('[[obstacles]]\nkind = "box"\nname = "crate"\n'
+                     f"center = [{CRATE[0]}, {CRATE[1]}]\nsize = [0.4, 0.4]\n")
+    bus = bus_cli_args({"interface": "udp_multicast", "channel": "239.74.163.97",
+                        "port": free_udp_port(), "hop_limit": 0})
+    truth_port = free_udp_port()
+    env = trace_master.env
+    place = [*PLACE, "--obstacles", str(crate)]
+    procs: list[Proc] = []
+    try:
+        world = Proc(["world", *place, "--truth-udp", str(truth_port), "--ground-truth",
+                      "--no-camera"], env)
+        procs.append(world)
+        world.wait_for("on ROS master", timeout=60.0)
+        procs.append(Proc(["emulate", *bus, *place, "--truth-udp", f"127.0.0.1:{truth_port}"],
+                          env))
+        driver = Proc(["driver", *bus], env)
+        procs.append(driver)
+        driver.wait_for("ROS master", timeout=60.0)
+        trace = Proc(["trace", "--map", "warehouse", "--blocked-timeout", "3",
+                      "--status-period", "1"], env)
+        procs.append(trace)
+        line = trace.wait_for("lowerbase trace:", timeout=60.0)
+        assert line.startswith(f"lowerbase trace: /trace_navigate on ROS master {trace_master.uri}")
+        yield {"master": trace_master, "trace": trace, "tmp": tmp}
+    finally:
+        for p in reversed(procs):
+            p.stop()
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_the_ros_tools_see_the_seeds_topics(chain: dict[str, Any]) -> None:
+    env = {**os.environ, **chain["master"].env}
+    env.pop("PYTHONPATH")  # the system rostopic finds lowerbase_msgs by ROS_PACKAGE_PATH alone
+    for topic in TOPICS:
+        out = subprocess.run(["rostopic", "type", "/" + topic], env=env, capture_output=True,
+                             text=True, timeout=60)
+        assert out.stdout.strip() == "lowerbase_msgs/Protobuf", (topic, out.stderr)
+    out = subprocess.run(["rostopic", "echo", "-n", "1", "/" + POSE], env=env,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and 'type: "RobotPose2D"' in out.stdout, out.stderr
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_the_business_node_runs_the_seeds_diagram(chain: dict[str, Any]) -> None:
+    bag = Bag(chain["tmp"] / "diagram.bag", chain["master"])
+    lines = business(chain["master"], "--route", "6.0,1.2:7.0,1.2:10.6,1.2")
+    records = bag.read()
+    # what the business node saw: 1-2 RUNNING, 3-4 BLOCKED, 5-7 detour FINISHED, 8-10 FINISHED
+    seen = [(t, s) for t, s, _ in (line.split(" ", 2) for line in lines)]
+    blocked = seen.index((STATUS, "BLOCKED"))
+    assert seen[0] == (STATUS, "RUNNING") and (STATUS, "RUNNING") in seen[1:blocked]
+    avoided = seen.index((AVOID_STATUS, "FINISHED"))
+    assert seen[blocked + 1:avoided] == [(AVOID_STATUS, "RUNNING")] * (avoided - blocked - 1)
+    assert seen[avoided + 1] == (STATUS, "RUNNING") and seen[-1] == (STATUS, "FINISHED")
+    # the same in the bag, decoded from the wire
+    assert {(topic, kind, md5) for topic, _, _, kind, md5 in records} >= {
+        (t, "lowerbase_msgs/Protobuf", PROTOBUF_MD5) for t in (ROUTE, STATUS, AVOID_STATUS,
+                                                              SPEED, POSE)}
+    statuses = [(t, m.STATUS_NAMES[msg.status]) for t, _, msg, _, _ in records
+                if t in (STATUS, AVOID_STATUS)]
+    assert statuses == seen
+    done = [msg for t, _, msg, _, _ in records if t == STATUS][-1]
+    assert [s.finished for s in done.lists] == [1.0, 1.0]
+    resumed = [msg for t, _, msg, _, _ in records if t == ROUTE][-1]
+    assert resumed.lists[0].finished == 1.0 and 0.0 < resumed.lists[1].finished < 1.0
+    x_rejoin = 7.0 + 3.6 * resumed.lists[1].finished
+    assert x_rejoin > CRATE[0] + 0.2  # rejoins past the crate
+    poses = [msg for t, _, msg, _, _ in records if t == POSE]
+    assert poses[-1].x == pytest.approx(10.6, abs=0.1)
+    assert max(abs(p.y - 1.2) for p in poses) > 0.3  # it went around
+    assert any(msg.linear > 0.4 for t, _, msg, _, _ in records if t == SPEED)
+    assert chain["trace"].popen.poll() is None
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_the_empty_list_cancels_zero_speed_idle_once(chain: dict[str, Any]) -> None:
+    def poses_x(n: int) -> list[float]:
+        """x of the next ``n`` msg_robot_global_pos, as the system rostopic prints them."""
+        out = subprocess.run(["rostopic", "echo", "-n", str(n), "/" + POSE], env={
+            **os.environ, **chain["master"].env}, capture_output=True, text=True, timeout=60)
+        rows = [line.split("data: ", 1)[1] for line in out.stdout.splitlines()
+                if line.startswith("data: ")]
+        return [m.RobotPose2D.FromString(bytes(int(v) for v in r.strip("[]").split(","))).x
+                for r in rows]
+
+    x0 = poses_x(1)[0]  # where the diagram left it (6.0 when this test runs alone)
+    bag = Bag(chain["tmp"] / "cancel.bag", chain["master"])
+    lines = business(chain["master"], "--route", f"{x0:.3f},1.2:{x0 + 2.5:.3f},1.2",
+                     "--cancel-after", "1.5")
+    assert lines[0].startswith(f"{STATUS} RUNNING") and lines[-1].startswith(f"{STATUS} IDLE")
+
+    # the robot comes to rest: a second of poses (20) within a millimetre
+    end = time.monotonic() + 30.0
+    while max(xs := poses_x(20)) - min(xs) > 1e-3:
+        assert time.monotonic() < end, "the robot did not stop"
+    x = xs[-1]
+    records = bag.read()
+    t_cancel = next(t for topic, t, msg, _, _ in records if topic == ROUTE and not msg.lists)
+    after = [(topic, msg) for topic, t, msg, _, _ in records if t >= t_cancel]
+    speeds = [(msg.linear, msg.angular) for topic, msg in after if topic == SPEED]
+    assert speeds and speeds[0] == (0.0, 0.0) and set(speeds) == {(0.0, 0.0)}
+    idle = [msg for topic, msg in after if topic == STATUS]
+    assert [msg.status for msg in idle] == [m.IDLE]
+    moving = [msg.x for topic, msg in after if topic == POSE]
+    assert moving[-1] == pytest.approx(x, abs=1e-3) and x - moving[0] < 0.2
+    assert x0 + 0.2 < x < x0 + 2.5 and math.isfinite(x)  # it had moved, and stopped short
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_bad_envelopes_are_counted_never_a_traceback(chain: dict[str, Any]) -> None:
+    """Last in the module: it stops the node to read its counts."""
+    env = {**os.environ, **chain["master"].env}
+    for msg in ('{type: "GLaserScan", data: [8, 1]}', '{type: "GTraceList", data: [255, 255]}',
+                '{type: "GTraceList", data: []}'):  # wrong type, undecodable, map missing
+        done = subprocess.run(["rostopic", "pub", "-1", "/" + ROUTE, "lowerbase_msgs/Protobuf",
+                               msg], env=env, capture_output=True, text=True, timeout=60)
+        assert done.returncode == 0, done.stderr
+    trace: Proc = chain["trace"]
+    assert trace.popen.poll() is None
+    code, err = trace.stop()
+    assert code == 0 and "Traceback" not in err, err
+    assert f"dropped {ROUTE} 3" in err, err

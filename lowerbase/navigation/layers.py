@@ -18,6 +18,10 @@ from lowerbase.errors import ConfigError, WorldError
 from lowerbase.world.footprint import Footprint
 from lowerbase.world.grid import OccupancyGrid
 
+#: skimage's polygon_perimeter without its ``@require("matplotlib")`` wrapper, which looks the
+#: package's version up on every call (about 1 ms, more than the drawing itself)
+_polygon_perimeter = getattr(draw.polygon_perimeter, "__wrapped__", draw.polygon_perimeter)
+
 FREE_SPACE = 0
 MAX_NON_OBSTACLE = 252
 INSCRIBED_INFLATED_OBSTACLE = 253
@@ -92,7 +96,7 @@ class Costmap2D:
         fc = (xy[:, 0] - self.origin[0]) / self.resolution - 0.5
         fr = (xy[:, 1] - self.origin[1]) / self.resolution - 0.5
         rr, cc = draw.polygon(fr, fc)
-        pr, pc = draw.polygon_perimeter(np.round(fr).astype(int), np.round(fc).astype(int))
+        pr, pc = _polygon_perimeter(np.round(fr).astype(int), np.round(fc).astype(int))
         rows = np.concatenate((rr, pr)).astype(np.int64)
         cols = np.concatenate((cc, pc)).astype(np.int64)
         ok = self.inside(cols, rows)

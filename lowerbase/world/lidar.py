@@ -119,16 +119,23 @@ class Lidar:
         self.rng = np.random.default_rng(config.seed)
         self._angles = config.angles
 
-    def true_ranges(self, scene: Scene, pose: tuple[float, float, float]) -> np.ndarray:
-        """Exact distances [m] (inf: nothing within range_max) with the base at ``pose``
-        (x, y, theta in the map frame)."""
+    def rays(self, pose: tuple[float, float, float]) -> tuple[float, float, np.ndarray]:
+        """The beams' origin (x, y) and world angles [rad] with the base at ``pose``."""
         cfg = self.config
         bx, by, bt = pose
         c, s = math.cos(bt), math.sin(bt)
         lx, ly = bx + c * cfg.x - s * cfg.y, by + s * cfg.x + c * cfg.y
-        world = self._angles + (bt + cfg.yaw)
-        dist = cast_grid(scene.mask, scene.grid, lx, ly, world, cfg.range_max,
-                         scene.grid_field).distance
+        return lx, ly, self._angles + (bt + cfg.yaw)
+
+    def true_ranges(self, scene: Scene, pose: tuple[float, float, float],
+                    grid_distance: np.ndarray | None = None) -> np.ndarray:
+        """Exact distances [m] (inf: nothing within range_max) with the base at ``pose``
+        (x, y, theta in the map frame). ``grid_distance``: the map's part already cast
+        (:meth:`LidarRig.scans` casts every lidar's rays in one call)."""
+        cfg = self.config
+        lx, ly, world = self.rays(pose)
+        dist = grid_distance if grid_distance is not None else cast_grid(
+            scene.mask, scene.grid, lx, ly, world, cfg.range_max, scene.grid_field).distance
         solids = solids_taller_than(scene.solids, cfg.z)
         if solids:
             dist = np.minimum(dist, cast_solids(solids, lx, ly, world))
@@ -147,13 +154,14 @@ class Lidar:
             out = np.where(self.rng.random(n) < cfg.dropout_prob, np.nan, out)
         return out.astype(np.float32)
 
-    def scan(self, scene: Scene, pose: tuple[float, float, float], stamp: float) -> LaserScan:
+    def scan(self, scene: Scene, pose: tuple[float, float, float], stamp: float,
+             grid_distance: np.ndarray | None = None) -> LaserScan:
         cfg = self.config
         period = 1.0 / cfg.rate_hz
         return LaserScan(cfg.frame_id, stamp, cfg.angle_min,
                          cfg.angle_min + (cfg.beams - 1) * cfg.angular_step, cfg.angular_step,
                          period / cfg.beams, period, cfg.range_min, cfg.range_max,
-                         self.measure(self.true_ranges(scene, pose)))
+                         self.measure(self.true_ranges(scene, pose, grid_distance)))
 
 
 @dataclass(frozen=True)
@@ -223,23 +231,31 @@ class ScanMerger:
         best = np.full(n, np.inf)
         too_close = np.zeros(n, dtype=bool)
         clear = np.zeros(n, dtype=bool)
-        for lc, scan in zip(self.lidars, scans, strict=True):
-            r = scan.ranges.astype(float)
-            beam = scan.angles + lc.yaw
-            finite = np.isfinite(r)
-            # Non-finite beams are binned along their direction (at range_max / range_min).
-            reach = np.where(finite, r, np.where(r == np.inf, lc.range_max, lc.range_min))
-            px = lc.x + reach * np.cos(beam)
-            py = lc.y + reach * np.sin(beam)
-            rel = np.arctan2(py, px) - m.angle_min
-            idx = np.round(np.mod(rel, TWO_PI) / inc).astype(np.int64)
-            if m.full_circle:
-                idx %= n
-            inside = (idx >= 0) & (idx < n)
-            valid = inside & finite
-            np.minimum.at(best, idx[valid], np.hypot(px[valid], py[valid]))
-            too_close[idx[inside & (r == -np.inf)]] = True
-            clear[idx[inside & (r == np.inf)]] = True
+        # all lidars' beams at once (each beam's arithmetic is its own: the same as per lidar)
+        r = np.concatenate([scan.ranges.astype(float) for scan in scans])
+        beam = np.concatenate([scan.angles + lc.yaw
+                               for lc, scan in zip(self.lidars, scans, strict=True)])
+        sizes = [scan.ranges.size for scan in scans]
+
+        def per_beam(values: list[float]) -> np.ndarray:
+            return np.repeat(np.asarray(values, dtype=float), sizes)
+
+        lx, ly = per_beam([lc.x for lc in self.lidars]), per_beam([lc.y for lc in self.lidars])
+        finite = np.isfinite(r)
+        # Non-finite beams are binned along their direction (at range_max / range_min).
+        reach = np.where(finite, r, np.where(r == np.inf, per_beam(
+            [lc.range_max for lc in self.lidars]), per_beam([lc.range_min for lc in self.lidars])))
+        px = lx + reach * np.cos(beam)
+        py = ly + reach * np.sin(beam)
+        rel = np.arctan2(py, px) - m.angle_min
+        idx = np.round(np.mod(rel, TWO_PI) / inc).astype(np.int64)
+        if m.full_circle:
+            idx %= n
+        inside = (idx >= 0) & (idx < n)
+        valid = inside & finite
+        np.minimum.at(best, idx[valid], np.hypot(px[valid], py[valid]))
+        too_close[idx[inside & (r == -np.inf)]] = True
+        clear[idx[inside & (r == np.inf)]] = True
         out = np.where(np.isfinite(best), best,
                        np.where(too_close, -np.inf, np.where(clear, np.inf, np.nan)))
         period = 1.0 / self.rate_hz
@@ -262,8 +278,20 @@ class LidarRig:
 
     def scans(self, scene: Scene, pose: tuple[float, float, float],
               stamp: float) -> list[LaserScan]:
-        """Each lidar's own scan, in its own frame."""
-        return [lidar.scan(scene, pose, stamp) for lidar in self.lidars]
+        """Each lidar's own scan, in its own frame. The map is cast for all lidars' rays in one
+        :func:`cast_grid` call (fewer, larger array operations; each ray's result is its own,
+        bit for bit as cast alone: tests/world/test_lidar.py)."""
+        rays = [lidar.rays(pose) for lidar in self.lidars]
+        sizes = [ang.size for _, _, ang in rays]
+        xs = np.concatenate([np.full(n, x) for (x, _, _), n in zip(rays, sizes, strict=True)])
+        ys = np.concatenate([np.full(n, y) for (_, y, _), n in zip(rays, sizes, strict=True)])
+        ranges = np.concatenate([np.full(n, lidar.config.range_max)
+                                 for lidar, n in zip(self.lidars, sizes, strict=True)])
+        dist = cast_grid(scene.mask, scene.grid, xs, ys, np.concatenate([a for *_, a in rays]),
+                         ranges, scene.grid_field).distance
+        parts = np.split(dist, np.cumsum(sizes)[:-1])
+        return [lidar.scan(scene, pose, stamp, part)
+                for lidar, part in zip(self.lidars, parts, strict=True)]
 
     def scan(self, scene: Scene, pose: tuple[float, float, float], stamp: float) -> LaserScan:
         """The merged scan in base_link."""

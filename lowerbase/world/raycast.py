@@ -117,6 +117,8 @@ def cast_grid(mask: np.ndarray, grid: OccupancyGrid, x0: np.ndarray | float,
     # Leave the grid's box: nothing can be hit beyond it (slab method on [0, w] x [0, h]).
     u_max = np.minimum(u_max, _exit_distance(gx, gy, c, s, w, h))
 
+    # Rays from off the grid look at crossings off it too: their cells are clamped.
+    clamp = bool(((gx < 0) | (gx > w) | (gy < 0) | (gy > h)).any())
     # Per active ray: where it is [cells], and its next window's length.
     active = np.flatnonzero(~start_hit & (u_max > 0))
     pos = np.zeros(active.size)
@@ -131,8 +133,9 @@ def cast_grid(mask: np.ndarray, grid: OccupancyGrid, x0: np.ndarray | float,
         if not active.size:
             break
         hi = np.minimum(pos + window, am)
-        ux, bx = _window_hits(fld.occupied, w, h, ax, ay, ac, as_, pos, hi)
-        uy, by = _window_hits(fld.occupied, h, w, ay, ax, as_, ac, pos, hi, transpose=True)
+        ux, bx = _window_hits(fld.occupied, w, h, ax, ay, ac, as_, pos, hi, clamp=clamp)
+        uy, by = _window_hits(fld.occupied, h, w, ay, ax, as_, ac, pos, hi, transpose=True,
+                              clamp=clamp)
         hit_x = ux <= uy
         u = np.where(hit_x, ux, uy)
         got = np.isfinite(u)
@@ -188,18 +191,22 @@ def _exit_distance(gx: np.ndarray, gy: np.ndarray, c: np.ndarray, s: np.ndarray,
 
 def _window_hits(occupied: np.ndarray, n_along: int, n_across: int, ga: np.ndarray,
                  gb: np.ndarray, ca: np.ndarray, cb: np.ndarray, u_lo: np.ndarray,
-                 u_hi: np.ndarray, transpose: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                 u_hi: np.ndarray, transpose: bool = False, clamp: bool = True
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """First occupied cell entered through a boundary a = const with u in [u_lo, u_hi).
 
     ``a`` is the axis whose boundaries are crossed (x, or y with ``transpose``), ``b`` the other;
     ``occupied`` is the padded flat mask of :class:`GridField`. Returns the ray distance [cells]
     (inf: none) and the boundary's a-coordinate [cells]. The k-th boundary's distance is
     ``(d0 + k) / |ca|`` whatever the window: windows only choose which k are looked at.
+    ``clamp=False`` when every ray starts on the grid (then every crossing looked at lies on
+    the grid or its padding ring: no clipping is needed).
     """
     m = ga.size
     abs_ca = np.abs(ca)
     moving = abs_ca > 1e-12
-    base = np.where(ca > 0, np.floor(ga) + 1.0, np.floor(ga))  # first boundary crossed
+    up = ca > 0
+    base = np.where(up, np.floor(ga) + 1.0, np.floor(ga))      # first boundary crossed
     d0 = np.abs(base - ga)                                      # its distance along a [cells]
     with np.errstate(divide="ignore", invalid="ignore"):
         k_lo = np.where(moving, np.ceil(u_lo * abs_ca - d0), 0.0)
@@ -209,27 +216,42 @@ def _window_hits(occupied: np.ndarray, n_along: int, n_across: int, ga: np.ndarr
     width = int(count.max(initial=0.0))
     if width == 0:
         return np.full(m, np.inf), np.zeros(m)
+    den = np.where(moving, abs_ca, 1.0)
     steps = np.arange(width, dtype=float)
     k = k_lo[:, None] + steps
-    step = np.where(ca > 0, 1.0, -1.0)[:, None]
-    boundary = base[:, None] + step * k                          # a-coordinate of the boundary
-    u = (d0[:, None] + k) / np.where(moving, abs_ca, 1.0)[:, None]
-    cell_a = (boundary - (ca < 0)[:, None]).astype(np.intp)      # the cell entered
-    cell_b = np.floor(gb[:, None] + u * cb[:, None]).astype(np.intp)
-    np.clip(cell_a, -1, n_along, out=cell_a)   # off the grid: onto the free padding ring
-    np.clip(cell_b, -1, n_across, out=cell_b)
-    # Row-major padded (h + 2, w + 2): with ``transpose`` a = row and b = col, else a = col.
-    if transpose:
-        index = (cell_a + 1) * (n_across + 2) + (cell_b + 1)
-    else:
-        index = (cell_b + 1) * (n_along + 2) + (cell_a + 1)
-    occ = occupied.take(index)
-    occ &= steps[None, :] < count[:, None]
+    u = d0[:, None] + k
+    u /= den[:, None]
+    # The cell entered: a = boundary - (ca < 0) (integers, exact in int arithmetic) and
+    # b = floor(gb + u cb). Its flat index in the padded mask (rows of ``stride`` cells; with
+    # ``transpose`` a is the row) is (a + 1) a_mul + (b + 1) b_mul.
+    stride = (n_across if transpose else n_along) + 2
+    a_mul, b_mul = (stride, 1) if transpose else (1, stride)
+    sign = np.where(up, 1, -1)
+    a0 = (base - (ca < 0)).astype(np.intp) + sign * k_lo.astype(np.intp)  # the cell at k_lo
+    v = u * cb[:, None]
+    v += gb[:, None]
+    cell_b = np.floor(v, out=v).astype(np.intp)
+    if clamp:
+        cell_a = a0[:, None] + sign[:, None] * np.arange(width, dtype=np.intp)
+        np.clip(cell_a, -1, n_along, out=cell_a)   # off the grid: onto the free padding ring
+        np.clip(cell_b, -1, n_across, out=cell_b)
+        index = cell_a * a_mul
+    else:  # the same integers, with the constants folded into the per-ray start
+        index = (sign * a_mul)[:, None] * np.arange(width, dtype=np.intp)
+        index += (a0 * a_mul)[:, None]
+    if b_mul != 1:
+        cell_b *= b_mul
+    index += cell_b
+    index += a_mul + b_mul
+    # Past a ray's own count the index may leave the mask (clipped; never used): the first
+    # occupied entry is a hit only within the count.
+    occ = occupied.take(index, mode="clip")
     first = np.argmax(occ, axis=1)
     rows = np.arange(m)
-    any_hit = occ[rows, first]
+    any_hit = occ[rows, first] & (first < count)
     u_hit = np.where(any_hit, u[rows, first], np.inf)
-    return u_hit, np.where(any_hit, boundary[rows, first], 0.0)
+    boundary = base + np.where(up, 1.0, -1.0) * (k_lo + first)
+    return u_hit, np.where(any_hit, boundary, 0.0)
 
 
 @dataclass(frozen=True)

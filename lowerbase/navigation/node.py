@@ -6,7 +6,8 @@ parameters; :class:`NavigationNode` feeds the :class:`~lowerbase.navigation.navi
 and the :class:`~lowerbase.navigation.steps.StepController` from /scan, the camera's
 cloud_without_planes, /odom, TF map -> odom (the world node's localization) and
 /driver_base/parameter, and sends their twists to /base_cmd_vel at 20 Hz while either is
-active. The action servers are in :mod:`lowerbase.navigation.actions`.
+active. The action servers are in :mod:`lowerbase.navigation.actions`, the services in
+:mod:`lowerbase.navigation.services`.
 
 Threads: the main loop (one control tick per period, costmap publishing), rospy's callback
 threads (subscribers, services) and actionlib's goal threads share one lock. Bad input (a NaN
@@ -107,7 +108,7 @@ class NavigationNode:
                                       "cmd_vel": 0, "plans": 0}
         self._tail = 0
         self._new_scan = False
-        self._pubs: dict[str, Any] = {}
+        self.pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
         self._services: list[Any] = []
         self._servers: Any = None
@@ -129,11 +130,12 @@ class NavigationNode:
         from woosh_msgs.msg import Parameter
 
         from lowerbase.navigation.actions import ActionServers
+        from lowerbase.navigation.services import Services
 
         self._tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
         self._tf_listener = tf2_ros.TransformListener(self._tf_buffer)
         pub = rospy.Publisher
-        self._pubs = {
+        self.pubs = {
             "cmd_vel": pub("base_cmd_vel", io.Twist, queue_size=5),
             "global": pub("~global_costmap/costmap", io.GridMsg, queue_size=1, latch=True),
             "local": pub("~local_costmap/costmap", io.GridMsg, queue_size=1),
@@ -152,9 +154,10 @@ class NavigationNode:
         if self.setup.camera is not None:
             self._subs.append(sub(f"{self.setup.camera.name}/depth/cloud_without_planes",
                                   PointCloud2, self._on_cloud, queue_size=1, buff_size=2 ** 24))
-        self._services = [rospy.Service("~make_plan", GetPlan, self._make_plan),
-                          rospy.Service("~enable_costmaps", SetBool, self._enable),
-                          rospy.Service("~clear_costmaps", Empty, self._clear)]
+        services = Services(self)
+        self._services = [rospy.Service("~make_plan", GetPlan, services.make_plan),
+                          rospy.Service("~enable_costmaps", SetBool, services.enable),
+                          rospy.Service("~clear_costmaps", Empty, services.clear)]
         self._servers = ActionServers(self)
         self._servers.start()
 
@@ -223,53 +226,6 @@ class NavigationNode:
             return
         log.info("%s costmap footprint set: %d points", which, len(points))
 
-    def _make_plan(self, req: Any) -> Any:
-        """nav_msgs/GetPlan; an empty path when there is none (the reason goes to the log: the
-        response has no message field). An empty start frame means the robot's pose."""
-        from nav_msgs.srv import GetPlanResponse
-
-        io, frame = self.io, self.setup.map_frame
-        stamp = self.rospy.Time.now()
-        try:
-            goal = io.stamped_pose(req.goal, "make_plan goal", (frame,))
-            if req.start.header.frame_id == "":
-                start = self.map_pose()
-                if start is None:
-                    raise WorldError("make_plan: the start has no frame_id and the robot's "
-                                     "pose is unknown (no /odom or map -> odom yet)")
-            else:
-                start = io.stamped_pose(req.start, "make_plan start", (frame,))
-            with self.lock:
-                plan = self.navigator.make_plan(start, goal, float(req.tolerance))
-        except LowerbaseError as exc:
-            log.warning("make_plan refused: %s", exc)
-            return GetPlanResponse(plan=io.path_msg([], stamp, frame))
-        if not plan.ok:
-            log.warning("make_plan: no path from (%.2f, %.2f) to (%.2f, %.2f): %s",
-                        start[0], start[1], goal[0], goal[1], plan.reason)
-        path = io.path_msg(plan.poses, stamp, frame)
-        self.stats["plans"] += 1
-        self._pubs["plan"].publish(path)
-        return GetPlanResponse(plan=path)
-
-    def _enable(self, req: Any) -> Any:
-        from std_srvs.srv import SetBoolResponse
-
-        with self.lock:
-            answers = [getattr(self.navigator, f"{w}_costmap").enable(bool(req.data))
-                       for w in ("global", "local")]
-            self.navigator.combined.refresh()
-        ok = all(a[0] for a in answers)
-        return SetBoolResponse(success=ok, message=answers[1][1])
-
-    def _clear(self, req: Any) -> Any:
-        from std_srvs.srv import EmptyResponse
-
-        with self.lock:
-            self.navigator.clear_costmaps()
-        log.info("costmaps cleared")
-        return EmptyResponse()
-
     # -- the robot's pose ----------------------------------------------------------------------
     def _lookup_map_to_odom(self) -> None:
         import tf2_ros
@@ -320,7 +276,7 @@ class NavigationNode:
                     command = (cmd.linear, cmd.angular)
                     if self.navigator.plans != self._plans_published:
                         self._plans_published = self.navigator.plans
-                        self._pubs["plan"].publish(self.io.path_msg(
+                        self.pubs["plan"].publish(self.io.path_msg(
                             self.navigator.path, self.rospy.Time.now(), self.setup.map_frame))
             if command is not None:
                 self._tail = STOP_TAIL
@@ -328,7 +284,7 @@ class NavigationNode:
                 self._tail -= 1
                 command = (0.0, 0.0)
             if command is not None:
-                self._pubs["cmd_vel"].publish(self.io.twist(*command))
+                self.pubs["cmd_vel"].publish(self.io.twist(*command))
                 self.stats["cmd_vel"] += 1
             self.tick_count += 1
             self.ticked.notify_all()
@@ -354,10 +310,10 @@ class NavigationNode:
             costs = gc.costs
             if costs is not self._published_global:
                 self._published_global = costs
-                self._pubs["global"].publish(io.costmap_msg(costs, gc.resolution, gc.origin,
+                self.pubs["global"].publish(io.costmap_msg(costs, gc.resolution, gc.origin,
                                                             stamp, frame))
             if publish_local:
-                self._pubs["local"].publish(io.costmap_msg(lc.costs, lc.resolution, lc.origin,
+                self.pubs["local"].publish(io.costmap_msg(lc.costs, lc.resolution, lc.origin,
                                                            stamp, frame))
 
     def spin(self) -> None:
@@ -385,9 +341,9 @@ class NavigationNode:
             self.ticked.notify_all()
         if self._servers is not None:
             self._servers.shutdown()
-        if self._pubs and (self.steps.active or self.navigator_active()):
+        if self.pubs and (self.steps.active or self.navigator_active()):
             try:  # a last zero twist; rospy may already have closed the topic
-                self._pubs["cmd_vel"].publish(self.io.twist(0.0, 0.0))
+                self.pubs["cmd_vel"].publish(self.io.twist(0.0, 0.0))
             except self.rospy.ROSException as exc:
                 log.warning("no zero twist at shutdown: %s", exc)
         for sub in self._subs:

@@ -121,6 +121,7 @@ class StepController:
                               "an integer >= 0")
         self.latency = LAG  #: measured: first command -> first motion on /odom [s]
         self.corrections = 0  #: corrections of the running step so far
+        self.summary = ""  #: how the last step ended (error on /odom, corrections, latency)
         self.steps: list[Step] = []
         self.use_avoid = False
         self.paused = False
@@ -225,11 +226,11 @@ class StepController:
             if not self._still((x, y, yaw)):
                 return self._ramp(0.0, 0.0)
             if abs(remaining) <= self._tolerance(step):
-                return self._next(step)
+                return self._next(step, remaining)
             if self.corrections >= self.max_corrections:
                 limit = 0.01 if step.execute_mode == STRAIGHT else math.radians(0.5)
                 if abs(remaining) <= limit:
-                    return self._next(step)
+                    return self._next(step, remaining)
                 unit = (1000.0, "mm") if step.execute_mode == STRAIGHT else \
                     (math.degrees(1.0), "deg")
                 self.result = StepResult(FAILED, step.execute_mode, self.percent,
@@ -360,11 +361,16 @@ class StepController:
             self._go = (self._clock, pose)
         return self._ramp(speed, 0.0) if straight else self._ramp(0.0, speed)
 
-    def _next(self, step: Step) -> tuple[float, float]:
+    def _next(self, step: Step, remaining: float) -> tuple[float, float]:
         self._k += 1
         self._start = None
+        off = f"{abs(remaining) * 1000:.1f} mm" if step.execute_mode == STRAIGHT else \
+            f"{math.degrees(abs(remaining)):.2f} deg"
+        self.summary = (f"step {self._k} ended {off} off on /odom after {self.corrections} "
+                        f"correction(s); latency {self.latency:.2f} s")
         if self._k == len(self.steps):
-            self.result = StepResult(SUCCEEDED, step.execute_mode, 100.0, "done")
+            self.result = StepResult(SUCCEEDED, step.execute_mode, 100.0,
+                                     f"done: {self.summary}")
         return self._ramp(0.0, 0.0)
 
     def _ramp(self, v: float, w: float) -> tuple[float, float]:

@@ -59,7 +59,8 @@ def chain(ros_master: Any, tmp_path_factory: pytest.TempPathFactory  # noqa: F81
         nav.wait_for("ready", timeout=60.0)
         client = NavClient(tmp, env)
         for topic, kind in ((GLOBAL, "nav_msgs/OccupancyGrid"), (LOCAL, "nav_msgs/OccupancyGrid"),
-                            ("/amcl_pose", "geometry_msgs/PoseWithCovarianceStamped")):
+                            ("/amcl_pose", "geometry_msgs/PoseWithCovarianceStamped"),
+                            ("/odom", "nav_msgs/Odometry")):
             client.ask(op="sub", topic=topic, type=kind)
         yield {"client": client, "nav": nav}
     finally:
@@ -76,6 +77,12 @@ def truth(client: NavClient) -> tuple[float, float, float]:
                            ["count"] > n + 1, 10.0, "a fresh /amcl_pose")
     p, q = msg["pose"]["pose"]["position"], msg["pose"]["pose"]["orientation"]
     return p["x"], p["y"], 2.0 * math.atan2(q["z"], q["w"])
+
+
+def odom_xy(client: NavClient) -> tuple[float, float]:
+    """The latest /odom position (to tell odometry error from control error)."""
+    p = client.wait_last("/odom", lambda m: True, 10.0, "/odom")["pose"]["pose"]["position"]
+    return p["x"], p["y"]
 
 
 def pose_msg(x: float, y: float, yaw: float) -> dict[str, Any]:
@@ -218,6 +225,7 @@ def step_goal(mode: int, steps: list[tuple[int, float, float]]) -> dict[str, Any
 def test_step_control_straight_half_a_metre_on_the_truth(chain: dict[str, Any]) -> None:
     client: NavClient = chain["client"]
     x0, y0, yaw0 = truth(client)
+    odom0 = odom_xy(client)
     client.ask(op="send", name="/cmd_vel_control", type=STEP,
                goal=step_goal(1, [(1, 0.5, 0.0)]))
     res = client.ask(op="result", name="/cmd_vel_control", timeout=60.0)
@@ -226,7 +234,8 @@ def test_step_control_straight_half_a_metre_on_the_truth(chain: dict[str, Any]) 
     assert res["feedbacks"] > 10
     x1, y1, yaw1 = truth(client)
     target = (x0 + 0.5 * math.cos(yaw0), y0 + 0.5 * math.sin(yaw0))
-    assert math.hypot(x1 - target[0], y1 - target[1]) < 0.01, ((x0, y0), (x1, y1))
+    assert math.hypot(x1 - target[0], y1 - target[1]) < 0.01, \
+        ((x0, y0), (x1, y1), res["text"], odom0, odom_xy(client))
     assert abs(math.remainder(yaw1 - yaw0, math.tau)) < math.radians(0.5)
     # and back, so the other tests find the robot at the start
     client.ask(op="send", name="/cmd_vel_control", type=STEP,

@@ -1,0 +1,73 @@
+"""The navigation node's services: /move_base/make_plan (nav_msgs/GetPlan),
+/move_base/enable_costmaps (std_srvs/SetBool) and /move_base/clear_costmaps (std_srvs/Empty).
+
+Each answers from the :class:`~lowerbase.navigation.node.NavigationNode`'s Navigator under the
+node's lock; bad input (a NaN pose, another frame, no robot pose yet) is an empty plan with the
+reason in the log, never an exception out of rospy's service thread.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from lowerbase.errors import LowerbaseError, WorldError
+
+log = logging.getLogger(__name__)
+
+
+class Services:
+    """The service handlers of one node (rospy.Service callbacks)."""
+
+    def __init__(self, node: Any) -> None:
+        self.node = node
+
+    def make_plan(self, req: Any) -> Any:
+        """nav_msgs/GetPlan; an empty path when there is none (the reason goes to the log: the
+        response has no message field). An empty start frame means the robot's pose."""
+        from nav_msgs.srv import GetPlanResponse
+
+        node = self.node
+        io, frame = node.io, node.setup.map_frame
+        stamp = node.rospy.Time.now()
+        try:
+            goal = io.stamped_pose(req.goal, "make_plan goal", (frame,))
+            if req.start.header.frame_id == "":
+                start = node.map_pose()
+                if start is None:
+                    raise WorldError("make_plan: the start has no frame_id and the robot's "
+                                     "pose is unknown (no /odom or map -> odom yet)")
+            else:
+                start = io.stamped_pose(req.start, "make_plan start", (frame,))
+            with node.lock:
+                plan = node.navigator.make_plan(start, goal, float(req.tolerance))
+        except LowerbaseError as exc:
+            log.warning("make_plan refused: %s", exc)
+            return GetPlanResponse(plan=io.path_msg([], stamp, frame))
+        if not plan.ok:
+            log.warning("make_plan: no path from (%.2f, %.2f) to (%.2f, %.2f): %s",
+                        start[0], start[1], goal[0], goal[1], plan.reason)
+        path = io.path_msg(plan.poses, stamp, frame)
+        node.stats["plans"] += 1
+        node.pubs["plan"].publish(path)
+        return GetPlanResponse(plan=path)
+
+    def enable(self, req: Any) -> Any:
+        from std_srvs.srv import SetBoolResponse  # type: ignore[import-untyped]
+
+        node = self.node
+        with node.lock:
+            answers = [getattr(node.navigator, f"{w}_costmap").enable(bool(req.data))
+                       for w in ("global", "local")]
+            node.navigator.combined.refresh()
+        ok = all(a[0] for a in answers)
+        return SetBoolResponse(success=ok, message=answers[1][1])
+
+    def clear(self, req: Any) -> Any:
+        from std_srvs.srv import EmptyResponse
+
+        node = self.node
+        with node.lock:
+            node.navigator.clear_costmaps()
+        log.info("costmaps cleared")
+        return EmptyResponse()

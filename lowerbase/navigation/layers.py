@@ -18,9 +18,21 @@ from lowerbase.errors import ConfigError, WorldError
 from lowerbase.world.footprint import Footprint
 from lowerbase.world.grid import OccupancyGrid
 
-#: skimage's polygon_perimeter without its ``@require("matplotlib")`` wrapper, which looks the
-#: package's version up on every call (about 1 ms, more than the drawing itself)
-_polygon_perimeter = getattr(draw.polygon_perimeter, "__wrapped__", draw.polygon_perimeter)
+
+def _polygon_perimeter(r: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The cells of skimage's ``polygon_perimeter(r, c)`` (integer vertices, no shape): its
+    Bresenham lines (``draw.line``) along the closed outline, without the version check and the
+    matplotlib clip to the polygon's own bounding box it does on every call (about 1 ms, more
+    than the drawing). The same cells: tests/navigation/test_layers_perimeter.py."""
+    rr, cc = [], []
+    n = len(r)
+    for i in range(n):
+        j = (i + 1) % n
+        line_r, line_c = draw.line(int(r[i]), int(c[i]), int(r[j]), int(c[j]))
+        rr.append(line_r)
+        cc.append(line_c)
+    return np.concatenate(rr), np.concatenate(cc)
+
 
 FREE_SPACE = 0
 MAX_NON_OBSTACLE = 252

@@ -17,8 +17,8 @@ def _cells(r: np.ndarray, c: np.ndarray) -> set[tuple[int, int]]:
 def test_the_perimeter_cells_are_skimages() -> None:
     rng = np.random.default_rng(5)
     cm = Costmap2D(100, 100, 0.05, (0.0, 0.0))
-    shapes = [DEFAULT_FOOTPRINT, Footprint([(0.3, 0.0), (-0.2, 0.25), (-0.2, -0.25)]),
-              Footprint([(0.5, 0.4), (-0.5, 0.4), (-0.5, -0.4), (0.5, -0.4)])]
+    shapes = [DEFAULT_FOOTPRINT, Footprint(((0.3, 0.0), (-0.2, 0.25), (-0.2, -0.25))),
+              Footprint(((0.5, 0.4), (-0.5, 0.4), (-0.5, -0.4), (0.5, -0.4)))]
     for k in range(600):
         fp = shapes[k % len(shapes)]
         pose = (float(rng.uniform(-1.0, 6.0)), float(rng.uniform(-1.0, 6.0)),

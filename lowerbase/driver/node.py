@@ -12,12 +12,13 @@ Threads (one lock, held around every DriverCore call):
 * rospy's subscriber threads hand /base_cmd_vel, /smooth_cmd_vel, rgbled and rgbled_shelf to
   ``set_twist`` / ``set_led``.
 
-Stamps are ``rospy.Time.now()`` when the frame was handled; DriverCore's own timeouts run on
-a :class:`~lowerbase.clock.RealClock`. A bus that fails (a USB adapter unplugged) is closed and
-reopened every second, while the core reports the lost link; nothing here raises on bad input
-from the wire. Run it with ``lowerbase driver`` (see docs/driver.md) or roslaunch
-(``lowerbase/driver/launch/driver_base.launch``); ``python -m lowerbase.driver.node ARGS`` is
-the same as ``lowerbase driver ARGS``.
+Stamps are ``rospy.Time.now()`` when the frame was handled; DriverCore's own timeouts and the
+main loop run on a :class:`~lowerbase.clock.RealClock`, or on ROS time when ``/use_sim_time``
+is true (:mod:`lowerbase.driver.rostime`: 20 Hz of /clock's time). A bus that fails (a USB
+adapter unplugged) is closed and reopened every second, while the core reports the lost link;
+nothing here raises on bad input from the wire. Run it with ``lowerbase driver`` (see
+docs/driver.md) or roslaunch (``lowerbase/driver/launch/driver_base.launch``); ``python -m
+lowerbase.driver.node ARGS`` is the same as ``lowerbase driver ARGS``.
 """
 
 from __future__ import annotations
@@ -28,7 +29,6 @@ import math
 import os
 import sys
 import threading
-import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import ModuleType
@@ -284,17 +284,15 @@ class DriverNode:
 
     def spin(self) -> None:
         """Run until rospy shuts down (Ctrl-C, SIGTERM, rosnode kill) or ``stop`` is set."""
+        from lowerbase.driver.rostime import Pacer
+
         rospy = self.rospy
         rospy.on_shutdown(self.stop.set)
-        period = 1.0 / self.core.config.command_rate
-        deadline = time.monotonic()
+        # on the core's clock: wall time, or ROS time under /use_sim_time (driver.rostime)
+        pacer = Pacer(self.core.clock, 1.0 / self.core.config.command_rate, self.stop)
         while not self.stop.is_set() and not rospy.is_shutdown():
             self.step()
-            deadline += period
-            delay = deadline - time.monotonic()
-            if delay < -1.0:  # suspended or overloaded: do not burst to catch up
-                deadline = time.monotonic()
-            self.stop.wait(max(delay, 0.0))
+            pacer.wait()
 
     def shutdown(self) -> None:
         """Stop the reader, send one stop if a twist is being commanded, close the link."""
@@ -352,7 +350,14 @@ def run(
 
         link = link_factory(finished)
         try:
-            node = DriverNode(settings, config, link)
+            from lowerbase.driver import rostime
+
+            clock: Clock | None = None
+            if rostime.uses_sim_time(rospy):  # the core and the loop on /clock's time
+                clock = rostime.RosClock(rospy)
+                if not rostime.wait_for_clock(rospy, clock.stop):
+                    return 0
+            node = DriverNode(settings, config, link, clock=clock)
             node.advertise()
             node.start_reader()
             print(f"lowerbase driver: {rospy.get_name()} on {link.description}; ROS master "

@@ -10,6 +10,7 @@ part's output goes to a log file of its own (``--log-dir``).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import signal
 import sys
 import tempfile
@@ -18,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from lowerbase.cli.args import positive_seconds
+from lowerbase.errors import ConfigError, LowerbaseError
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -38,12 +40,50 @@ def add_subparser(subparsers: Any) -> None:
                    help="serve the chassis live to Foxglove (default 127.0.0.1:8765)")
     p.add_argument("--duration", type=positive_seconds, metavar="S",
                    help="stop after S seconds of wall time (default: until Ctrl-C)")
+    p.add_argument("--sim-time", action="store_true",
+                   help="simulated time, as Gazebo and Stage run: /use_sim_time true on the "
+                   "master, the world publishes /clock from the emulator, which runs --speed "
+                   "times real time; every node follows /clock (docs/robot.md)")
+    p.add_argument("--speed", type=_speed_factor, metavar="K",
+                   help=f"with --sim-time: how many times real time (default {DEFAULT_SPEED:g}; "
+                   "the status line shows what the machine achieves)")
     p.set_defaults(func=run)
 
 
-def _status(sup: Any, started: float, master: str) -> str:
+#: --sim-time's default speed: twice real time keeps up on a 2-core machine (docs/robot.md)
+DEFAULT_SPEED = 2.0
+
+
+def _speed_factor(text: str) -> float:
+    from lowerbase.cli.emulate import _speed_factor as emulate_speed
+
+    return emulate_speed(text)
+
+
+def _status(sup: Any, started: float, master: str, watch: Any = None) -> str:
     parts = " ".join(f"{c.spec.name} {'up' if c.ready else 'starting'}" for c in sup.children)
-    return f"lowerbase robot: {parts} | master {master} | {time.monotonic() - started:.0f} s"
+    sim = "" if watch is None else f" | {watch.status()}"
+    return f"lowerbase robot: {parts} | master {master} | {time.monotonic() - started:.0f} s{sim}"
+
+
+def _use_sim_time(uri: str, sim: bool) -> Any:
+    """Set /use_sim_time for this run (true with --sim-time; false when a previous run left it
+    true); returns what restores the master's previous value."""
+    from lowerbase.robot.master import delete_param, get_param, set_param
+
+    previous = get_param(uri, "/use_sim_time")
+    if not sim and not previous:
+        return lambda: None
+    set_param(uri, "/use_sim_time", sim)
+
+    def restore() -> None:
+        with contextlib.suppress(OSError, LowerbaseError):
+            if previous is None:
+                delete_param(uri, "/use_sim_time")
+            else:
+                set_param(uri, "/use_sim_time", previous)
+
+    return restore
 
 
 def run(args: argparse.Namespace) -> int:
@@ -53,6 +93,9 @@ def run(args: argparse.Namespace) -> int:
     from lowerbase.robot.supervisor import Supervisor
     from lowerbase.world.maps import load_map
 
+    if args.speed is not None and not args.sim_time:
+        raise ConfigError("--speed K goes with --sim-time (real time runs at 1 x)")
+    speed = (args.speed or DEFAULT_SPEED) if args.sim_time else None
     load_map(args.map)  # a wrong map is one line now, not a part ending later
     log_dir = Path(args.log_dir) if args.log_dir else Path(
         tempfile.mkdtemp(prefix="lowerbase-robot-"))
@@ -63,20 +106,32 @@ def run(args: argparse.Namespace) -> int:
     line = StatusLine(force=False)
     started = time.monotonic()
     ended = None
+    restore: Any = lambda: None  # noqa: E731
+    watch, unwatch = None, None
     try:
         if not master_answers(uri):
             sup.start([own_master(uri)])
             wait_for_master(uri)
             print(f"lowerbase robot: started a ROS master at {uri}", flush=True)
+        restore = _use_sim_time(uri, speed is not None)  # before any node starts
+        if speed is not None:
+            print(f"lowerbase robot: simulated time: /use_sim_time true, the emulator at "
+                  f"{speed:g} x real time, /clock from the world", flush=True)
         parts = tuple(p for p in UPPER if p not in args.without)
-        sup.start(robot_plan(RobotOptions(map=args.map, parts=parts, foxglove=args.foxglove)),
+        sup.start(robot_plan(RobotOptions(map=args.map, parts=parts, foxglove=args.foxglove,
+                                          sim_speed=speed)),
                   on_ready=lambda c: print(f"lowerbase robot: {c.spec.name} up", flush=True))
         print(f"lowerbase robot: ready on ROS master {uri}; logs in {log_dir}; Ctrl-C stops",
               flush=True)
+        if speed is not None:
+            from lowerbase.robot.simclock import ClockWatch, watch_clock
+
+            watch = ClockWatch()
+            unwatch = watch_clock(watch)
         deadline = None if args.duration is None else started + args.duration
 
         def tick() -> None:
-            line.show(_status(sup, started, uri), time.monotonic())
+            line.show(_status(sup, started, uri, watch), time.monotonic())
             if deadline is not None and time.monotonic() >= deadline:
                 sup.request_stop()
 
@@ -85,7 +140,12 @@ def run(args: argparse.Namespace) -> int:
         pass
     finally:
         line.done()
+        if watch is not None:
+            print(f"lowerbase robot: {watch.status()}", flush=True)
+        if unwatch is not None:
+            unwatch()
         codes = sup.stop_all()
+        restore()
         for s, handler in previous.items():
             signal.signal(s, handler)
     if ended is not None:

@@ -79,3 +79,15 @@ def set_param(uri: str, name: str, value: Any) -> None:
     code, msg = reply[0], reply[1]
     if code != 1:
         raise RobotError(f"cannot set {name} on the ROS master at {uri}: {msg}")
+
+
+def get_param(uri: str, name: str) -> Any:
+    """The value of ``name`` on the master, or None when it is not set."""
+    proxy = xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(2.0))
+    reply: Any = proxy.getParam("/lowerbase_robot", name)
+    return reply[2] if reply[0] == 1 else None
+
+
+def delete_param(uri: str, name: str) -> None:
+    proxy = xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(2.0))
+    proxy.deleteParam("/lowerbase_robot", name)

@@ -6,6 +6,10 @@ robots on one host never meet); the world reads the emulator's ground truth over
 loopback (``emulate --truth-udp``); the ROS nodes meet on the master. The world starts first
 (it must be listening when the emulator starts sending its truth), then the emulator, then
 driver_base, then the nodes above it.
+
+With ``sim_speed`` K (``--sim-time``) the emulator runs K x real time and the world publishes
+/clock from its ground truth; ``/use_sim_time`` is set on the master before anything starts
+(``lowerbase.cli.robot``), so every node's ROS time is the emulator's.
 """
 
 from __future__ import annotations
@@ -34,6 +38,8 @@ class RobotOptions:
     truth_port: int | None = None
     python: str = sys.executable
     foxglove: str | None = None
+    #: --sim-time: the emulator's speed factor K, the world publishes /clock (None: real time)
+    sim_speed: float | None = None
 
 
 def _lowerbase(opts: RobotOptions, *args: str) -> list[str]:
@@ -53,11 +59,14 @@ def robot_plan(opts: RobotOptions) -> list[ChildSpec]:
     truth = opts.truth_port or free_loopback_port()
     map_ref = str(Path(opts.map).resolve()) if Path(opts.map).suffix else opts.map
     emulate = ["emulate", *bus, "--truth-udp", f"127.0.0.1:{truth}", "--map", map_ref]
+    world = ["world", "--map", map_ref, "--truth-udp", str(truth)]
     if opts.foxglove:
         emulate += ["--foxglove", opts.foxglove]
+    if opts.sim_speed is not None:  # the world is the simulator: /clock from the truth's t
+        emulate += ["--speed", f"{opts.sim_speed:g}"]
+        world += ["--publish-clock"]
     specs = [
-        ChildSpec("world", _lowerbase(opts, "world", "--map", map_ref, "--truth-udp",
-                                      str(truth)), ON_MASTER),
+        ChildSpec("world", _lowerbase(opts, *world), ON_MASTER),
         ChildSpec("emulate", _lowerbase(opts, *emulate), "lower computer on"),
         ChildSpec("driver", _lowerbase(opts, "driver", *bus), "link ready"),
     ]

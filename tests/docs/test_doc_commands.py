@@ -77,6 +77,12 @@ CHECKS: dict[str, Check] = {
     "lowerbase world --map warehouse": Check("skip", why=ROS),
     "lowerbase world --map empty_room --ground-truth --no-camera": Check("skip", why=ROS),
     "lowerbase navigation --map warehouse": Check("skip", why=ROS),
+    "lowerbase robot --map warehouse": Check("skip", why=ROS),
+    "lowerbase robot --map empty_room --without navigation --without tasks": Check(
+        "skip", why=ROS),
+    "lowerbase robot --map warehouse --sim-time": Check("skip", why=ROS),
+    "lowerbase robot --map warehouse --sim-time --speed 4 --without navigation --without "
+    "tasks": Check("skip", why=ROS),
     "lowerbase emulate --fleet 100": Check("start", "Ctrl-C stops"),
     "lowerbase driver --bus-kwargs port=43115": Check("skip", why=ROS),
     "lowerbase driver --robot legged": Check("skip", why=ROS),

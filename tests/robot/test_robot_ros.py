@@ -137,3 +137,65 @@ def test_errors_before_anything_starts_are_one_line(tmp_path: Path) -> None:
         lines = out.stderr.strip().splitlines()
         assert len(lines) == 1 and text in lines[0] and lines[0].startswith(
             "lowerbase robot: error:"), out.stderr
+
+
+SIM_TOPICS = {**TOPICS, "/clock": "rosgraph_msgs/Clock"}
+WALL_EPOCH = 1.0e9  #: any wall time (since 1970) is past this; the sim time starts near 0
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_robot_sim_time_runs_the_graph_on_the_emulators_clock(
+        ros_master: Any, tmp_path: Path) -> None:  # noqa: F811
+    import rosgraph
+
+    env = {k: v for k, v in ros_master.env.items() if k != "ROS_IP"}
+    robot = Robot(env, tmp_path / "logs", "--without", "navigation", "--without", "tasks",
+                  "--sim-time", "--speed", "2")
+    probe = None
+    try:
+        robot.wait_for("ready on ROS master")
+        master = rosgraph.Master("/simtime_test", master_uri=ros_master.env["ROS_MASTER_URI"])
+        assert master.getParam("/use_sim_time") is True
+        script = tmp_path / "probe.py"
+        script.write_text(PROBE)
+        probe = Probe(script, ros_master.env, SIM_TOPICS)
+        start = probe.wait_for(lambda s: all(s[t]["count"] >= 1 for t in SIM_TOPICS), 60.0,
+                               "clock, odom, scan and amcl_pose")
+        clock0 = start["/clock"]["msg"]["clock"]
+        later = probe.wait_for(lambda s: s["/clock"]["msg"]["clock"] > clock0 + 2.0, 30.0,
+                               "/clock advancing")
+        clock1 = later["/clock"]["msg"]["clock"]
+        assert 0.0 < clock0 < clock1 < WALL_EPOCH
+        # every stamp is sim time: near /clock (50 Hz topics, a little behind), not wall time
+        for topic in ("/odom", "/scan"):
+            stamp = later[topic]["msg"]["header"]["stamp"]
+            assert abs(stamp - clock1) < 2.0, (topic, stamp, clock1)
+        probe.ask(op="publish", topic="/base_cmd_vel", type="geometry_msgs/Twist",
+                  fields={"linear": {"x": 0.3}, "angular": {"z": 0.0}}, rate=20, duration=2.0)
+        moved = probe.wait_for(lambda s: _x(s, "/odom") > _x(start, "/odom") + 0.3, 30.0,
+                               "/odom moving forward on sim time")
+        probe.wait_for(lambda s: _x(s, "/amcl_pose") > _x(start, "/amcl_pose") + 0.25, 30.0,
+                       "/amcl_pose following")
+        assert abs(moved["/odom"]["msg"]["header"]["stamp"]
+                   - moved["/clock"]["msg"]["clock"]) < 2.0
+    finally:
+        if probe is not None:
+            probe.close()
+        code, out, err = robot.ctrl_c()
+    assert code == 0, err
+    assert "Traceback" not in err
+    shown = "".join(robot.lines) + out
+    assert "x real time" in out and "/use_sim_time true" in shown
+    # the master is left as it was found: no /use_sim_time
+    assert not master.hasParam("/use_sim_time")
+    driver_log = (tmp_path / "logs" / "driver.log").read_text()
+    assert "link ready" in driver_log and "link lost" not in driver_log
+
+
+def test_speed_without_sim_time_is_one_line(tmp_path: Path) -> None:
+    out = subprocess.run([sys.executable, "-m", "lowerbase", "robot", "--speed", "3"],
+                         capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert out.returncode != 0
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--speed K goes with --sim-time" in lines[0], out.stderr

@@ -48,6 +48,9 @@ DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 43213
 DEFAULT_PERIOD = 0.02  # [s]: 50 Hz
 FLAG_CONTACT = 0x01
+#: a sequence number this far behind the latest, with an earlier t, is a new emulator process
+#: whose boot counter started over (no --params), not a late datagram: accepted
+RESTART_GAP = 100
 
 
 @dataclass(frozen=True)
@@ -168,7 +171,8 @@ class TruthReceiver:
     sample arrives or the timeout passes; :attr:`latest` is the newest valid sample and
     :attr:`received_at` the ``time.monotonic()`` it came. ``stats`` counts ``received``
     (valid), each malformed kind (``bad_size``, ``bad_magic``, ``bad_version``,
-    ``not_finite``) and ``stale`` (a sequence number not newer than the latest of its boot).
+    ``not_finite``) and ``stale`` (a sequence number not newer than the latest of its boot, unless
+it is :data:`RESTART_GAP` behind with an earlier ``t``: an emulator restarted from boot 1).
     """
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
@@ -240,7 +244,8 @@ class TruthReceiver:
                             "counted", exc)
             return 0
         last = self.latest
-        if last is not None and sample.boot == last.boot and sample.seq <= last.seq:
+        if last is not None and sample.boot == last.boot and sample.seq <= last.seq and (
+                last.seq - sample.seq < RESTART_GAP or sample.t >= last.t):
             self.stats["stale"] += 1
             return 0
         self.latest = sample

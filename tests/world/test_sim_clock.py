@@ -79,3 +79,29 @@ def test_malformed_datagrams_do_not_reach_the_clock() -> None:
         clocked.close()
         sender.close()
         assert got == [1.5] and rx.stats["bad_size"] == 1
+
+
+def test_an_emulator_restarted_with_the_same_boot_number_keeps_the_clock_going() -> None:
+    """A second `lowerbase emulate` without --params is boot #1 again, its seq and t from 0:
+    the receiver takes it (a late datagram of the first run is still stale), and /clock goes
+    on from where the first run left it."""
+    with TruthReceiver("127.0.0.1", 0) as rx:
+        clocked = ClockedTruth(rx)
+        got: list[float] = []
+        clocked.start(got.append)
+        sender = TruthSender("127.0.0.1", rx.address[1])
+        for k in range(300):
+            sender.send(_s(0.02 * k, seq=k))
+            if k % 50 == 49:  # in batches a socket buffer holds
+                _wait(lambda k=k: len(got) == k + 1)
+        sender.send(_s(0.02 * 250, seq=250))  # late: stale
+        _wait(lambda: rx.stats["stale"] == 1)
+        for k in range(50):  # the new emulator
+            sender.send(_s(0.02 * k, seq=k))
+        _wait(lambda: len(got) == 350)
+        clocked.close()
+        sender.close()
+        assert rx.stats["stale"] == 1 and clocked.time.stats["restarts"] == 1
+        assert got[:300] == [0.02 * k for k in range(300)]
+        assert got[300:] == pytest.approx([0.02 * 299 + 0.02 * k for k in range(50)])
+        assert all(b >= a for a, b in itertools.pairwise(got))

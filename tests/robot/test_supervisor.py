@@ -17,8 +17,11 @@ def script(body: str, name: str = "part", ready: str | None = "ready",
     return ChildSpec(name, [sys.executable, "-u", "-c", body], ready, timeout)
 
 
-SERVE = ("import time\nprint('booting'); print('{name} ready', flush=True)\n"
-         "open('{marker}', 'a').write('{name}\\n')\n"
+# the marker is written (and closed) before the ready line: once a part is seen ready, its
+# line is in the file (written after it, it raced the test's read under load)
+SERVE = ("import time\nprint('booting')\n"
+         "with open('{marker}', 'a') as f: f.write('{name}\\n')\n"
+         "print('{name} ready', flush=True)\n"
          "time.sleep(600)\n")
 
 

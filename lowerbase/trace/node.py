@@ -146,7 +146,15 @@ class TraceNode:
 
     def _send(self, topic: str, msg: Message) -> None:
         type_name, data = m.encode(msg)
-        self._pubs[topic].publish(self.Protobuf(type=type_name, data=data))
+        self._publish(topic, self.Protobuf(type=type_name, data=data))
+
+    def _publish(self, key: str, msg: Any) -> None:
+        """Publish; a topic rospy closed while shutting down is not an error."""
+        try:
+            self._pubs[key].publish(msg)
+        except self.rospy.ROSException as exc:
+            if not (self.stop.is_set() or self.rospy.is_shutdown()):
+                self._count("publish_failed", exc)
 
     def _count(self, key: str, exc: Exception) -> None:
         self.stats[key] += 1
@@ -190,7 +198,7 @@ class TraceNode:
         if not (math.isfinite(v) and math.isfinite(w)):
             self._count("bad_speed", WorldError(f"{SPEED}: a non-finite twist ({v}, {w})"))
             return
-        self._pubs["cmd_vel"].publish(twist(v, w))
+        self._publish("cmd_vel", twist(v, w))
         self.stats["cmd_vel"] += 1
 
     def _bridge_pose(self) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -45,7 +46,7 @@ class Bag:
         self.proc = subprocess.Popen(
             ["rosbag", "record", "-O", str(path), "__name:=traceros_bag",
              *("/" + t for t in TOPICS)], env={**os.environ, **master.env},
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
         end = time.monotonic() + 30.0
         while not all(_subscribed(master.uri, "/" + t, "/traceros_bag") for t in TOPICS):
             assert time.monotonic() < end and self.proc.poll() is None, "rosbag did not start"
@@ -55,8 +56,15 @@ class Bag:
         """(topic, receipt time, the decoded protobuf, datatype, md5) of every message."""
         import rosbag
 
-        self.proc.send_signal(2)
+        # rosbag's script forwards Ctrl-C to its `record` child but does not wait for it:
+        # interrupt the whole group, then wait for the bag to be closed (renamed from .active)
+        os.killpg(self.proc.pid, signal.SIGINT)
         self.proc.wait(timeout=30)
+        active = self.path.with_name(self.path.name + ".active")
+        end = time.monotonic() + 30.0
+        while not self.path.exists() or active.exists():
+            assert time.monotonic() < end, f"rosbag did not close {self.path}"
+            time.sleep(0.05)
         out = []
         with rosbag.Bag(str(self.path)) as bag:
             types = {c.topic: (c.datatype, c.md5sum) for c in bag._get_connections()}

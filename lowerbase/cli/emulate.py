@@ -182,9 +182,9 @@ def run(args: argparse.Namespace) -> int:
         if feed is not None:
             feed.bind(mcu)
             mcu.receive = _fed(mcu.receive, feed, "rx")  # type: ignore[method-assign]
-        if args.map is not None:  # before the ready line: contact is on from the first step
-            _install_world(mcu, args)
-        hooks = _truth_hooks(args) + ([feed] if feed is not None else [])
+        # before the ready line: contact (and the charger's) from the first step
+        charger = _install_world(mcu, args) if args.map is not None else None
+        hooks = _truth_hooks(args) + [h for h in (feed, charger) if h is not None]
 
         def _stop(*_: Any) -> None:
             stop.set()
@@ -247,18 +247,24 @@ class _SinceBoot:
         return bool(self.inner.allowed(pose_from, pose_to, t - self.t0))
 
 
-def _install_world(mcu: Any, args: argparse.Namespace) -> None:
+def _install_world(mcu: Any, args: argparse.Namespace) -> Any:
     """--map: the world's contact checker in the emulator's ground truth (the seam
-    firmware_model.truth.Surroundings; the firmware model never imports lowerbase.world)."""
+    firmware_model.truth.Surroundings; the firmware model never imports lowerbase.world);
+    returns the charger contact's runner hook (lowerbase.world.charger), or None."""
     from lowerbase.cli.world import world_parts
+    from lowerbase.world.charger import contact_for
     from lowerbase.world.truth import WorldSurroundings
 
     parts = world_parts(args)
     mcu.truth.surroundings = _SinceBoot(
         WorldSurroundings(parts.grid, parts.obstacles, map_from_truth=parts.start),
         mcu.boot_time)
+    charger = contact_for(mcu, args.map, parts.grid, parts.start,
+                          lambda line: print(f"lowerbase emulate: {line}", flush=True))
     print(f"lowerbase emulate: on map {args.map} at {parts.where}: the robot stops at walls "
-          f"and obstacles", flush=True)
+          f"and obstacles" + ("" if charger is None else ", the BMS charges while it stands "
+                              "on the charger"), flush=True)
+    return charger
 
 
 def _truth_hooks(args: argparse.Namespace) -> list[Any]:

@@ -15,13 +15,11 @@ its frames, which is what the machine waits for.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 
 from lowerbase.bms.status import BmsStatus, ChargeMode
 from lowerbase.driver.core import DriverCore, LinkState
 from lowerbase.navigation.controller import Status as CtrlStatus
-from lowerbase.navigation.controller import wrap
 from lowerbase.navigation.navigator import GoalState, NavCommand
 from lowerbase.navigation.sim import NavSim
 from lowerbase.protocol.status_codes import StatusBit
@@ -30,6 +28,7 @@ from lowerbase.tasks.machine import TaskMachine
 from lowerbase.tasks.model import Pose, Status, TaskRequest, TaskResponse
 from lowerbase.tasks.plan import TaskConfig
 from lowerbase.tasks.status import Chassis
+from lowerbase.world.charger import CONTACT_TOLERANCE, CONTACT_YAW, on_charger
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.places import Places, load_places
 from lowerbase.world.sim import WorldSim
@@ -85,7 +84,7 @@ class TaskSim:
 
     def __init__(self, navsim: NavSim, places: Places | None = None,
                  config: TaskConfig | None = None, *,
-                 contact_tolerance: float = 0.05, contact_yaw: float = math.radians(5.0),
+                 contact_tolerance: float = CONTACT_TOLERANCE, contact_yaw: float = CONTACT_YAW,
                  on_status: Callable[[Status], None] | None = None) -> None:
         self.navsim = navsim
         world = navsim.world
@@ -119,12 +118,8 @@ class TaskSim:
 
     def on_charger(self) -> bool:
         """The robot truly stands on the charger's contacts."""
-        c = self.places.charger
-        if c is None:
-            return False
-        x, y, yaw = self.world.true_pose()
-        return math.hypot(x - c.pose[0], y - c.pose[1]) <= self.contact_tolerance and \
-            abs(wrap(yaw - c.pose[2])) <= self.contact_yaw
+        return on_charger(self.world.true_pose(), self.places.charger, self.contact_tolerance,
+                          self.contact_yaw)
 
     def _charger(self) -> None:
         bms = self.world.loop.mcu.bms

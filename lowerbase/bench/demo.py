@@ -329,3 +329,35 @@ class StatusLine(_Line):
 
     def __call__(self, t: float, harness: Harness) -> None:
         self.show(status_text(t, harness), t)
+
+
+def task_status_text(t: float, sim: Any) -> str:
+    """A task run on one line: t, the true pose, SOC and current (the BMS as the driver reads
+    it), the task and its action, robot_state and the status message."""
+    from lowerbase.bench.scenario_tasks import FIELDS
+
+    x, y, _ = sim.world.true_pose()
+    snap = sim.world.loop.driver.bms.snapshot()
+    battery = f"SOC {snap.soc:.0f}% {snap.current:+5.1f} A" if snap is not None else "SOC -"
+    st = sim.machine.tracker.current
+    if st is None:
+        return f"t {t:6.1f} s  x {x:5.2f} y {y:5.2f} m  {battery}"
+
+    def name(field: str) -> str:
+        try:
+            return FIELDS[field](int(getattr(st, field))).name.lower()
+        except ValueError:
+            return str(getattr(st, field))
+
+    task = f"task {st.task_id} {name('task_state')}, {name('action_type')}" if st.task_type \
+        else "no task"
+    msg = f"  {st.msg}" if st.msg else ""
+    return (f"t {t:6.1f} s  x {x:5.2f} y {y:5.2f} m  {battery}  {task}  "
+            f"robot {name('robot_state')}{msg}")
+
+
+class TaskStatusLine(_Line):
+    """The task demo's live line (see :func:`task_status_text`)."""
+
+    def __call__(self, t: float, sim: Any) -> None:
+        self.show(task_status_text(t, sim), t)

@@ -31,6 +31,7 @@ from lowerbase.protocol.status_codes import StatusBit, describe
 
 if TYPE_CHECKING:
     from lowerbase.bench.scenario_legged import LeggedScenario
+    from lowerbase.bench.scenario_tasks import TasksScenario
 
 #: RobotState value table of SystemStatus (chassis.dbc)
 ROBOT_STATES = ("Boot", "Standby", "Active", "EmergencyStop", "Fault")
@@ -691,10 +692,18 @@ def robot_of(data: Mapping[str, Any]) -> str:
     return robot if isinstance(robot, str) else "wheeled"
 
 
-def load_any_scenario(path: str | Path) -> Scenario | LeggedScenario:
-    """A wheeled or a legged (``robot = "legged"``) scenario file."""
+def load_any_scenario(path: str | Path) -> Scenario | LeggedScenario | TasksScenario:
+    """A wheeled, a legged (``robot = "legged"``) or a task (a ``[tasks]`` table,
+    scenario_tasks.py) scenario file."""
     p = Path(path)
     data = read_toml(p, "scenario")
+    if "tasks" in data:
+        from lowerbase.bench.scenario_tasks import load_tasks_scenario
+
+        try:
+            return load_tasks_scenario(p)
+        except ConfigError as e:
+            raise ConfigError(str(e) if str(e).startswith(str(p)) else f"{p}: {e}") from None
     if robot_of(data) == "legged":
         from lowerbase.bench.scenario_legged import legged_scenario_from_dict
 
@@ -932,13 +941,21 @@ def library_dirs() -> list[Path]:
     return [d for d in dirs if d.is_dir()]
 
 
+#: sub-libraries (scenarios/NAME/*.toml, named "NAME/STEM") that `library("all")` includes
+SUBLIBRARIES = ("tasks",)
+
+
 def library(robot: str = "wheeled") -> dict[str, Path]:
     """Library scenarios of ``robot`` ("wheeled", "legged" or "all") by name (file stem); the
-    repository's copy wins."""
+    repository's copy wins. "all" also has the sub-libraries' scenarios, as "tasks/STEM"."""
     found: dict[str, Path] = {}
     for d in reversed(library_dirs()):
         for p in sorted(d.glob("*.toml")):
             found[p.stem] = p
+        if robot == "all":
+            for sub in SUBLIBRARIES:
+                for p in sorted((d / sub).glob("*.toml")):
+                    found[f"{sub}/{p.stem}"] = p
     if robot != "all":
         found = {k: p for k, p in found.items() if _robot_of_file(p) == robot}
     return dict(sorted(found.items()))

@@ -39,20 +39,18 @@ task machine) in one process::
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass
 from enum import IntEnum
 from pathlib import Path
 from typing import Any
 
-from lowerbase.errors import ConfigError
+from lowerbase.errors import ConfigError, LowerbaseError
 from lowerbase.files import read_toml
 from lowerbase.tasks.model import (
-    FINAL_STATES,
     ActionState,
     ActionType,
     RobotState,
-    Status,
     TaskRequest,
     TaskState,
 )
@@ -86,6 +84,9 @@ class Expect:
     within: tuple[float, float] = (0.0, math.inf)
     at_least: int = 0
 
+    def title(self) -> str:
+        return self.describe()
+
     def describe(self) -> str:
         if self.kind == "robot_status":
             names = [FIELDS[self.field](v).name.lower() for v in self.sequence]
@@ -105,19 +106,11 @@ class TasksScenario:
     timeline: list[Step]
     expects: list[Expect]
     description: str = ""
-
-
-@dataclass
-class TasksResult:
-    scenario: TasksScenario
-    history: list[tuple[float, Status]] = field(default_factory=list)
-    outcomes: list[tuple[Expect, bool, str]] = field(default_factory=list)
-    responses: list[tuple[float, int, bool, str]] = field(default_factory=list)
-    sim: Any = None  #: the TaskSim it ran on (its world's truth, the BMS)
+    source: str = ""
 
     @property
-    def passed(self) -> bool:
-        return all(ok for _, ok, _ in self.outcomes)
+    def expectations(self) -> list[Expect]:
+        return self.expects
 
 
 def _num(t: Mapping[str, Any], key: str, where: str, default: float | None = None,
@@ -244,14 +237,23 @@ def load_tasks_scenario(path: str | Path) -> TasksScenario:
     bad = sorted(set(tasks) - TASK_KEYS)
     if bad:
         raise ConfigError(f"[tasks]: unknown key {bad[0]!r}; known: {', '.join(sorted(TASK_KEYS))}")
-    config = TaskConfig(**tasks)
+    for key, value in tasks.items():
+        if key == "auto_charge" and not isinstance(value, bool):
+            raise ConfigError(f"[tasks]: auto_charge must be true or false, not {value!r}")
+        if key != "auto_charge" and (isinstance(value, bool)
+                                     or not isinstance(value, int | float)):
+            raise ConfigError(f"[tasks]: {key} must be a number, not {value!r}")
+    try:
+        config = TaskConfig(**tasks)
+    except LowerbaseError as e:
+        raise ConfigError(f"[tasks]: {e}") from None
     timeline = [_step(t, f"timeline[{i}]", duration)
                 for i, t in enumerate(data.get("timeline", []))]
     expects = [_expect(t, f"expect[{i}]") for i, t in enumerate(data.get("expect", []))]
     return TasksScenario(str(head.get("name", path.stem)), duration,
                          _num(data.get("initial", {}), "soc", "[initial]", 80.0, 0.0, 100.0),
                          world, config, sorted(timeline, key=lambda s: s.at), expects,
-                         str(head.get("description", "")))
+                         str(head.get("description", "")), str(path))
 
 
 def library_tasks() -> dict[str, Path]:
@@ -261,94 +263,3 @@ def library_tasks() -> dict[str, Path]:
         if d.is_dir():
             return {p.stem: p for p in sorted(d.glob("*.toml"))}
     return {}
-
-
-def build(sc: TasksScenario, on_status: Callable[[Status], None] | None = None) -> Any:
-    """The TaskSim a scenario runs on."""
-    from lowerbase.bench.simloop import SimLoop
-    from lowerbase.navigation.sim import NavSim
-    from lowerbase.tasks.sim import TaskSim
-    from lowerbase.world.sim import WorldSim
-
-    world = WorldSim(sc.world.config(), loop=SimLoop(soc=sc.soc))
-    return TaskSim(NavSim(world), config=sc.config, on_status=on_status)
-
-
-def _apply(ts: Any, step: Step, result: TasksResult) -> None:
-    if step.kind == "exec_task":
-        assert step.request is not None
-        res = ts.request(step.request)
-        result.responses.append((ts.now, step.request.task_id, res.success, res.message))
-    elif step.kind == "move_base":
-        target = step.target
-        if isinstance(target, str):
-            target = ts.places.named()[target]
-        ts.navsim.navigator.send_goal(target, (), 0, ts.now)
-    elif step.kind == "fault":
-        from lowerbase.firmware_model.faults import Fault, parse_fault
-
-        f = parse_fault(step.fault)
-        if step.duration is not None:
-            f = Fault(f.kind, f.arg, 0.0, step.duration)
-        ts.world.loop.mcu.inject(f)
-    elif step.kind == "control":
-        ts.world.loop.driver.control(step.fault)
-    else:
-        ts.world.loop.mcu.clear_fault()
-
-
-def run_tasks_scenario(sc: TasksScenario) -> TasksResult:
-    """Run ``sc`` on the simulated clock and evaluate its expectations."""
-    result = TasksResult(sc)
-    holder: list[Any] = []
-
-    def on_status(s: Status) -> None:
-        result.history.append((holder[0].now if holder else 0.0, s))
-
-    ts = build(sc, on_status)
-    holder.append(ts)
-    result.sim = ts
-    pending = list(sc.timeline)
-    while ts.now < sc.duration - 1e-9:
-        while pending and pending[0].at <= ts.now + 1e-9 and (
-                not pending[0].idle or not ts.machine.active):
-            _apply(ts, pending.pop(0), result)
-        ts.tick()
-    result.outcomes = [(e, *evaluate(e, result.history)) for e in sc.expects]
-    return result
-
-
-def evaluate(e: Expect, history: list[tuple[float, Status]]) -> tuple[bool, str]:
-    mine = [(t, s) for t, s in history if s.task_id == e.task_id and s.task_type]
-    if e.kind == "tasks_completed":
-        done, prev = 0, None
-        for _, s in history:
-            key = (s.task_id, s.task_state)
-            if s.task_state == TaskState.COMPLETED and key != prev:
-                done += 1
-            prev = key
-        return done >= e.at_least, f"{done} completed"
-    if not mine:
-        return False, f"task {e.task_id} never published"
-    if e.kind == "robot_status":
-        seen: list[int] = []
-        for _, s in mine:
-            v = int(getattr(s, e.field))
-            if not seen or seen[-1] != v:
-                seen.append(v)
-        it = iter(seen)
-        ok = all(any(v == want for v in it) for want in e.sequence)
-        names = " -> ".join(FIELDS[e.field](v).name.lower() for v in seen)
-        return ok, f"seen {names}"
-    ends = [t for t, s in mine if s.task_state in FINAL_STATES]
-    if not ends:
-        return False, f"task {e.task_id} did not end"
-    took = ends[0] - mine[0][0]
-    return e.within[0] <= took <= e.within[1], f"took {took:.1f} s"
-
-
-def report(result: TasksResult) -> str:
-    lines = [f"{result.scenario.name}: {'PASSED' if result.passed else 'FAILED'}"]
-    lines += [f"  {'ok ' if ok else 'BAD'} {e.describe()}: {why}" for e, ok, why in
-              result.outcomes]
-    return "\n".join(lines)

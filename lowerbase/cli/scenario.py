@@ -222,11 +222,16 @@ def run_command(args: argparse.Namespace) -> int:
     scenario = load_any_scenario(find_scenario(args.scenario))
     out = Path(args.out) if args.out else default_out(scenario.name)
     from lowerbase.bench.scenario_legged import LeggedScenario
+    from lowerbase.bench.scenario_tasks import TasksScenario
 
     if isinstance(scenario, LeggedScenario):  # robot = "legged": its own runner and report
         from lowerbase.bench.legged_report import run_command as run_legged
 
         return run_legged(args, scenario, out)
+    if isinstance(scenario, TasksScenario):  # a [tasks] table: TaskSim, its own report
+        from lowerbase.bench.report_tasks import run_command as run_tasks
+
+        return run_tasks(args, scenario, out)
     progress: Any
     if args.status or args.mode != "simulated":
         progress = StatusLine(force=args.status or args.progress)

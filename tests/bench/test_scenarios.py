@@ -308,9 +308,9 @@ def test_replay_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
 # -- the demo and the other commands -----------------------------------------------------------
 
 
-def test_demo_fast(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_demo_chassis_fast(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "demo"
-    assert main(["demo", "--fast", "--out", str(out)]) == 0
+    assert main(["demo", "--chassis", "--fast", "--out", str(out)]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     assert lines[-2].startswith("demo passed:") and "cm from the ground truth" in lines[-2]
     assert lines[-1].startswith(f"report: {out / 'index.html'}")

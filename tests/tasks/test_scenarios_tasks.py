@@ -1,6 +1,7 @@
-"""Task scenarios (lowerbase/bench/scenario_tasks.py): the library passes on the whole emulated
-robot, a wrong expectation fails, move_base goals drive the navigator, bad files are one-line
-ConfigErrors."""
+"""Task scenarios (lowerbase/bench/scenario_tasks.py, tasks_run.py): the library passes on the
+whole emulated robot, a wrong expectation fails, move_base goals drive the navigator, bad files
+are one-line ConfigErrors. The demo (scenarios/tasks/demo.toml) runs in
+tests/bench/test_report_tasks.py, once, with its report."""
 
 from __future__ import annotations
 
@@ -9,12 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from lowerbase.bench.scenario_tasks import (
-    library_tasks,
-    load_tasks_scenario,
-    report,
-    run_tasks_scenario,
-)
+from lowerbase.bench.scenario_tasks import library_tasks, load_tasks_scenario
+from lowerbase.bench.tasks_run import report, run_tasks_scenario
 from lowerbase.errors import ConfigError
 
 HEAD = """
@@ -29,10 +26,10 @@ unload_time = 2.0
 
 def test_the_library_has_one_per_task_type_a_fault_and_a_shift() -> None:
     assert set(library_tasks()) == {"transport", "picking", "parking", "charging",
-                                    "fault_during_task", "shift"}
+                                    "fault_during_task", "shift", "demo"}
 
 
-@pytest.mark.parametrize("name", sorted(library_tasks()))
+@pytest.mark.parametrize("name", sorted(set(library_tasks()) - {"demo"}))
 def test_every_task_scenario_passes(name: str) -> None:
     result = run_tasks_scenario(load_tasks_scenario(library_tasks()[name]))
     assert result.passed, report(result)
@@ -93,6 +90,9 @@ target = [7.0, 5.0, 0.0]
      "sequence = ['flying']\n", "'flying' is not a task_state"),
     ("[world]\nmap = 'empty_room'\n[tasks]\n[[timeline]]\nat = 1.0\naction = 'control'\n"
      "command = 'Explode'\n", "command must be one of"),
+    ("[world]\nmap = 'empty_room'\n[tasks]\nload_time = 'long'\n", "load_time must be a number"),
+    ("[world]\nmap = 'empty_room'\n[tasks]\nfull_soc = 0\n", "full_soc must be within"),
+    ("[world]\nmap = 'empty_room'\n[tasks]\nauto_charge = 1\n", "auto_charge must be true"),
 ])
 def test_bad_files_are_one_line_errors(tmp_path: Path, body: str, text: str) -> None:
     p = tmp_path / "bad.toml"

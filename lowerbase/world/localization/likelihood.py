@@ -10,7 +10,9 @@ Two ways to combine the beams of one particle, as amcl's two likelihood-field mo
 - ``likelihood_field`` (amcl's default): ``p = 1 + sum(pz^3)``, amcl's heuristic that keeps
   one bad beam from vetoing a pose (robust, but a broad posterior);
 - ``likelihood_field_prob``: ``log p = sum(log pz)``, the beams' product (sharper, and
-  over-confident when beams are correlated). amcl's optional beam skipping is not done.
+  over-confident when beams are correlated). With amcl's beam skipping (``do_beamskip``, for
+  a converged filter) the beams that most particles see off the map's obstacles (an unmapped
+  crate or person) are left out.
 
 Beams at or beyond ``range_max`` (no return), under ``range_min`` and NaN are skipped; of the
 rest, ``laser_max_beams`` evenly spaced ones are used (amcl's subsampling step).
@@ -108,23 +110,49 @@ class LikelihoodField:
         flat, inside = self._cells(x[0], y[0])
         return np.where(inside, self.dist[flat], self.params.laser_likelihood_max_dist)
 
-    def score(self, poses: np.ndarray, beams: Beams) -> tuple[np.ndarray, bool]:
-        """Per-particle log-likelihood of the beams; True when it is amcl's cube-sum ``log p``.
+    def score(self, poses: np.ndarray, beams: Beams, skip: bool = False
+              ) -> tuple[np.ndarray, bool, int]:
+        """Per-particle log-likelihood of the beams; True when it is amcl's cube-sum ``log p``;
+        the number of beams weighed.
 
         Returns ``log p`` for both models (``log(1 + sum pz^3)`` or ``sum log pz``), so the
-        filter works in the log domain without underflow.
+        filter works in the log domain without underflow. ``skip``: amcl's beam skipping
+        (``likelihood_field_prob`` only, see AmclParams.do_beamskip).
         """
         m = beams.end_xy.shape[0]
         if m == 0:
-            return np.zeros(poses.shape[0]), self.model_type == "likelihood_field"
+            return np.zeros(poses.shape[0]), self.model_type == "likelihood_field", 0
         x, y = self._ends(poses, beams)
         flat, inside = self._cells(x, y)
-        pz = np.where(inside, self.hit[flat], self.hit_outside).astype(np.float64)
-        pz += self.params.laser_z_rand / beams.range_max
+        hit = np.where(inside, self.hit[flat], self.hit_outside)
+        pz = hit.astype(np.float64) + self.params.laser_z_rand / beams.range_max
         k = self.params.laser_likelihood_exponent
         if self.model_type == "likelihood_field":
-            return k * np.log1p(np.sum(pz * pz * pz, axis=1)), True
-        return k * np.sum(np.log(pz), axis=1), False
+            return k * np.log1p(np.sum(pz * pz * pz, axis=1)), True, m
+        log_pz = np.log(pz)
+        if skip:
+            used = self._agreed(flat, inside, hit)
+            if used is not None:
+                return k * np.sum(log_pz[:, used], axis=1), False, int(used.sum())
+        return k * np.sum(log_pz, axis=1), False, m
+
+    def _agreed(self, flat: np.ndarray, inside: np.ndarray, hit: np.ndarray
+                ) -> np.ndarray | None:
+        """amcl's beam skipping: the beams (mask) whose end more than ``beam_skip_threshold`` of
+        the particles see within ``beam_skip_distance`` of a mapped obstacle (off the map: not
+        near); None (use all) when ``beam_skip_error_threshold`` of them or more would go."""
+        p = self.params
+        if p.laser_z_hit > 0:  # hit is monotone in the distance: compare it, not gather again
+            s = p.laser_sigma_hit
+            near = inside & (hit > np.float32(
+                p.laser_z_hit * math.exp(-(p.beam_skip_distance ** 2) / (2 * s * s))))
+        else:
+            near = inside & (self.dist[flat] < p.beam_skip_distance)
+        used = np.count_nonzero(near, axis=0) > p.beam_skip_threshold * near.shape[0]
+        skipped = used.size - int(used.sum())
+        if skipped == 0 or skipped >= used.size * p.beam_skip_error_threshold:
+            return None
+        return used
 
     # -- free space ----------------------------------------------------------------------------
     def is_free(self, x: float, y: float) -> bool:

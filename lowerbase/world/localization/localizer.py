@@ -223,8 +223,9 @@ class Localizer:
             sample_diff(self._set.poses, ref, odom,
                         (p.odom_alpha1, p.odom_alpha2, p.odom_alpha3, p.odom_alpha4), self._rng)
         beams = self._field.beams(scan, self.laser_pose)
-        log_p, cube = self._field.score(self._set.poses, beams)
-        self._set.correct(log_p, cube, beams.end_xy.shape[0])
+        skip = p.do_beamskip and self._set.converged()
+        log_p, cube, used = self._field.score(self._set.poses, beams, skip)
+        self._set.correct(log_p, cube, used)
         pose, cov, _ = self._set.estimate()
         est = self._estimate(pose, cov, odom, beams, "filter")
         if self._set.resample_due():

@@ -68,6 +68,18 @@ class AmclParams:
     laser_likelihood_max_dist: float = 2.0
     laser_min_range: float = -1.0  #: -1: the scan's own range_min
     laser_max_range: float = -1.0  #: -1: the scan's own range_max
+    #: amcl's beam skipping (likelihood_field_prob only; amcl default False): once the filter
+    #: has converged (every particle within 0.5 m of the mean in x and y, amcl's pf), a beam is
+    #: left out of the scan's weighing when no more than beam_skip_threshold of the particles
+    #: see its end within beam_skip_distance of a mapped obstacle: it hit something the map
+    #: does not know (a crate, a person). Unless beam_skip_error_threshold of the beams would be
+    #: left out: then all are used (the filter may sit at a wrong pose). lowerbase: on. Off, a
+    #: crate's beams drove w_fast down, recovery read it as a kidnap and scattered particles
+    #: over the repetitive warehouse until a look-alike aisle won (test_localization_obstacles)
+    do_beamskip: bool = True
+    beam_skip_distance: float = 0.5
+    beam_skip_threshold: float = 0.3
+    beam_skip_error_threshold: float = 0.9
     # -- lowerbase's lost/converged indicator (amcl has none) -------------------------------------
     lost_sigma_xy: float = 0.3        #: lost when the position sigma (largest axis) exceeds [m]
     lost_sigma_yaw: float = math.radians(15.0)  #: ... or the heading sigma exceeds [rad]
@@ -82,7 +94,7 @@ class AmclParams:
         positive = ("laser_likelihood_exponent", "kld_err", "kld_bin_xy", "kld_bin_yaw",
                     "laser_sigma_hit",
                     "laser_likelihood_max_dist", "lost_sigma_xy", "lost_sigma_yaw",
-                    "fit_tolerance")
+                    "fit_tolerance", "beam_skip_distance")
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ConfigError(f"localization parameter {name} must be > 0, "
@@ -105,7 +117,8 @@ class AmclParams:
         if self.laser_model_type not in ("likelihood_field", "likelihood_field_prob"):
             raise ConfigError("localization parameter laser_model_type must be likelihood_field"
                               f" or likelihood_field_prob, got {self.laser_model_type!r}")
-        for name in ("resample_ess", "lost_min_fit", "recovery_min_w_diff"):
+        for name in ("resample_ess", "lost_min_fit", "recovery_min_w_diff",
+                     "beam_skip_threshold", "beam_skip_error_threshold"):
             if not 0 <= getattr(self, name) <= 1:
                 raise ConfigError(f"localization parameter {name} must be in [0, 1], "
                                   f"got {getattr(self, name)}")

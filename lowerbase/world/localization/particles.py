@@ -39,6 +39,9 @@ from lowerbase.world.localization.poses import Pose2D, wrap
 #: the cluster histogram is built over the occupied bins' bounding box; beyond this many
 #: cells (a cloud spread over a huge map) the whole set is taken as one cluster
 _MAX_CLUSTER_CELLS = 8_000_000
+#: amcl's pf ``dist_threshold`` [m]: the set has converged when every particle is this close
+#: to the mean in x and in y (beam skipping is done only then)
+CONVERGED_DIST = 0.5
 
 
 def systematic_indices(weights: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -166,6 +169,12 @@ class ParticleSet:
         else:
             self.w_slow += self.params.recovery_alpha_slow * (fit - self.w_slow)
             self.w_fast += self.params.recovery_alpha_fast * (fit - self.w_fast)
+
+    def converged(self) -> bool:
+        """amcl's ``pf_update_converged``: every particle within ``CONVERGED_DIST`` of the
+        particles' mean in x and in y."""
+        xy = self.poses[:, :2]
+        return bool(np.all(np.abs(xy - xy.mean(axis=0)) <= CONVERGED_DIST))
 
     @property
     def n_eff(self) -> float:

@@ -176,6 +176,8 @@ CHECKS: dict[str, Check] = {
                               stdin="(1.0) vcan0 090#D430000003000101\n"),
     "lowerbase dbc --signals": Check("run", "WheelFeedback"),
     "lowerbase demo": Check("start", "lowerbase demo:"),
+    "lowerbase demo --chassis": Check("start", "lowerbase demo:"),
+    "lowerbase scenario run tasks/transport": Check("run", "scenario tasks_transport: PASSED"),
 }
 
 MY_SCENARIO = """[scenario]

@@ -20,7 +20,6 @@ from __future__ import annotations
 import logging
 import math
 import threading
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -34,6 +33,7 @@ from lowerbase.world.lidar import LidarRig
 from lowerbase.world.localization import Localizer
 from lowerbase.world.localization.poses import compose
 from lowerbase.world.obstacles import Obstacles
+from lowerbase.world.pacing import pace_for, paced_loop
 from lowerbase.world.raycast import Scene, Solid
 from lowerbase.world.sensors import SensorsConfig
 
@@ -300,7 +300,8 @@ class WorldNode:
     def spin(self) -> None:
         """Scans at the lidars' rate in this thread, camera frames at the camera's rate in a
         thread of its own (numpy releases the GIL: the two share the cores), until rospy
-        shuts down. A late scan is caught up (within 1 s); a late frame is dropped, counted."""
+        shuts down. A late scan is caught up (within 1 s); a late frame is dropped, counted.
+        Rates are per second of ROS time: sim time under /use_sim_time."""
         rospy = self.rospy
         rospy.on_shutdown(self.stop.set)
         camera = None
@@ -313,23 +314,24 @@ class WorldNode:
             camera.join(timeout=5.0)
 
     def _loop(self, work: Any, rate_hz: float, catch_up: bool) -> None:
-        period = 1.0 / rate_hz
-        due = time.monotonic()
-        while not self.stop.is_set() and not self.rospy.is_shutdown():
-            self.stop.wait(max(due - time.monotonic(), 0.0))
-            if self.stop.is_set():
-                break
+        """``work`` at ``rate_hz`` per second of ROS time under /use_sim_time (woken by
+        /clock), else of wall time (lowerbase.world.pacing)."""
+        def running() -> bool:
+            return not self.stop.is_set() and not self.rospy.is_shutdown()
+
+        def guarded() -> None:
             try:
                 work()
             except LowerbaseError as exc:  # e.g. a camera mounted above the walls
                 log.error("%s; stopping this sensor", exc)
-                return
-            due += period
-            late = time.monotonic() - due
-            if late > (1.0 if catch_up else period):
-                if not catch_up:
-                    self.stats["frames_dropped"] += int(late / period)
-                due = time.monotonic()
+                failed.set()
+
+        def dropped(n: int) -> None:
+            self.stats["frames_dropped"] += n
+
+        failed = threading.Event()
+        paced_loop(pace_for(self.rospy, self.stop), guarded, rate_hz, catch_up,
+                   lambda: running() and not failed.is_set(), dropped)
 
     def shutdown(self) -> None:
         self.stop.set()

@@ -171,6 +171,15 @@ def test_robot_sim_time_runs_the_graph_on_the_emulators_clock(
         for topic in ("/odom", "/scan"):
             stamp = later[topic]["msg"]["header"]["stamp"]
             assert abs(stamp - clock1) < 2.0, (topic, stamp, clock1)
+        # the lidars' 25 Hz is per simulated second (the world's loop runs on /clock): count
+        # /scan against /clock over a window of 4 s of /clock
+        before = probe.ask(op="stats")
+        c0 = before["/clock"]["msg"]["clock"]
+        after = probe.wait_for(lambda s: s["/clock"]["msg"]["clock"] > c0 + 4.0, 30.0,
+                               "4 s of /clock")
+        per_sim_s = ((after["/scan"]["count"] - before["/scan"]["count"])
+                     / (after["/clock"]["msg"]["clock"] - c0))
+        assert 0.7 * 25 <= per_sim_s <= 1.2 * 25, per_sim_s  # 12.5 paced on wall time at K=2
         probe.ask(op="publish", topic="/base_cmd_vel", type="geometry_msgs/Twist",
                   fields={"linear": {"x": 0.3}, "angular": {"z": 0.0}}, rate=20, duration=2.0)
         moved = probe.wait_for(lambda s: _x(s, "/odom") > _x(start, "/odom") + 0.3, 30.0,

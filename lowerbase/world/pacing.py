@@ -1,0 +1,95 @@
+"""How the world node's sensor loops keep their rates: on the wall clock, or on ROS time.
+
+Under ``/use_sim_time`` (``lowerbase robot --sim-time``: the emulator runs K x real time and
+the world publishes /clock from its ground truth) a sensor's rate is per simulated second, so
+its loop must run on ROS time: :class:`RosPace` reads ``rospy.get_time()`` and sleeps on
+rospy's time condition, which rospy notifies on every /clock it receives (as ``rospy.sleep``
+does), so the loop wakes on /clock. Otherwise :class:`WallPace` (the monotonic clock).
+
+:func:`paced_loop` is the loop itself, the same on either: ``work()`` every ``1 / rate_hz``
+[s of that time]; a late tick is caught up (``catch_up``: up to 1 s late) or dropped and
+counted; time that went backwards (a /clock restarted by someone else) starts the schedule
+again from now.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from typing import Any, Protocol
+
+#: [s] how long a wait on ROS time sleeps before it looks at the stop flag again (wall)
+_POLL = 0.1
+
+
+class Pace(Protocol):
+    def now(self) -> float:
+        """The current time [s] on this pace's clock."""
+        ...
+
+    def wait_until(self, due: float) -> None:
+        """Return once ``now() >= due`` or the loop should stop."""
+        ...
+
+
+class WallPace:
+    """The monotonic wall clock; ``stop`` ends a wait at once."""
+
+    def __init__(self, stop: threading.Event) -> None:
+        self.stop = stop
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def wait_until(self, due: float) -> None:
+        self.stop.wait(max(due - time.monotonic(), 0.0))
+
+
+class RosPace:
+    """ROS time (``rospy.get_time()``: sim time under /use_sim_time); a wait wakes on each
+    /clock rospy receives and ends on ``stop`` or rospy's shutdown."""
+
+    def __init__(self, rospy: Any, stop: threading.Event) -> None:
+        self.rospy = rospy
+        self.stop = stop
+
+    def now(self) -> float:
+        return float(self.rospy.get_time())
+
+    def wait_until(self, due: float) -> None:
+        rospy = self.rospy
+        cond = rospy.rostime.get_rostime_cond()
+        with cond:
+            while (not self.stop.is_set() and not rospy.is_shutdown()
+                   and float(rospy.get_time()) < due):
+                cond.wait(_POLL)
+
+
+def pace_for(rospy: Any, stop: threading.Event) -> Pace:
+    """:class:`RosPace` when ``/use_sim_time`` is true on the master, else :class:`WallPace`."""
+    sim = bool(rospy.get_param("/use_sim_time", False))
+    return RosPace(rospy, stop) if sim else WallPace(stop)
+
+
+def paced_loop(pace: Pace, work: Callable[[], None], rate_hz: float, catch_up: bool,
+               running: Callable[[], bool], dropped: Callable[[int], None] | None = None
+               ) -> None:
+    """``work()`` at ``rate_hz`` on ``pace``'s clock while ``running()`` (see the module)."""
+    period = 1.0 / rate_hz
+    due = pace.now()
+    while running():
+        pace.wait_until(due)
+        if not running():
+            break
+        work()
+        due += period
+        now = pace.now()
+        if due - now > 1.0 + period:  # the clock went backwards: start again from now
+            due = now
+            continue
+        late = now - due
+        if late > (1.0 if catch_up else period):
+            if not catch_up and dropped is not None:
+                dropped(int(late / period + 1e-6))
+            due = now

@@ -3,7 +3,9 @@
 A task scenario is a scenario file with a ``[tasks]`` table (it needs a ``[world]``, read by
 :func:`lowerbase.bench.scenario_world.parse_world`); it runs on a
 :class:`~lowerbase.tasks.sim.TaskSim` (emulator, driver core, world, localization, navigator,
-task machine) in one process::
+task machine) in one process (:mod:`lowerbase.bench.tasks_run`; its report:
+:mod:`lowerbase.bench.report_tasks`; `lowerbase scenario run` loads it for files with
+``[tasks]``)::
 
     [scenario]
     name = "transport"; duration = 120.0      # [s] simulated (up to 8 h)

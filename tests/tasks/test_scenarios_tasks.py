@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from lowerbase.bench.scenario_tasks import library_tasks, load_tasks_scenario
@@ -100,3 +101,11 @@ def test_bad_files_are_one_line_errors(tmp_path: Path, body: str, text: str) -> 
     with pytest.raises(ConfigError) as err:
         load_tasks_scenario(p)
     assert text in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_run_is_deterministic() -> None:
+    sc = load_tasks_scenario(library_tasks()["transport"])
+    a, b = run_tasks_scenario(sc), run_tasks_scenario(sc)
+    assert [(t, s) for t, s in a.history] == [(t, s) for t, s in b.history]
+    np.testing.assert_array_equal(np.array(a.samples), np.array(b.samples))  # NaN == NaN
+    assert a.plans == b.plans and len(a.samples) > 200

@@ -19,7 +19,7 @@ OLDEST_STAMP := $(OLDEST_VENV)/.lowerbase-installed
 .PHONY: help env system-deps test test-oldest lint typecheck unit demo bench docs clean
 
 help:
-	@echo "make demo   - set up and run the demo (emulator + driver + a scenario, with a report)"
+	@echo "make demo   - set up and run the demo (the whole robot: a transport task, a low battery, a charge; a report)"
 	@echo "make test   - set up and run ruff, mypy and the whole test suite"
 	@echo "make test-oldest - the test suite on the oldest supported Python (3.10, from pyenv)"
 	@echo "make bench  - run the benchmarks and print the results (WRITE=1: into docs/benchmarks.md)"

@@ -148,6 +148,8 @@ class DriverCore:
         self._last_enable = -math.inf
         #: notices a second lower computer on the bus (warned once, stats two_lower_computers)
         self.peers = PeerMonitor(self.codec)
+        #: [s] how far a Heartbeat's Uptime may stray from this clock (:meth:`allow_receive_lag`)
+        self.uptime_slack = UPTIME_SLACK
         self.parameters: dict[str, float] = {}
         self.versions: dict[str, str] = {}
         self._version_parts: dict[int, dict[int, bytes]] = {}
@@ -295,7 +297,7 @@ class DriverCore:
             self._enable_wanted = self.config.auto_enable
             self._configure("first contact")
             return
-        if _continues(self._uptime, uptime, now):
+        if _continues(self._uptime, uptime, now, self.uptime_slack):
             self._uptime = (uptime, now)
             if self._reboot_suspect is not None:
                 self._reboot_suspect = None
@@ -307,7 +309,8 @@ class DriverCore:
                             self.boot_counter)
             return
         suspect = self._reboot_suspect
-        if suspect is not None and _continues(suspect[:2], uptime, now) and boot == suspect[2]:
+        if suspect is not None and _continues(suspect[:2], uptime, now, self.uptime_slack) \
+                and boot == suspect[2]:
             behind = uptime < self._uptime[0] + (now - self._uptime[1])
             self._reboot_suspect = None
             self.boot_counter, self._uptime = boot, (uptime, now)
@@ -325,6 +328,13 @@ class DriverCore:
         self._reboot_suspect = (uptime, now, boot)
         self.stats["heartbeat_off_timeline"] += 1
         self._hold_odometry(0.0)  # counters may restart: the next sample is a baseline
+
+    def allow_receive_lag(self, seconds: float) -> None:
+        """Take Heartbeats handled up to ``seconds`` late on this core's clock for the same
+        lower computer (not a reboot, a jump or a second one). For ROS sim time: at K x real
+        time a backlog of frames 1/K as long puts their Uptime that far behind /clock."""
+        self.uptime_slack = max(UPTIME_SLACK, seconds)
+        self.peers.tolerance = max(self.peers.tolerance, seconds)
 
     def _configure(self, why: str) -> None:
         self.state = LinkState.CONFIGURING
@@ -603,7 +613,10 @@ class DriverCore:
                 "parameter": dict(self.parameters)}
 
 
-def _continues(last: tuple[float, float], uptime: float, now: float) -> bool:
-    """Whether a Heartbeat's ``uptime`` received at ``now`` continues the timeline ``last``."""
+def _continues(last: tuple[float, float], uptime: float, now: float,
+               slack: float = UPTIME_SLACK) -> bool:
+    """Whether a Heartbeat's ``uptime`` received at ``now`` continues the timeline ``last``:
+    never backwards (a frame handled late is still in order; a restart starts again near 0),
+    and within ``slack`` (+ 2 % of the gap) of what the receiver's clock expects."""
     expected = last[0] + (now - last[1])
-    return abs(uptime - expected) <= UPTIME_SLACK + 0.02 * (now - last[1])
+    return uptime > last[0] and abs(uptime - expected) <= slack + 0.02 * (now - last[1])

@@ -358,6 +358,8 @@ def run(
                 if not rostime.wait_for_clock(rospy, clock.stop):
                     return 0
             node = DriverNode(settings, config, link, clock=clock)
+            if clock is not None:  # frames handled late lag /clock K x as much (K x real time)
+                node.core.allow_receive_lag(config.link_timeout)
             node.advertise()
             node.start_reader()
             print(f"lowerbase driver: {rospy.get_name()} on {link.description}; ROS master "

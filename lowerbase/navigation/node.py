@@ -98,6 +98,7 @@ class NavigationNode:
         self.steps = StepController(period=1.0 / setup.rate_hz)
         self.limits = Limits()
         self.odom: Pose | None = None
+        self.odom_stamp: float | None = None  #: /odom's header stamp [s, ROS time]
         self.map_to_odom: Pose | None = None
         self.scan: LaserScan | None = None
         self.cloud: tuple[np.ndarray, tuple[float, float, float]] | None = None
@@ -173,8 +174,10 @@ class NavigationNode:
         except WorldError as exc:
             self._count_bad("bad_odom", exc)
             return
+        stamp = msg.header.stamp.to_sec()
         with self.lock:
             self.odom = pose
+            self.odom_stamp = stamp if stamp > 0 else None  # StepControl: a stalled /odom
 
     def _on_scan(self, msg: Any) -> None:
         try:
@@ -264,8 +267,8 @@ class NavigationNode:
                     self._count_bad("bad_scan", exc)
             command: tuple[float, float] | None = None
             if self.steps.active:
-                command = self.steps.tick(self.odom, now) if self.odom is not None \
-                    else (0.0, 0.0)
+                command = self.steps.tick(self.odom, now, self.odom_stamp) \
+                    if self.odom is not None else (0.0, 0.0)
             elif self.navigator_active():
                 if pose is None:
                     self.stats["no_pose"] += 1

@@ -136,8 +136,9 @@ class StepController:
         self._clock = 0.0
         self._last_now: float | None = None
         self._go: tuple[float, Pose] | None = None
-        self._still_at: tuple[float, Pose] = (0.0, (0.0, 0.0, 0.0))
-        self._settle_from = 0.0
+        self._still_at: tuple[float, float | None, Pose] = (0.0, None, (0.0, 0.0, 0.0))
+        self._odom_time: float | None = None
+        self._settle_from: tuple[float, float | None] = (0.0, None)
         self._creep_speed = 0.0
         self._left = 0.0
 
@@ -196,11 +197,16 @@ class StepController:
         return ""
 
     # -- running --------------------------------------------------------------------------------
-    def tick(self, odom: Sequence[float], now: float | None = None) -> tuple[float, float]:
+    def tick(self, odom: Sequence[float], now: float | None = None,
+             odom_time: float | None = None) -> tuple[float, float]:
         """The twist for this period from the /odom pose (x, y, yaw) at time ``now`` [s] (None:
-        one ``period`` after the last tick)."""
+        one ``period`` after the last tick). ``odom_time``: the pose's own time stamp [s, any
+        clock]; a stop then also needs ``settle`` s of fresh stamps standing still, so a stalled
+        /odom (a pose that stops changing because none arrives) is not taken for a robot at
+        rest."""
         x, y, yaw = (float(v) for v in odom)
         dt = self._advance(now)
+        self._odom_time = odom_time
         if not self.active:
             return self._ramp(0.0, 0.0)
         step = self.steps[self._k]
@@ -239,6 +245,12 @@ class StepController:
                 return self._ramp(0.0, 0.0)
             self._plan_correction(step, remaining)
         return self._correct(step, (x, y, yaw), dt)
+
+    @property
+    def phase(self) -> str:
+        """The running step's phase: ``drive``, ``settle`` (stopped, waiting for /odom to stand
+        still) or ``correct`` (a creeping correction)."""
+        return self._phase
 
     @property
     def mode(self) -> int:
@@ -309,18 +321,24 @@ class StepController:
 
     def _to_settle(self, pose: Pose) -> None:
         self._phase = SETTLE
-        self._still_at = (self._clock, pose)
-        self._settle_from = self._clock
+        self._still_at = (self._clock, self._odom_time, pose)
+        self._settle_from = (self._clock, self._odom_time)
 
     def _still(self, pose: Pose) -> bool:
         """Whether /odom has stood still for ``settle`` s plus the measured latency (or the
         wait reached ``settle_timeout``)."""
-        t0, anchor = self._still_at
+        t0, s0, anchor = self._still_at
         if math.hypot(pose[0] - anchor[0], pose[1] - anchor[1]) > STILL_DISTANCE or \
                 abs(wrap(pose[2] - anchor[2])) > STILL_ANGLE:
-            self._still_at = t0, anchor = self._clock, pose
-        return self._clock - t0 >= self.settle + self.latency - 1e-9 or \
-            self._clock - self._settle_from >= self.settle_timeout
+            self._still_at = t0, s0, anchor = self._clock, self._odom_time, pose
+        c0, o0 = self._settle_from
+        return (self._clock - t0 >= self.settle + self.latency - 1e-9 and self._fresh(s0)) or \
+            (self._clock - c0 >= self.settle_timeout and self._fresh(o0))
+
+    def _fresh(self, since: float | None) -> bool:
+        """Whether /odom stamps ran ``settle`` s on since ``since`` (True without stamps)."""
+        return since is None or self._odom_time is None or \
+            self._odom_time - since >= self.settle - 1e-9
 
     def _measure_latency(self, pose: Pose) -> None:
         """The time from a start (first command after standing) to the first motion on /odom:

@@ -100,6 +100,9 @@ def handle(req):
     if op == "cancel":
         clients[req["name"]].cancel_goal()
         return {}
+    if op == "state":
+        c = clients[req["name"]]
+        return {"state": c.get_state(), "text": c.get_goal_status_text()}
     if op == "result":
         c = clients[req["name"]]
         done = c.wait_for_result(rospy.Duration(req.get("timeout", 60.0)))

@@ -7,6 +7,7 @@ back through the world (with --ground-truth its /amcl_pose is the true pose)."""
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -366,3 +367,77 @@ def test_navigation_mode_results(chain: dict[str, Any]) -> None:
     client.ask(op="send", name="/navigation_mode", type=kind, goal={"navigation_mode": 1})
     assert client.ask(op="result", name="/navigation_mode")["state"] == SUCCEEDED
 
+
+
+def move(client: NavClient, goal: tuple[float, float, float]) -> None:
+    client.ask(op="send", name="/move_base", type=MOVE,
+               goal={"target_pose": pose_msg(*goal), "execution_mode": 0})
+
+
+def at(client: NavClient, goal: tuple[float, float, float]) -> None:
+    """The robot stands at ``goal`` within move_base's tolerances (5 cm, 2 deg) on the truth."""
+    x, y, yaw = standing(client)
+    assert math.hypot(x - goal[0], y - goal[1]) < 0.05, ((x, y, yaw), goal)
+    assert abs(math.remainder(yaw - goal[2], math.tau)) < math.radians(2.0), ((x, y, yaw), goal)
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_a_newer_move_base_goal_preempts_the_running_one(chain: dict[str, Any]) -> None:
+    client: NavClient = chain["client"]
+    client.ask(op="sub", topic="/move_base/result", type="woosh_msgs/MoveBaseActionResult")
+    ended = client.ask(op="last", topic="/move_base/result")["count"]
+    move(client, (7.5, 2.5, 0.0))
+    client.wait_last("/amcl_pose", lambda m: client.ask(op="feedback", name="/move_base")
+                     ["count"] > 3, 30.0, "move_base feedback")
+    second = (5.0, 2.5, math.pi / 2)
+    move(client, second)  # the same SimpleActionClient: a new goal, the first is preempted
+    first = client.wait_last("/move_base/result", lambda m: client.ask(
+        op="last", topic="/move_base/result")["count"] > ended, 30.0, "the first goal's end")
+    assert first["status"]["status"] == PREEMPTED, first["status"]
+    assert "newer goal" in first["status"]["text"]
+    res = client.ask(op="result", name="/move_base", timeout=90.0)
+    assert res["state"] == SUCCEEDED, res
+    last = client.ask(op="last", topic="/move_base/result")
+    assert last["count"] == ended + 2
+    assert last["msg"]["status"]["goal_id"]["id"] != first["status"]["goal_id"]["id"]
+    at(client, second)
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_stop_and_wait_waits_in_front_of_the_crate_then_precise_avoids_it(
+        chain: dict[str, Any]) -> None:
+    """From (5, 2.5) facing the crate 3.3 m ahead (out of the costmaps' 2.5 m reach when the
+    path is planned, so the plan runs through it): mode 2 stops in front of it and waits, the
+    goal still ACTIVE; switched to mode 1 while waiting, the robot goes around and arrives."""
+    client: NavClient = chain["client"]
+    kind = "woosh_msgs/NavigationModeAction"
+    start = (5.0, 2.5, math.pi / 2)
+    move(client, start)
+    assert client.ask(op="result", name="/move_base", timeout=90.0)["state"] == SUCCEEDED
+    assert client.ask(op="call", name="/move_base/clear_costmaps", type="std_srvs/Empty") == {}
+    client.ask(op="send", name="/navigation_mode", type=kind, goal={"navigation_mode": 2})
+    assert client.ask(op="result", name="/navigation_mode")["state"] == SUCCEEDED
+    goal = (5.0, 7.0, math.pi / 2)  # behind the crate (its faces at y 5.8 and 6.2)
+    move(client, goal)
+    try:
+        client.wait_last("/amcl_pose", lambda m: m["pose"]["pose"]["position"]["y"] > 4.5,
+                         60.0, "the robot on its way to the crate")
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}; move_base: "
+                             f"{client.ask(op='state', name='/move_base')}") from None
+    x, y, _ = standing(client)
+    assert 4.5 < y < BOX[1] - 0.2 - 0.4 and abs(x - BOX[0]) < 0.1  # in front of it, on the line
+    time.sleep(3.0)  # waiting, seconds later: still ACTIVE, not aborted (no "stuck")
+    res = client.ask(op="state", name="/move_base")
+    assert res["state"] == 1, res
+    x2, y2, _ = standing(client)
+    assert math.hypot(x2 - x, y2 - y) < 0.002
+    # precise avoidance; permitted_passage (False in an unset message) allows a changed path
+    client.ask(op="send", name="/navigation_mode", type=kind,
+               goal={"navigation_mode": 1, "permitted_passage": True})
+    assert client.ask(op="result", name="/navigation_mode")["state"] == SUCCEEDED
+    res = client.ask(op="result", name="/move_base", timeout=60.0)
+    assert res["state"] == SUCCEEDED, res
+    at(client, goal)

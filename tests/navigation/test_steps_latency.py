@@ -38,17 +38,23 @@ def _truth(loop: SimLoop) -> Pose:
 
 
 def run_late(loop: SimLoop, ctl: StepController, odom_delay: float, cmd_delay: float,
-             timeout: float = 60.0) -> None:
-    """Tick at 20 Hz; the controller sees /odom ``odom_delay`` s old and its twists reach the
-    driver ``cmd_delay`` s after it sent them."""
+             timeout: float = 60.0, stall: float = 0.0) -> None:
+    """Tick at 20 Hz; the controller sees /odom ``odom_delay`` s old (with its time stamp) and
+    its twists reach the driver ``cmd_delay`` s after it sent them. ``stall``: at the first
+    stop, no new /odom reaches the controller for this long (a stalled driver or callback)."""
     seen: deque[tuple[float, Pose]] = deque()
     sent: deque[tuple[float, tuple[float, float]]] = deque()
     end = loop.now + timeout
+    stalled_until = None
     while loop.now < end and ctl.active:
-        seen.append((loop.now, _odom(loop)))
+        if stalled_until is None and stall and ctl.phase == "settle":
+            stalled_until = loop.now + stall
+        if stalled_until is None or loop.now >= stalled_until:
+            seen.append((loop.now, _odom(loop)))
         while len(seen) > 1 and seen[1][0] <= loop.now - odom_delay + 1e-9:
             seen.popleft()
-        sent.append((loop.now + cmd_delay, ctl.tick(seen[0][1], loop.now)))
+        stamp, pose = seen[0]
+        sent.append((loop.now + cmd_delay, ctl.tick(pose, loop.now, stamp)))
         while sent and sent[0][0] <= loop.now + 1e-9:
             loop.driver.set_twist(*sent.popleft()[1])
         for _ in range(10):
@@ -90,6 +96,37 @@ def test_late_odom_or_commands_still_end_within_1cm_half_a_degree_on_truth(
         # past a 0.5 m step): the stop is measured and corrected
         assert ctl.corrections >= 1
     assert ctl.latency == pytest.approx(odom_delay + cmd_delay + 0.1, abs=0.1)
+
+
+def test_a_stalled_odom_is_not_taken_for_a_robot_at_rest() -> None:
+    """/odom stops arriving as the step reaches its end while the robot rolls on 8 mm: the last
+    pose repeats and looks still. Without stamps the step ends on it after settle + latency;
+    with the pose's stamp frozen it waits (a zero command) for fresh /odom, sees the overshoot
+    and corrects it."""
+    def stop_with(stamps: bool) -> tuple[StepController, float, float]:
+        ctl = StepController(period=0.05)
+        assert ctl.goal(EXCUTE, [Step(STRAIGHT, 0.5)]) is None
+        t, x = 0.0, 0.0
+        while ctl.phase == "drive" and t < 10.0:  # drive there (/odom follows exactly)
+            v, _ = ctl.tick((x, 0.0, 0.0), t, t if stamps else None)
+            t, x = t + 0.05, x + v * 0.05
+        assert ctl.phase == "settle" and abs(x - 0.5) <= 0.003
+        seen, frozen, robot = x, t, x + 0.008
+        while ctl.result is None and t < 20.0:
+            if t >= frozen + 2.0:  # /odom is back
+                seen = robot
+            v, _ = ctl.tick((seen, 0.0, 0.0), t, (min(t, frozen) if t < frozen + 2.0 else t)
+                            if stamps else None)
+            assert t >= frozen + 2.0 or v == 0.0  # stopped while /odom is stalled
+            t, robot = t + 0.05, robot + v * 0.05
+        return ctl, t - frozen, robot
+
+    ctl, ended, robot = stop_with(stamps=False)
+    assert ended < 1.0 and ctl.corrections == 0  # taken in by the stale pose
+    assert robot - 0.5 > 0.005
+    ctl, ended, robot = stop_with(stamps=True)
+    assert ctl.result is not None and ctl.result.result == SUCCEEDED
+    assert ended > 2.0 and ctl.corrections == 1 and abs(robot - 0.5) <= 0.003
 
 
 def test_a_step_that_cannot_be_corrected_fails_with_the_error() -> None:

@@ -31,8 +31,9 @@ def route(xs: Sequence[float], y: float = Y, starters: Sequence[int] = (), speed
     return lst
 
 
-def trace_sim(start_x: float = 6.0, crate: bool = False, **params: float) -> TraceSim:
+def trace_sim(start_x: float = 6.0, crate: bool = False, localization: str = "truth",
+              **params: float) -> TraceSim:
     obstacles = obstacles_from_dicts([CRATE] if crate else [])
-    return TraceSim(WorldConfig(map="warehouse", start=(start_x, Y, 0.0), localization="truth",
-                                obstacles=obstacles),
+    return TraceSim(WorldConfig(map="warehouse", start=(start_x, Y, 0.0),
+                                localization=localization, obstacles=obstacles),
                     TraceParams(map_name="warehouse", **params))  # type: ignore[arg-type]

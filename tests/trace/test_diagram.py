@@ -1,8 +1,9 @@
 """The seed's sequence diagram, every numbered step, on the warehouse with a crate dropped on the
-route, on the simulated clock (emulator + driver_base + world; ground-truth localization, so
-that the module is what is tested). A business node (a listener on the status topics) answers as
-the seed says: BLOCKED -> the list to ObstacleNavigate; its FINISHED -> the list back to
-TraceNavigate. blocked_timeout is 10 s here (the 60 s default: test_trace_navigate.py)."""
+route, on the simulated clock (emulator + driver_base + world with amcl, as on a robot: the
+crate is not on the map, so this also holds localization to the detour). A business node (a
+listener on the status topics) answers as the seed says: BLOCKED -> the list to
+ObstacleNavigate; its FINISHED -> the list back to TraceNavigate. blocked_timeout is 10 s
+here (the 60 s default: test_trace_navigate.py)."""
 
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ class Run:
 
 @pytest.fixture(scope="module")
 def run() -> Run:
-    sim = trace_sim(crate=True, blocked_timeout=10.0)
+    sim = trace_sim(crate=True, localization="filter", blocked_timeout=10.0)
     r = Run(sim)
 
     def business(topic: str, msg: m.GTraceList) -> None:
@@ -119,6 +120,8 @@ def test_8_9_10_trace_resumes_and_finishes_at_the_end(run: Run) -> None:
 
 
 def test_cross_track_along_the_straight_segments(run: Run) -> None:
+    # the truth's distance to the line: the controller's error (<= 3 cm, benchmarks/bench_trace
+    # on ground truth) plus amcl's sideways error in the corridor (3-4 cm p95, docs/world.md)
     on_line = sorted(d for x, d in run.cross if 7.0 < x < 11.5 or 16.0 < x < 20.5)
     p95 = on_line[int(0.95 * (len(on_line) - 1))]
-    assert p95 <= 0.03
+    assert p95 <= 0.05

@@ -343,42 +343,19 @@ class WorldNode:
 
 def run(setup: WorldSetup, truth: Any, ros_args: Sequence[str], truth_where: str) -> int:
     """Start rospy on the master in ROS_MASTER_URI, build the node and spin."""
-    import os
-    import sys
+    from lowerbase.rosnode import ros_session
 
-    from lowerbase.driver.node import _ToRosout
-    from lowerbase.driver.settings import loopback_address
-    from lowerbase.errors import TransportError
-
-    rospy, _ = import_ros()
-    import rosgraph
-
-    if not rosgraph.is_master_online():
-        raise TransportError(f"no ROS master at {rosgraph.get_master_uri()} (start roscore, or "
-                             "set ROS_MASTER_URI)")
-    address = loopback_address(os.environ, rosgraph.get_master_uri(), [*sys.argv, *ros_args])
-    if address is not None:
-        os.environ["ROS_IP"] = address
-    rospy.init_node(NODE_NAME, argv=[NODE_NAME, *ros_args], anonymous=False)
-    start_clock = getattr(truth, "start_ros", None)
-    if start_clock is not None:  # --publish-clock: /clock from the truth (world.sim_clock)
-        start_clock(rospy)
-    pkg_logger = logging.getLogger("lowerbase")
-    pkg_logger.addHandler(_ToRosout())
-    pkg_logger.propagate = False
-    node = WorldNode(setup, truth)
-    try:
-        node.advertise()
-        print(f"lowerbase world: {rospy.get_name()} on ROS master {rosgraph.get_master_uri()}"
-              f"{' (loopback only)' if address else ''}; ground truth from {truth_where}",
-              flush=True)
-        node.spin()
-    finally:
-        node.shutdown()
-        pkg_logger.removeHandler(pkg_logger.handlers[-1])
-        pkg_logger.propagate = True
-        stats = ", ".join(f"{k} {v}" for k, v in sorted(node.stats.items()))
-        print(f"lowerbase world: stopped; {stats}", file=sys.stderr, flush=True)
-        if not rospy.is_shutdown():
-            rospy.signal_shutdown("world stopped")
+    import_ros()  # one line if ROS or the message modules are missing
+    with ros_session("world", NODE_NAME, ros_args) as session:
+        start_clock = getattr(truth, "start_ros", None)
+        if start_clock is not None:  # --publish-clock: /clock from the truth (world.sim_clock)
+            start_clock(session.rospy)
+        node = WorldNode(setup, truth)
+        try:
+            node.advertise()
+            session.announce(f"ground truth from {truth_where}")
+            node.spin()
+        finally:
+            node.shutdown()
+            session.stopped(node.stats)
     return 0

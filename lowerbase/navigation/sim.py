@@ -8,6 +8,15 @@ emulator: the whole chain and every lower-computer rule applies. The local costm
 the camera on, its cloud_without_planes. While no goal is active nothing is sent (one zero twist
 when a goal ends), so other commanders (StepControl, a test) can drive.
 
+Standing idle costs no sensing: while no goal is pending or active, the camera is off and the
+estimate has not moved since the last update (``idle_still``: 1 mm, 0.05 deg), the 5 Hz update
+is deferred: no scan is cast for it (:meth:`WorldSim.skip_scan` draws its noise, so every other
+scan stays what it was) and no costmap work is done. The next tick that needs the costmap (a
+goal pending or active, or the robot moving) first does the last deferred update, with the same
+scan and pose. Nothing reads the local costmap meanwhile, and a standing robot's repeated updates
+only re-mark the same returns: the robot drives exactly as with every update done
+(``idle_sensing=True``; tests/navigation/test_navsim_idle.py compares both, tick by tick).
+
 :meth:`NavSim.go_to` is what tests, scenarios and benchmarks use: send a goal and run until it
 ends, answering a :class:`NavRun` (state, reason, time, the true path driven, contacts, the
 largest speed commanded and driven).
@@ -19,11 +28,12 @@ import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
-from lowerbase.navigation.controller import Limits
+from lowerbase.navigation.controller import Limits, wrap
 from lowerbase.navigation.costmap import camera_cloud
 from lowerbase.navigation.navigator import GoalState, NavCommand, Navigator, Pose
+from lowerbase.world.lidar import LaserScan
 from lowerbase.world.obstacles import Obstacle, Obstacles
-from lowerbase.world.sim import WorldSim
+from lowerbase.world.sim import DeferredScan, WorldSim
 
 CONTROL_PERIOD = 0.05
 
@@ -65,8 +75,14 @@ class NavSim:
     """A Navigator ticked at 20 Hz on a WorldSim (see the module docstring)."""
 
     def __init__(self, world: WorldSim, navigator: Navigator | None = None,
-                 sensor_rate: float = 5.0) -> None:
+                 sensor_rate: float = 5.0, idle_sensing: bool = False,
+                 idle_still: tuple[float, float] = (1e-3, math.radians(0.05))) -> None:
         self.world = world
+        self.idle_sensing = idle_sensing
+        self.idle_still = idle_still
+        self._sensed_at: Pose | None = None  #: the pose of the last local costmap update
+        #: the last update deferred while standing idle: (pose, scan)
+        self._deferred: tuple[Pose, DeferredScan | None] | None = None
         self.navigator = navigator or Navigator(world.grid, footprint=world.config.footprint)
         self.navigator.set_limits(Limits.from_parameters(world.loop.driver.parameters))
         self._every = max(1, round(CONTROL_PERIOD / world.control_dt))
@@ -95,12 +111,16 @@ class NavSim:
         """One control period: sensors if due, the navigator, the twist, the world."""
         w, nav = self.world, self.navigator
         pose = self.pose()
+        idle = nav.state not in (GoalState.PENDING, GoalState.ACTIVE)
         if w.now + 1e-9 >= self._next_sensor:
             self._next_sensor += self._sensor_period
-            cloud = None
-            if w.camera is not None and w.frame is not None:
-                cloud = camera_cloud(w.frame.points_without_planes, w.camera.config)
-            nav.update_sensors(pose, scan=w.scan, cloud=cloud)
+            if idle and w.camera is None and self._standing(pose):
+                self._deferred = (pose, w.skip_scan())
+            else:
+                self._sense(pose)
+        elif self._deferred is not None and not (idle and self._standing(pose)):
+            d_pose, d_scan = self._deferred  # catch up before the costmap is used
+            self._sense(d_pose, None if d_scan is None else w.deferred_scan(d_scan))
         cmd = nav.tick(w.now, pose)
         active = cmd.state in (GoalState.PENDING, GoalState.ACTIVE)
         if active or self._was_active:
@@ -111,6 +131,27 @@ class NavSim:
             w.step()
             self.contacts += w.contact is not None
         return cmd
+
+    def _standing(self, pose: Pose) -> bool:
+        """The estimate has not moved since the last costmap update (``idle_sensing``: never
+        treated as standing)."""
+        ref = self._sensed_at
+        if self.idle_sensing or ref is None:
+            return False
+        d, a = self.idle_still
+        return math.hypot(pose[0] - ref[0], pose[1] - ref[1]) <= d and \
+            abs(wrap(pose[2] - ref[2])) <= a
+
+    def _sense(self, pose: Pose, scan: LaserScan | bool | None = True) -> None:
+        """One local costmap update from ``scan`` (True: the latest scan) and the camera."""
+        w = self.world
+        cloud = None
+        if w.camera is not None and w.frame is not None:
+            cloud = camera_cloud(w.frame.points_without_planes, w.camera.config)
+        use = w.scan if scan is True else scan if isinstance(scan, LaserScan) else None
+        self.navigator.update_sensors(pose, scan=use, cloud=cloud)
+        self._sensed_at = (float(pose[0]), float(pose[1]), float(pose[2]))
+        self._deferred = None
 
     def run(self, seconds: float) -> None:
         """Tick for ``seconds`` of simulated time."""

@@ -21,6 +21,8 @@ from lowerbase.errors import ConfigError
 from lowerbase.world.raycast import Scene, cast_grid, cast_solids, solids_taller_than
 
 TWO_PI = 2.0 * math.pi
+#: one scan's random numbers: range noise (standard normal), dropouts (uniform) or None
+Draws = tuple[np.ndarray, np.ndarray | None]
 
 
 @dataclass(frozen=True)
@@ -141,27 +143,36 @@ class Lidar:
             dist = np.minimum(dist, cast_solids(solids, lx, ly, world))
         return np.where(dist <= cfg.range_max, dist, np.inf)
 
-    def measure(self, true: np.ndarray) -> np.ndarray:
-        """REP-117 ranges (float32) from true distances: noise, limits, dropouts."""
+    def draw(self) -> Draws:
+        """The random numbers of one scan (range noise, dropouts), in the order
+        :meth:`measure` takes them: drawn ahead, a scan that is never cast still advances the
+        generator as casting it would have (:meth:`LidarRig.draw`)."""
+        n = self.config.beams
+        normal = self.rng.standard_normal(n)
+        return normal, self.rng.random(n) if self.config.dropout_prob > 0 else None
+
+    def measure(self, true: np.ndarray, draws: Draws | None = None) -> np.ndarray:
+        """REP-117 ranges (float32) from true distances: noise, limits, dropouts (``draws``:
+        this scan's random numbers from :meth:`draw`; None: drawn now)."""
         cfg = self.config
-        n = true.size
+        normal, uniform = draws if draws is not None else self.draw()
         finite = np.isfinite(true)
         sigma = cfg.range_sigma + cfg.range_sigma_per_m * np.where(finite, true, 0.0)
-        noisy = true + sigma * self.rng.standard_normal(n)
+        noisy = true + sigma * normal
         out = np.where(finite, np.clip(noisy, cfg.range_min, cfg.range_max), np.inf)
         out = np.where(true < cfg.range_min, -np.inf, out)
-        if cfg.dropout_prob > 0:
-            out = np.where(self.rng.random(n) < cfg.dropout_prob, np.nan, out)
+        if uniform is not None:
+            out = np.where(uniform < cfg.dropout_prob, np.nan, out)
         return out.astype(np.float32)
 
     def scan(self, scene: Scene, pose: tuple[float, float, float], stamp: float,
-             grid_distance: np.ndarray | None = None) -> LaserScan:
+             grid_distance: np.ndarray | None = None, draws: Draws | None = None) -> LaserScan:
         cfg = self.config
         period = 1.0 / cfg.rate_hz
         return LaserScan(cfg.frame_id, stamp, cfg.angle_min,
                          cfg.angle_min + (cfg.beams - 1) * cfg.angular_step, cfg.angular_step,
                          period / cfg.beams, period, cfg.range_min, cfg.range_max,
-                         self.measure(self.true_ranges(scene, pose, grid_distance)))
+                         self.measure(self.true_ranges(scene, pose, grid_distance), draws))
 
 
 @dataclass(frozen=True)
@@ -276,8 +287,12 @@ class LidarRig:
     def rate_hz(self) -> float:
         return self.merger.rate_hz
 
+    def draw(self) -> list[Draws]:
+        """Every lidar's random numbers for one scan (:meth:`Lidar.draw`)."""
+        return [lidar.draw() for lidar in self.lidars]
+
     def scans(self, scene: Scene, pose: tuple[float, float, float],
-              stamp: float) -> list[LaserScan]:
+              stamp: float, draws: Sequence[Draws] | None = None) -> list[LaserScan]:
         """Each lidar's own scan, in its own frame. The map is cast for all lidars' rays in one
         :func:`cast_grid` call (fewer, larger array operations; each ray's result is its own,
         bit for bit as cast alone: tests/world/test_lidar.py)."""
@@ -290,9 +305,11 @@ class LidarRig:
         dist = cast_grid(scene.mask, scene.grid, xs, ys, np.concatenate([a for *_, a in rays]),
                          ranges, scene.grid_field).distance
         parts = np.split(dist, np.cumsum(sizes)[:-1])
-        return [lidar.scan(scene, pose, stamp, part)
-                for lidar, part in zip(self.lidars, parts, strict=True)]
+        ds: Sequence[Draws | None] = draws if draws is not None else [None] * len(parts)
+        return [lidar.scan(scene, pose, stamp, part, d)
+                for lidar, part, d in zip(self.lidars, parts, ds, strict=True)]
 
-    def scan(self, scene: Scene, pose: tuple[float, float, float], stamp: float) -> LaserScan:
-        """The merged scan in base_link."""
-        return self.merger.merge(self.scans(scene, pose, stamp), stamp)
+    def scan(self, scene: Scene, pose: tuple[float, float, float], stamp: float,
+             draws: Sequence[Draws] | None = None) -> LaserScan:
+        """The merged scan in base_link (``draws``: its random numbers, :meth:`draw`)."""
+        return self.merger.merge(self.scans(scene, pose, stamp, draws), stamp)

@@ -40,7 +40,7 @@ from lowerbase.world.footprint import (
     validate_pose,
 )
 from lowerbase.world.grid import OccupancyGrid
-from lowerbase.world.lidar import LaserScan, LidarRig
+from lowerbase.world.lidar import Draws, LaserScan, LidarRig
 from lowerbase.world.localization import AmclParams, Localizer, PoseEstimate
 from lowerbase.world.localization.poses import Pose2D, compose, inverse, wrap_scalar
 from lowerbase.world.maps import DEFAULT_MAP, load_map
@@ -73,6 +73,18 @@ class WorldConfig:
     camera: bool = False
     footprint: Footprint = DEFAULT_FOOTPRINT
     seed: int = 0
+
+
+@dataclass(frozen=True)
+class DeferredScan:
+    """A scan tick read without casting it (:meth:`WorldSim.skip_scan`): its ``stamp``, the
+    true ``pose``, and either its random numbers (``draws``, already taken from the lidars'
+    generators) or the ``scan`` itself when it was cast already."""
+
+    stamp: float
+    pose: Pose2D
+    draws: list[Draws] | None = None
+    scan: LaserScan | None = None
 
 
 def resolve_start(map_ref: str | Path | OccupancyGrid, grid: OccupancyGrid,
@@ -136,6 +148,7 @@ class WorldSim(SteppedLoop):
         self.scene = Scene(grid)
         self._tick: tuple[float, Pose2D] | None = None  #: the last scan tick: (t, true pose)
         self._scan: LaserScan | None = None
+        self._draws: list[Draws] | None = None  #: the last tick's random numbers, drawn ahead
         self._fed: Pose2D | None = None  #: /odom when the localizer last got a scan
         #: the last two /odom samples (stamp, pose): the scan's odometry is interpolated
         self._odom_hist: list[tuple[float, Pose2D]] = []
@@ -219,13 +232,42 @@ class WorldSim(SteppedLoop):
         """The merged /scan (base_link) of the last scan tick, None before the first."""
         if self._scan is None and self._tick is not None:
             t, pose = self._tick
-            self._scan = self.rig.scan(self.scene_at(t), pose, t)
+            self._scan = self.rig.scan(self.scene_at(t), pose, t, self._draws)
+            self._draws = None
             self.scans += 1
         return self._scan
+
+    def skip_scan(self) -> DeferredScan | None:
+        """Read the last scan tick as :attr:`scan` would, but cast it only if
+        :meth:`deferred_scan` is asked for it later: its random numbers are drawn now, so every
+        other scan is exactly what it would have been had this one been cast (the lidars'
+        generators are stateful). None before the first tick."""
+        if self._tick is None:
+            return None
+        t, pose = self._tick
+        if self._scan is not None:
+            return DeferredScan(t, pose, scan=self._scan)
+        if self._draws is None:
+            self._draws = self.rig.draw()
+        return DeferredScan(t, pose, draws=self._draws)
+
+    def deferred_scan(self, d: DeferredScan) -> LaserScan:
+        """The scan :meth:`skip_scan` stood for, bit for bit what :attr:`scan` gave then."""
+        if d.scan is not None:
+            return d.scan
+        if self._tick is not None and self._tick[0] == d.stamp:
+            if self._scan is None:
+                assert self._draws is d.draws
+            scan = self.scan  # cast now with its draws, or already cast (amcl) with them
+            assert scan is not None
+            return scan
+        self.scans += 1
+        return self.rig.scan(self.scene_at(d.stamp), d.pose, d.stamp, d.draws)
 
     def _sense_scan(self, now: float) -> None:
         self._tick = (now, self.true_pose())
         self._scan = None
+        self._draws = None
         odom = self.odom_pose()
         loc = self.localizer
         if odom is None or not loc.running:

@@ -114,6 +114,13 @@ class FootprintCells:
             cells = np.unique(np.concatenate((np.column_stack((rr, cc)),
                                               np.column_stack((pr, pc)))), axis=0) - n
             self.offsets.append((cells[:, 0], cells[:, 1]))
+        # every bin's cells in one (bins, L) array, short bins padded with their first cell
+        # (a repeated cell changes neither the max nor "any cell off the map")
+        size = max(dr.size for dr, _ in self.offsets)
+        self._dr = np.stack([np.pad(dr, (0, size - dr.size), mode="edge")
+                             for dr, _ in self.offsets])
+        self._dc = np.stack([np.pad(dc, (0, size - dc.size), mode="edge")
+                             for _, dc in self.offsets])
 
     def max_cost(self, costs: np.ndarray, origin: Sequence[float], x: np.ndarray | float,
                  y: np.ndarray | float, yaw: np.ndarray | float) -> np.ndarray:
@@ -125,8 +132,23 @@ class FootprintCells:
         cols = np.floor((x - origin[0]) / self.resolution).astype(np.int64)
         k = np.round(np.mod(yaw, 2.0 * math.pi) / (2.0 * math.pi) * self.bins).astype(
             np.int64) % self.bins
-        out = np.empty(x.shape, dtype=np.int64)
         h, w = costs.shape
+        if costs.dtype == np.uint8:
+            # all poses at once: LETHAL (254) is the highest cost once NO_INFORMATION (255)
+            # counts 0, so "a cell off the map" is a max of LETHAL
+            kk = k.ravel()
+            r = rows.ravel()[:, None] + self._dr[kk]
+            c = cols.ravel()[:, None] + self._dc[kk]
+            off = ((r < 0) | (c < 0) | (r >= h) | (c >= w)).any(axis=1)
+            if off.any():
+                np.clip(r, 0, h - 1, out=r)
+                np.clip(c, 0, w - 1, out=c)
+            vals = costs[r, c]
+            vals[vals == NO_INFORMATION] = 0
+            best = vals.max(axis=1).astype(np.int64)
+            best[off] = LETHAL
+            return best.reshape(x.shape)
+        out = np.empty(x.shape, dtype=np.int64)
         for b in np.unique(k):
             sel = k == b
             dr, dc = self.offsets[b]

@@ -57,7 +57,8 @@ class RosSession:
 
     def stopped(self, stats: Mapping[str, Any]) -> None:
         counts = ", ".join(f"{k} {v}" for k, v in sorted(stats.items()))
-        print(f"lowerbase {self.command}: stopped; {counts}", file=sys.stderr, flush=True)
+        print(f"lowerbase {self.command}: stopped; {counts or 'nothing counted'}",
+              file=sys.stderr, flush=True)
 
 
 @contextmanager

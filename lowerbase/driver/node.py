@@ -26,7 +26,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-import os
 import sys
 import threading
 from collections.abc import Callable, Sequence
@@ -39,7 +38,8 @@ from lowerbase.driver import services
 from lowerbase.driver.core import DriverConfig, DriverCore, LinkState
 from lowerbase.driver.links import REPLAY_SUFFIXES, BusLink, ReplayLink  # noqa: F401 (re-export)
 from lowerbase.driver.settings import NodeSettings
-from lowerbase.errors import RosUnavailableError, TransportError
+from lowerbase.errors import RosUnavailableError
+from lowerbase.rosnode import ToRosout as _ToRosout  # noqa: F401 (navigation.node uses it)
 
 log = logging.getLogger(__name__)
 
@@ -84,13 +84,6 @@ class Throttle:
 
 
 # -- the node ----------------------------------------------------------------------------------
-
-
-class _ToRosout(logging.Handler):
-    """Hands lowerbase's log records to rospy's ``rosout`` logger (console and /rosout)."""
-
-    def emit(self, record: logging.LogRecord) -> None:
-        logging.getLogger("rosout").handle(record)
 
 
 class DriverNode:
@@ -318,28 +311,18 @@ def run(
     ``ros_args`` are remappings and special keys (``__name:=``, ``__ns:=``, ``_param:=``),
     as ``rospy.myargv`` leaves them out. ``params`` override the private parameters (tests).
     """
-    rospy, _ = import_ros()
+    import_ros()  # one line if ROS or woosh_msgs are missing
     from lowerbase.driver.settings import load_settings
+    from lowerbase.rosnode import ros_session
 
     with contextlib.suppress(AttributeError, ValueError):
         sys.stdout.reconfigure(line_buffering=True)  # type: ignore[union-attr]
-    import rosgraph
-
-    if not rosgraph.is_master_online():
-        raise TransportError(f"no ROS master at {rosgraph.get_master_uri()} (start roscore, or "
-                             "set ROS_MASTER_URI)")
-    from lowerbase.driver.settings import loopback_address
-
-    address = loopback_address(os.environ, rosgraph.get_master_uri(), [*sys.argv, *ros_args])
-    if address is not None:  # a local master: listen on loopback, not on every interface
-        os.environ["ROS_IP"] = address
-        print(f"lowerbase driver: listening on loopback only (ROS_IP={address}); set ROS_IP or "
-              "ROS_HOSTNAME to this host's address to serve other hosts", flush=True)
-    rospy.init_node(name, argv=[name, *ros_args], anonymous=False)
-    pkg_logger = logging.getLogger("lowerbase")
-    pkg_logger.addHandler(_ToRosout())
-    pkg_logger.propagate = False
-    try:
+    with ros_session("driver", name, ros_args) as session:
+        rospy = session.rospy
+        if session.loopback is not None:
+            print(f"lowerbase driver: listening on loopback only (ROS_IP={session.loopback}); "
+                  "set ROS_IP or ROS_HOSTNAME to this host's address to serve other hosts",
+                  flush=True)
         private = rospy.get_param("~", {})
         settings, config = load_settings({**private, **(params or {})})
         node: DriverNode | None = None
@@ -362,21 +345,14 @@ def run(
                 node.core.allow_receive_lag(config.link_timeout)
             node.advertise()
             node.start_reader()
-            print(f"lowerbase driver: {rospy.get_name()} on {link.description}; ROS master "
-                  f"{rosgraph.get_master_uri()}", flush=True)
+            session.announce(f"link {link.description}")
             node.spin()
         finally:
             if node is not None:
                 node.shutdown()
-                stats = ", ".join(f"{k} {v}" for k, v in sorted(node.core.stats.items()))
-                print(f"lowerbase driver: stopped; {stats}", file=sys.stderr, flush=True)
+                session.stopped(node.core.stats)
             else:
                 link.close()
-    finally:
-        pkg_logger.removeHandler(pkg_logger.handlers[-1])
-        pkg_logger.propagate = True
-        if not rospy.is_shutdown():
-            rospy.signal_shutdown("driver_base stopped")
     return 0
 
 

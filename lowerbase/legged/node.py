@@ -31,7 +31,7 @@ from types import SimpleNamespace
 from typing import Any
 
 from lowerbase.clock import RealClock
-from lowerbase.errors import ConfigError, RosUnavailableError, TransportError
+from lowerbase.errors import ConfigError, RosUnavailableError
 from lowerbase.legged.body import ALLOWED
 from lowerbase.legged.driver_core import LeggedDriverConfig, LeggedDriverCore
 from lowerbase.legged.protocol import LocomotionState, legged_codec
@@ -373,51 +373,41 @@ def run(bus_config: dict[str, Any], ros_args: Sequence[str], *, name: str = NODE
         params: dict[str, Any] | None = None) -> int:
     """Open the four leg buses, start rospy and spin until shutdown."""
     from lowerbase.driver.links import FULL_ID_MASK, BusLink
-    from lowerbase.driver.settings import loopback_address
+    from lowerbase.rosnode import ros_session
 
-    ros = import_ros()
-    rospy = ros.rospy
+    import_ros()  # one line if ROS or the legged messages are missing
     configs = leg_bus_configs(bus_config)
-    import rosgraph
-
-    if not rosgraph.is_master_online():
-        raise TransportError(f"no ROS master at {rosgraph.get_master_uri()} (start roscore, or "
-                             "set ROS_MASTER_URI)")
     with contextlib.suppress(AttributeError, ValueError):
         sys.stdout.reconfigure(line_buffering=True)  # type: ignore[union-attr]
-    address = loopback_address(os.environ, rosgraph.get_master_uri(), [*sys.argv, *ros_args])
-    if address is not None:
-        os.environ["ROS_IP"] = address
-        print(f"lowerbase driver: listening on loopback only (ROS_IP={address}); set ROS_IP or "
-              "ROS_HOSTNAME to this host's address to serve other hosts", flush=True)
     filters = [{"can_id": i, "can_mask": FULL_ID_MASK} for i in lower_ids()]
     links: list[Any] = []
-    try:
-        for cfg in configs:
-            links.append(BusLink({**cfg, "can_filters": filters}))
-        rospy.init_node(name, argv=[name, *ros_args], anonymous=False)
-        settings, config = load_legged_settings({**rospy.get_param("~", {}), **(params or {})})
-        if config.map_dir is not None:
-            try:
-                config.map_dir.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise ConfigError(f"~map_dir {config.map_dir}: {exc.strerror}") from None
-        node = LeggedNode(settings, config, links)
-        node.advertise()
-        node.start_readers()
-        where = ", ".join(f"{c.get('interface')} {c.get('channel')}"
-                          + (f":{c['port']}" if "port" in c else "") for c in configs)
-        print(f"lowerbase driver: {rospy.get_name()} (legged) on {where}; ROS master "
-              f"{rosgraph.get_master_uri()}", flush=True)
+    with ros_session("driver", name, ros_args) as session:
+        if session.loopback is not None:
+            print(f"lowerbase driver: listening on loopback only (ROS_IP={session.loopback}); "
+                  "set ROS_IP or ROS_HOSTNAME to this host's address to serve other hosts",
+                  flush=True)
         try:
-            node.spin()
+            for cfg in configs:
+                links.append(BusLink({**cfg, "can_filters": filters}))
+            settings, config = load_legged_settings(
+                {**session.rospy.get_param("~", {}), **(params or {})})
+            if config.map_dir is not None:
+                try:
+                    config.map_dir.mkdir(parents=True, exist_ok=True)
+                except OSError as exc:
+                    raise ConfigError(f"~map_dir {config.map_dir}: {exc.strerror}") from None
+            node = LeggedNode(settings, config, links)
+            node.advertise()
+            node.start_readers()
+            where = ", ".join(f"{c.get('interface')} {c.get('channel')}"
+                              + (f":{c['port']}" if "port" in c else "") for c in configs)
+            session.announce(f"legged, buses {where}")
+            try:
+                node.spin()
+            finally:
+                node.shutdown()
+                session.stopped(node.core.stats)
         finally:
-            node.shutdown()
-            stats = ", ".join(f"{k} {v}" for k, v in sorted(node.core.stats.items()))
-            print(f"lowerbase driver: stopped; {stats}", file=sys.stderr, flush=True)
-    finally:
-        for link in links:
-            link.close()
-        if not rospy.is_shutdown():
-            rospy.signal_shutdown("legged_driver stopped")
+            for link in links:
+                link.close()
     return 0

@@ -255,39 +255,16 @@ class TraceNode:
 
 def run(setup: TraceSetup, ros_args: Sequence[str], where: str) -> int:
     """Start rospy on the master in ROS_MASTER_URI, build the node and spin."""
-    import os
-    import sys
+    from lowerbase.rosnode import ros_session
 
-    from lowerbase.driver.node import _ToRosout
-    from lowerbase.driver.settings import loopback_address
-    from lowerbase.errors import TransportError
-
-    rospy, _ = import_ros()
-    import rosgraph
-
-    if not rosgraph.is_master_online():
-        raise TransportError(f"no ROS master at {rosgraph.get_master_uri()} (start roscore, or "
-                             "set ROS_MASTER_URI)")
-    address = loopback_address(os.environ, rosgraph.get_master_uri(), [*sys.argv, *ros_args])
-    if address is not None:
-        os.environ["ROS_IP"] = address
-    rospy.init_node(NODE_NAME, argv=[NODE_NAME, *ros_args], anonymous=False)
-    pkg_logger = logging.getLogger("lowerbase")
-    pkg_logger.addHandler(_ToRosout())
-    pkg_logger.propagate = False
-    node = TraceNode(setup)
-    try:
-        node.advertise()
-        print(f"lowerbase trace: {rospy.get_name()} on ROS master {rosgraph.get_master_uri()}"
-              f"{' (loopback only)' if address else ''}; {where}", flush=True)
-        node.spin()
-    finally:
-        node.shutdown()
-        pkg_logger.removeHandler(pkg_logger.handlers[-1])
-        pkg_logger.propagate = True
-        stats = ", ".join(f"{k} {v}" for k, v in node.all_stats().items())
-        print(f"lowerbase trace: stopped; {stats or 'nothing counted'}", file=sys.stderr,
-              flush=True)
-        if not rospy.is_shutdown():
-            rospy.signal_shutdown("trace stopped")
+    import_ros()  # one line if ROS or the message modules are missing
+    with ros_session("trace", NODE_NAME, ros_args) as session:
+        node = TraceNode(setup)
+        try:
+            node.advertise()
+            session.announce(where)
+            node.spin()
+        finally:
+            node.shutdown()
+            session.stopped(node.all_stats())
     return 0

@@ -133,7 +133,7 @@ class Rig:
         self.node = Proc(["driver", "--robot", "legged", *bus_cli_args(self.bus),
                           f"__name:={name}", f"_map_dir:={self.map_dir}", *params], node_env)
         try:
-            self.node.wait_for("(legged) on", timeout=30.0)
+            self.node.wait_for("on ROS master", timeout=30.0)
         except AssertionError:
             self.close()
             raise
@@ -347,7 +347,7 @@ def test_against_the_legged_emulator(rig: dict[str, Any], legged_srvs: ModuleTyp
                 {k: v for k, v in master.env.items() if k != "ROS_IP"})
     try:
         emulator.wait_for("Ctrl-C stops", timeout=30.0)
-        node.wait_for("(legged) on", timeout=30.0)
+        node.wait_for("on ROS master", timeout=30.0)
         deadline = time.monotonic() + 20.0
         while not (reply := call("/real/legged_driver/walk", Trigger)).success:
             assert time.monotonic() < deadline, reply.message

@@ -78,6 +78,7 @@ CHECKS: dict[str, Check] = {
     "lowerbase world --map empty_room --ground-truth --no-camera": Check("skip", why=ROS),
     "lowerbase navigation --map warehouse": Check("skip", why=ROS),
     "lowerbase trace --map warehouse": Check("skip", why=ROS),
+    "lowerbase tasks --map warehouse": Check("skip", why=ROS),
     "lowerbase robot --map warehouse": Check("skip", why=ROS),
     "lowerbase robot --map empty_room --without navigation --without tasks": Check(
         "skip", why=ROS),

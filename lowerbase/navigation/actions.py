@@ -26,7 +26,6 @@ goal (PREEMPTED), a move_base goal cancels a running step list (result -2).
 from __future__ import annotations
 
 import logging
-import time
 from typing import Any
 
 from lowerbase.errors import LowerbaseError, WorldError
@@ -89,7 +88,7 @@ class ActionServers:
                     node.steps.goal(CANCEL)
                 node.last_command = None
                 node.navigator.send_goal(target, poses, int(goal.execution_mode),
-                                         time.monotonic())
+                                         node.now())
         except LowerbaseError as exc:
             log.warning("move_base goal refused: %s", exc)
             server.set_aborted(text=str(exc))
@@ -104,7 +103,7 @@ class ActionServers:
             with node.lock:
                 pose = node.map_pose()
                 if server.is_preempt_requested():
-                    node.navigator.cancel(time.monotonic())
+                    node.navigator.cancel(node.now())
                     why = "a newer goal" if server.is_new_goal_available() else "cancelled"
                     server.set_preempted(text=f"preempted: {why}")
                     return
@@ -145,7 +144,7 @@ class ActionServers:
             if not refused and mode == EXCUTE:
                 self.step_generation += 1
                 if node.navigator_active():
-                    node.navigator.cancel(time.monotonic())
+                    node.navigator.cancel(node.now())
             generation = self.step_generation
         if refused:
             log.warning("cmd_vel_control goal refused: %s", refused)

@@ -26,14 +26,12 @@ target is reached within the tolerances).
 
 from __future__ import annotations
 
-import enum
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
-from lowerbase.errors import WorldError
 from lowerbase.navigation.combined import CombinedCosts
 from lowerbase.navigation.controller import (
     ControllerConfig,
@@ -43,15 +41,24 @@ from lowerbase.navigation.controller import (
     wrap,
 )
 from lowerbase.navigation.costmap import (
-    CostmapParams,
     LayeredCostmap,
     global_costmap,
     local_costmap,
 )
-from lowerbase.navigation.layers import InflationParams
+from lowerbase.navigation.goals import (
+    GoalResult,
+    GoalState,
+    NavCommand,
+    NavigationError,
+    NavigatorConfig,
+    Pose,
+    _pose,
+    path_blocked,
+    remaining,
+    unblocked_start,
+)
 from lowerbase.navigation.modes import Mode, NavDir, NavigationModeGoal
 from lowerbase.navigation.planner import (
-    INSCRIBED,
     FootprintCells,
     GlobalPlanner,
     Plan,
@@ -61,101 +68,8 @@ from lowerbase.world.footprint import DEFAULT_POINTS, Footprint
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lidar import LaserScan
 
-Pose = tuple[float, float, float]
-
 __all__ = ["GoalResult", "GoalState", "Mode", "NavCommand", "NavigationError",
            "NavigationModeGoal", "Navigator", "NavigatorConfig", "Pose"]
-
-
-class NavigationError(WorldError):
-    """A navigation request that cannot be taken: a NaN or off-map goal."""
-
-
-class GoalState(enum.Enum):
-    """actionlib's goal states; SUCCEEDED, ABORTED and PREEMPTED are final."""
-
-    PENDING = "pending"
-    ACTIVE = "active"
-    SUCCEEDED = "succeeded"
-    ABORTED = "aborted"
-    PREEMPTED = "preempted"
-
-    @property
-    def terminal(self) -> bool:
-        return self in (GoalState.SUCCEEDED, GoalState.ABORTED, GoalState.PREEMPTED)
-
-
-def _inflation() -> CostmapParams:
-    return CostmapParams(inflation=InflationParams(inflation_radius=1.0, cost_scaling_factor=3.0))
-
-
-@dataclass(frozen=True)
-class NavigatorConfig:
-    """move_base's parameters for the Navigator (times in s, distances in m, angles in rad)."""
-
-    xy_tolerance: float = 0.05
-    yaw_tolerance: float = math.radians(2.0)
-    blocked_patience: float = 1.0  #: BLOCKED this long before replanning (modes 0, 1)
-    max_replans: int = 5  #: replans while blocked per goal before ABORTED
-    max_early_replans: int = 20  #: replans as new obstacles come into view, per goal
-    stuck_timeout: float = 10.0  #: no progress this long (not waiting): ABORTED
-    progress_distance: float = 0.05  #: moving this far counts as progress
-    progress_angle: float = math.radians(5.0)  #: turning this far counts as progress
-    default_max_speed: float = 0.6  #: cruise speed when the mode's max_speed <= 0
-    goal_tolerance: float = 0.0  #: the planner's tolerance for goals (GetPlan's)
-    replan_interval: float = 0.5  #: at most one early replan (path ahead blocked) per this
-    costmap: CostmapParams = field(default_factory=_inflation)  #: global costmap
-    local_size: float = 5.0  #: local rolling window, square [m]
-    cost_scale: float = 50.0  #: planner: a cell of cost c is 1 + c/cost_scale long
-    fuzzy_cost_scale: float = 1000.0  #: the same in mode 0 (inflation weighs little)
-    clearance_margin: float = 0.1  #: keep-out beyond the footprint's radius (modes 0, 1)
-    controller: ControllerConfig = field(default_factory=ControllerConfig)
-
-    def __post_init__(self) -> None:
-        for name in ("xy_tolerance", "yaw_tolerance", "blocked_patience", "stuck_timeout",
-                     "progress_distance", "progress_angle", "default_max_speed",
-                     "goal_tolerance", "replan_interval", "local_size", "cost_scale",
-                     "fuzzy_cost_scale", "clearance_margin"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise NavigationError(f"navigator {name} = {v!r} is invalid; allowed: >= 0")
-        for name in ("max_replans", "max_early_replans"):
-            v = getattr(self, name)
-            if not isinstance(v, int) or v < 0:
-                raise NavigationError(f"navigator {name} = {v!r} is invalid; allowed: an "
-                                      f"integer >= 0")
-
-
-@dataclass(frozen=True)
-class NavCommand:
-    """One control step: the twist to send (/base_cmd_vel), the goal's state, the controller's
-    status and why (the reason of a final state, or what the robot waits for)."""
-
-    linear: float
-    angular: float
-    state: GoalState
-    status: Status
-    reason: str = ""
-
-
-@dataclass(frozen=True)
-class GoalResult:
-    """A goal that ended: its id (1, 2, ... in sending order), final state, reason, time."""
-
-    goal_id: int
-    state: GoalState
-    reason: str
-    stamp: float
-
-
-def _pose(value: Sequence[float], what: str) -> Pose:
-    try:
-        x, y, yaw = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise NavigationError(f"the {what} is (x, y, yaw) numbers, got {value!r}") from None
-    if not all(math.isfinite(v) for v in (x, y, yaw)):
-        raise NavigationError(f"the {what} must be finite numbers, got ({x}, {y}, {yaw})")
-    return x, y, yaw
 
 
 class Navigator:
@@ -293,26 +207,8 @@ class Navigator:
         s = _pose(start, "start")
         r, c = planner.cell(s[0], s[1])
         if planner.inside(r, c) and planner.blocked[r, c]:
-            planner = self._unblocked_start(planner, s)
+            planner = unblocked_start(planner, s, self.global_costmap.inscribed_radius)
         return planner.make_plan(s, goal, tolerance)
-
-    def _unblocked_start(self, planner: GlobalPlanner, start: Pose) -> GlobalPlanner:
-        """A planner whose costs let the robot out of the inflation it stands in (not out of
-        LETHAL cells: cells within the inscribed radius of the start are lowered to 252)."""
-        costs = np.array(planner.costs)
-        res = self.grid.resolution
-        rad = self.global_costmap.inscribed_radius
-        r0, c0 = planner.cell(start[0], start[1])
-        n = math.ceil(rad / res)
-        rr, cc = np.mgrid[r0 - n:r0 + n + 1, c0 - n:c0 + n + 1]
-        keep = (np.hypot(rr - r0, cc - c0) * res <= rad) & (rr >= 0) & (cc >= 0) \
-            & (rr < costs.shape[0]) & (cc < costs.shape[1])
-        rr, cc = rr[keep], cc[keep]
-        sel = costs[rr, cc] == INSCRIBED
-        costs[rr[sel], cc[sel]] = 252
-        out = GlobalPlanner(costs, res, planner.origin, cost_scale=planner.cost_scale)
-        out.footprint = planner.footprint
-        return out
 
     # -- goals -----------------------------------------------------------------------------------
     def send_goal(self, target: Sequence[float], poses: Sequence[Sequence[float]] = (),
@@ -507,26 +403,9 @@ class Navigator:
 
     def _path_ahead_blocked(self) -> bool:
         """Whether the rest of the plan crosses an INSCRIBED or LETHAL cell now."""
-        if not self.path:
-            return False
-        rest = np.asarray(self.path[self.controller._index:])
-        if not len(rest):
-            return False
-        costs, res, (ox, oy) = self.combined.costs, self.grid.resolution, self.combined.origin
-        rows = np.floor((rest[:, 1] - oy) / res).astype(int)
-        cols = np.floor((rest[:, 0] - ox) / res).astype(int)
-        ok = (rows >= 0) & (cols >= 0) & (rows < costs.shape[0]) & (cols < costs.shape[1])
-        return bool((costs[rows[ok], cols[ok]] >= INSCRIBED).any())
+        return path_blocked(self.path[self.controller._index:], self.combined.costs,
+                            self.grid.resolution, self.combined.origin)
 
     def _update_remaining(self, p: Pose) -> None:
-        if not self.path:
-            self.distance_remaining = 0.0
-            return
-        gx, gy, _ = self.path[-1]
-        straight = math.hypot(gx - p[0], gy - p[1])
-        rest = np.asarray(self.path[self.controller._index:])[:, :2]
-        if not len(rest) or straight <= self.controller.config.approach_distance:
-            self.distance_remaining = straight  # the final approach goes straight at it
-            return
-        along = float(np.hypot(*np.diff(rest, axis=0).T).sum()) if len(rest) > 1 else 0.0
-        self.distance_remaining = math.hypot(rest[0, 0] - p[0], rest[0, 1] - p[1]) + along
+        self.distance_remaining = remaining(self.path, self.controller._index, p,
+                                            self.controller.config.approach_distance)

@@ -25,16 +25,17 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from lowerbase.errors import ConfigError, LowerbaseError, WorldError
 from lowerbase.navigation.controller import Limits
 from lowerbase.navigation.costmap import camera_cloud
+from lowerbase.navigation.loop import control_loop, pose2d
 from lowerbase.navigation.steps import StepController
+from lowerbase.navigation.sync import PoseHistory, StampedSensors
 from lowerbase.world.camera import CameraConfig
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lidar import LaserScan
 from lowerbase.world.localization.poses import compose
+from lowerbase.world.pacing import Pace
 
 log = logging.getLogger(__name__)
 
@@ -100,15 +101,16 @@ class NavigationNode:
         self.odom: Pose | None = None
         self.odom_stamp: float | None = None  #: /odom's header stamp [s, ROS time]
         self.map_to_odom: Pose | None = None
-        self.scan: LaserScan | None = None
-        self.cloud: tuple[np.ndarray, tuple[float, float, float]] | None = None
+        self.scan: LaserScan | None = None  #: the newest /scan
+        #: /odom's poses by stamp, and the scans and clouds waiting for it to reach theirs
+        self.odom_history = PoseHistory()
+        self.sensors = StampedSensors(self.odom_history, self._map_to_odom_at)
         self.last_command: Any = None  #: the Navigator's NavCommand of the last tick
         self.tick_count = 0
         self.stats: dict[str, int] = {"bad_scan": 0, "bad_cloud": 0, "bad_odom": 0,
                                       "bad_footprint": 0, "bad_parameter": 0, "no_pose": 0,
                                       "cmd_vel": 0, "plans": 0}
         self._tail = 0
-        self._new_scan = False
         self.pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
         self._services: list[Any] = []
@@ -117,10 +119,20 @@ class NavigationNode:
         self._published_global: Any = None
         self._ready_printed = False
         self._plans_published = 0
+        self.pace: Pace | None = None  #: set on the master (advertise): wall or ROS time
+
+    # -- time ----------------------------------------------------------------------------------
+    def now(self) -> float:
+        """[s] the node's clock: ROS time (/clock's) under /use_sim_time, else monotonic wall
+        time; every deadline of the Navigator and the StepController is on it."""
+        return self.pace.now() if self.pace is not None else time.monotonic()
 
     # -- set-up --------------------------------------------------------------------------------
     def advertise(self) -> None:
         rospy, io = self.rospy, self.io
+        from lowerbase.world.pacing import pace_for
+
+        self.pace = pace_for(rospy, self.stop)
         import tf2_ros
         from geometry_msgs.msg import Polygon
         from nav_msgs.msg import Odometry
@@ -178,6 +190,11 @@ class NavigationNode:
         with self.lock:
             self.odom = pose
             self.odom_stamp = stamp if stamp > 0 else None  # StepControl: a stalled /odom
+            self.odom_history.add(self._stamp(stamp), pose)
+
+    def _stamp(self, stamp: float) -> float:
+        """A header stamp [s]; an unset one (0) is taken as now (ROS time)."""
+        return stamp if stamp > 0 else float(self.rospy.get_time())
 
     def _on_scan(self, msg: Any) -> None:
         try:
@@ -188,8 +205,10 @@ class NavigationNode:
         except WorldError as exc:
             self._count_bad("bad_scan", exc)
             return
+        stamp = self._stamp(msg.header.stamp.to_sec())
         with self.lock:
-            self.scan, self._new_scan = scan, True
+            self.scan = scan
+            self.sensors.add("scan", stamp, scan)
 
     def _on_cloud(self, msg: Any) -> None:
         camera = self.setup.camera
@@ -202,8 +221,9 @@ class NavigationNode:
         except WorldError as exc:
             self._count_bad("bad_cloud", exc)
             return
+        stamp = self._stamp(msg.header.stamp.to_sec())
         with self.lock:
-            self.cloud = cloud
+            self.sensors.add("cloud", stamp, cloud)
 
     def _on_parameter(self, msg: Any) -> None:
         try:
@@ -239,11 +259,28 @@ class NavigationNode:
         except (tf2_ros.LookupException, tf2_ros.ConnectivityException,
                 tf2_ros.ExtrapolationException):  # no localization (yet)
             return
-        tr, q = t.transform.translation, t.transform.rotation
-        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-        if all(math.isfinite(v) for v in (tr.x, tr.y, yaw)):
+        m2o = pose2d(t.transform)
+        if m2o is not None:
             with self.lock:
-                self.map_to_odom = (float(tr.x), float(tr.y), yaw)
+                self.map_to_odom = m2o
+
+    def _map_to_odom_at(self, stamp: float) -> Pose | None:
+        """TF map -> odom at ``stamp`` (the localization of that scan); the newest one when TF
+        has none there (not yet, or from before the buffer)."""
+        import tf2_ros
+
+        s = self.setup
+        if self._tf_buffer is not None:
+            try:
+                t = self._tf_buffer.lookup_transform(s.map_frame, s.odom_frame,
+                                                     self.rospy.Time.from_sec(stamp))
+                m2o = pose2d(t.transform)
+                if m2o is not None:
+                    return m2o
+            except (tf2_ros.LookupException, tf2_ros.ConnectivityException,
+                    tf2_ros.ExtrapolationException):
+                pass
+        return self.map_to_odom
 
     def map_pose(self) -> Pose | None:
         """The robot in the map frame: TF map -> odom (localization) composed with /odom."""
@@ -253,18 +290,22 @@ class NavigationNode:
             return compose(self.map_to_odom, self.odom)
 
     # -- the loop ------------------------------------------------------------------------------
-    def tick(self) -> None:
-        """One control period: sensors into the costmaps, one twist if anything is active."""
+    def tick(self, now: float | None = None) -> None:
+        """One control period at ``now`` (None: :meth:`now`): sensors into the costmaps, one
+        twist if anything is active."""
         self._lookup_map_to_odom()
-        now = time.monotonic()
+        if now is None:
+            now = self.now()
         with self.lock:
             pose = self.map_pose()
-            if pose is not None and self._new_scan:
-                self._new_scan = False
+            for sensor, at, data in self.sensors.ready():  # each at the pose of its stamp
                 try:
-                    self.navigator.update_sensors(pose, self.scan, self.cloud)
+                    if sensor == "scan":
+                        self.navigator.update_sensors(at, scan=data)
+                    else:
+                        self.navigator.update_sensors(at, cloud=data)
                 except WorldError as exc:
-                    self._count_bad("bad_scan", exc)
+                    self._count_bad(f"bad_{sensor}", exc)
             command: tuple[float, float] | None = None
             if self.steps.active:
                 command = self.steps.tick(self.odom, now, self.odom_stamp) \
@@ -320,23 +361,16 @@ class NavigationNode:
                                                            stamp, frame))
 
     def spin(self) -> None:
+        """The control loop at ``rate_hz`` per second of the node's clock (ROS time under
+        /use_sim_time, woken by /clock) until rospy shuts down."""
         rospy = self.rospy
         rospy.on_shutdown(self.stop.set)
-        period = 1.0 / self.setup.rate_hz
-        every = max(1, round(self.setup.rate_hz / self.setup.costmap_rate_hz))
-        due = time.monotonic()
-        k = 0
-        while not self.stop.is_set() and not rospy.is_shutdown():
-            self.stop.wait(max(due - time.monotonic(), 0.0))
-            if self.stop.is_set():
-                break
-            self.tick()
-            if k % every == 0:
-                self.publish_costmaps(True)
-            k += 1
-            due += period
-            if time.monotonic() - due > 1.0:
-                due = time.monotonic()
+        if self.pace is None:
+            from lowerbase.world.pacing import WallPace
+
+            self.pace = WallPace(self.stop)
+        control_loop(self.pace, self.tick, self.publish_costmaps, self.setup,
+                     lambda: not self.stop.is_set() and not rospy.is_shutdown())
 
     def shutdown(self) -> None:
         self.stop.set()
@@ -357,39 +391,20 @@ class NavigationNode:
 
 def run(setup: NavigationSetup, ros_args: Sequence[str], where: str) -> int:
     """Start rospy on the master in ROS_MASTER_URI, build the node and spin."""
-    import os
-    import sys
+    from lowerbase.rosnode import ros_session
+    from lowerbase.world.pacing import RosPace
 
-    from lowerbase.driver.node import _ToRosout
-    from lowerbase.driver.settings import loopback_address
-    from lowerbase.errors import TransportError
-
-    rospy, _ = import_ros()
-    import rosgraph
-
-    if not rosgraph.is_master_online():
-        raise TransportError(f"no ROS master at {rosgraph.get_master_uri()} (start roscore, or "
-                             "set ROS_MASTER_URI)")
-    address = loopback_address(os.environ, rosgraph.get_master_uri(), [*sys.argv, *ros_args])
-    if address is not None:
-        os.environ["ROS_IP"] = address
-    rospy.init_node(NODE_NAME, argv=[NODE_NAME, *ros_args], anonymous=False)
-    pkg_logger = logging.getLogger("lowerbase")
-    pkg_logger.addHandler(_ToRosout())
-    pkg_logger.propagate = False
-    node = NavigationNode(setup)
-    try:
-        node.advertise()
-        print(f"lowerbase navigation: {rospy.get_name()} on ROS master "
-              f"{rosgraph.get_master_uri()}{' (loopback only)' if address else ''}; {where}; "
-              "waiting for /odom, /scan and TF map -> odom", flush=True)
-        node.spin()
-    finally:
-        node.shutdown()
-        pkg_logger.removeHandler(pkg_logger.handlers[-1])
-        pkg_logger.propagate = True
-        stats = ", ".join(f"{k} {v}" for k, v in sorted(node.stats.items()))
-        print(f"lowerbase navigation: stopped; {stats}", file=sys.stderr, flush=True)
-        if not rospy.is_shutdown():
-            rospy.signal_shutdown("navigation stopped")
+    import_ros()  # one line if ROS or the message modules are missing
+    with ros_session("navigation", NODE_NAME, ros_args) as session:
+        node = NavigationNode(setup)
+        try:
+            node.advertise()
+            clock = "ROS time (/use_sim_time)" if isinstance(node.pace, RosPace) \
+                else "wall time"
+            session.announce(f"{where}; on {clock}; waiting for /odom, /scan and TF "
+                             "map -> odom")
+            node.spin()
+        finally:
+            node.shutdown()
+            session.stopped({**node.stats, **node.sensors.stats})
     return 0

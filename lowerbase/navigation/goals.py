@@ -1,0 +1,159 @@
+"""The Navigator's goal bookkeeping: its parameters (:class:`NavigatorConfig`), the goal states
+(actionlib's), one control step's answer (:class:`NavCommand`), ended goals
+(:class:`GoalResult`), and the plan checks it replans by: :func:`path_blocked` (the rest of the
+plan crosses an INSCRIBED or LETHAL cell) and :func:`unblocked_start` (a start inside inflation
+is planned out of)."""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lowerbase.errors import WorldError
+from lowerbase.navigation.controller import ControllerConfig, Status
+from lowerbase.navigation.costmap import CostmapParams
+from lowerbase.navigation.layers import InflationParams
+from lowerbase.navigation.planner import INSCRIBED, GlobalPlanner
+
+Pose = tuple[float, float, float]
+
+
+class NavigationError(WorldError):
+    """A navigation request that cannot be taken: a NaN or off-map goal."""
+
+
+class GoalState(enum.Enum):
+    """actionlib's goal states; SUCCEEDED, ABORTED and PREEMPTED are final."""
+
+    PENDING = "pending"
+    ACTIVE = "active"
+    SUCCEEDED = "succeeded"
+    ABORTED = "aborted"
+    PREEMPTED = "preempted"
+
+    @property
+    def terminal(self) -> bool:
+        return self in (GoalState.SUCCEEDED, GoalState.ABORTED, GoalState.PREEMPTED)
+
+
+def _inflation() -> CostmapParams:
+    return CostmapParams(inflation=InflationParams(inflation_radius=1.0, cost_scaling_factor=3.0))
+
+
+@dataclass(frozen=True)
+class NavigatorConfig:
+    """move_base's parameters for the Navigator (times in s, distances in m, angles in rad)."""
+
+    xy_tolerance: float = 0.05
+    yaw_tolerance: float = math.radians(2.0)
+    blocked_patience: float = 1.0  #: BLOCKED this long before replanning (modes 0, 1)
+    max_replans: int = 5  #: replans while blocked per goal before ABORTED
+    max_early_replans: int = 20  #: replans as new obstacles come into view, per goal
+    stuck_timeout: float = 10.0  #: no progress this long (not waiting): ABORTED
+    progress_distance: float = 0.05  #: moving this far counts as progress
+    progress_angle: float = math.radians(5.0)  #: turning this far counts as progress
+    default_max_speed: float = 0.6  #: cruise speed when the mode's max_speed <= 0
+    goal_tolerance: float = 0.0  #: the planner's tolerance for goals (GetPlan's)
+    replan_interval: float = 0.5  #: at most one early replan (path ahead blocked) per this
+    costmap: CostmapParams = field(default_factory=_inflation)  #: global costmap
+    local_size: float = 5.0  #: local rolling window, square [m]
+    cost_scale: float = 50.0  #: planner: a cell of cost c is 1 + c/cost_scale long
+    fuzzy_cost_scale: float = 1000.0  #: the same in mode 0 (inflation weighs little)
+    clearance_margin: float = 0.1  #: keep-out beyond the footprint's radius (modes 0, 1)
+    controller: ControllerConfig = field(default_factory=ControllerConfig)
+
+    def __post_init__(self) -> None:
+        for name in ("xy_tolerance", "yaw_tolerance", "blocked_patience", "stuck_timeout",
+                     "progress_distance", "progress_angle", "default_max_speed",
+                     "goal_tolerance", "replan_interval", "local_size", "cost_scale",
+                     "fuzzy_cost_scale", "clearance_margin"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise NavigationError(f"navigator {name} = {v!r} is invalid; allowed: >= 0")
+        for name in ("max_replans", "max_early_replans"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or v < 0:
+                raise NavigationError(f"navigator {name} = {v!r} is invalid; allowed: an "
+                                      f"integer >= 0")
+
+
+@dataclass(frozen=True)
+class NavCommand:
+    """One control step: the twist to send (/base_cmd_vel), the goal's state, the controller's
+    status and why (the reason of a final state, or what the robot waits for)."""
+
+    linear: float
+    angular: float
+    state: GoalState
+    status: Status
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class GoalResult:
+    """A goal that ended: its id (1, 2, ... in sending order), final state, reason, time."""
+
+    goal_id: int
+    state: GoalState
+    reason: str
+    stamp: float
+
+
+def _pose(value: Sequence[float], what: str) -> Pose:
+    try:
+        x, y, yaw = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise NavigationError(f"the {what} is (x, y, yaw) numbers, got {value!r}") from None
+    if not all(math.isfinite(v) for v in (x, y, yaw)):
+        raise NavigationError(f"the {what} must be finite numbers, got ({x}, {y}, {yaw})")
+    return x, y, yaw
+
+
+def path_blocked(rest: Sequence[Pose], costs: np.ndarray, resolution: float,
+                 origin: Sequence[float]) -> bool:
+    """Whether any of the poses ``rest`` lies on an INSCRIBED or LETHAL cell of ``costs``."""
+    if not len(rest):
+        return False
+    pts = np.asarray(rest)
+    rows = np.floor((pts[:, 1] - origin[1]) / resolution).astype(int)
+    cols = np.floor((pts[:, 0] - origin[0]) / resolution).astype(int)
+    ok = (rows >= 0) & (cols >= 0) & (rows < costs.shape[0]) & (cols < costs.shape[1])
+    return bool((costs[rows[ok], cols[ok]] >= INSCRIBED).any())
+
+
+def unblocked_start(planner: GlobalPlanner, start: Pose, inscribed_radius: float
+                    ) -> GlobalPlanner:
+    """A planner whose costs let the robot out of the inflation it stands in (not out of
+    LETHAL cells: cells within the inscribed radius of the start are lowered to 252)."""
+    costs = np.array(planner.costs)
+    res = planner.resolution
+    rad = inscribed_radius
+    r0, c0 = planner.cell(start[0], start[1])
+    n = math.ceil(rad / res)
+    rr, cc = np.mgrid[r0 - n:r0 + n + 1, c0 - n:c0 + n + 1]
+    keep = (np.hypot(rr - r0, cc - c0) * res <= rad) & (rr >= 0) & (cc >= 0) \
+        & (rr < costs.shape[0]) & (cc < costs.shape[1])
+    rr, cc = rr[keep], cc[keep]
+    sel = costs[rr, cc] == INSCRIBED
+    costs[rr[sel], cc[sel]] = 252
+    out = GlobalPlanner(costs, res, planner.origin, cost_scale=planner.cost_scale)
+    out.footprint = planner.footprint
+    return out
+
+
+def remaining(path: Sequence[Pose], index: int, p: Pose, approach_distance: float) -> float:
+    """The distance left along ``path`` from ``p`` (its pose ``index`` on); straight to the
+    goal within ``approach_distance`` of it (the final approach goes straight at it)."""
+    if not path:
+        return 0.0
+    gx, gy, _ = path[-1]
+    straight = math.hypot(gx - p[0], gy - p[1])
+    rest = np.asarray(path[index:])[:, :2]
+    if not len(rest) or straight <= approach_distance:
+        return straight
+    along = float(np.hypot(*np.diff(rest, axis=0).T).sum()) if len(rest) > 1 else 0.0
+    return math.hypot(rest[0, 0] - p[0], rest[0, 1] - p[1]) + along

@@ -1,0 +1,45 @@
+"""The navigation node's control loop on its clock: :func:`control_loop` runs one control tick
+per period of wall time, or of ROS time under /use_sim_time (``lowerbase.world.pacing``: woken
+by each /clock), and hands the tick that clock's time, so every deadline of the Navigator and
+the StepController (stuck, settle, waiting, blocked patience) is on it too. ROS-free."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from lowerbase.world.pacing import Pace, paced_loop
+
+if TYPE_CHECKING:
+    from lowerbase.navigation.node import NavigationSetup
+
+Pose = tuple[float, float, float]
+
+
+def pose2d(transform: Any) -> Pose | None:
+    """(x, y, yaw) of a geometry_msgs/Transform; None if not finite."""
+    tr, q = transform.translation, transform.rotation
+    yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    if not all(math.isfinite(v) for v in (tr.x, tr.y, yaw)):
+        return None
+    return (float(tr.x), float(tr.y), yaw)
+
+
+def control_loop(pace: Pace, tick: Callable[[float], None],
+                 publish_costmaps: Callable[[bool], None], setup: NavigationSetup,
+                 running: Callable[[], bool]) -> None:
+    """``tick(now)`` every ``1 / setup.rate_hz`` s of ``pace``'s clock (``now`` on that clock),
+    the costmaps every ``setup.costmap_rate_hz``; a late tick is caught up within 1 s, a longer
+    stall starts the schedule again (lowerbase.world.pacing.paced_loop)."""
+    every = max(1, round(setup.rate_hz / setup.costmap_rate_hz))
+    k = 0
+
+    def work() -> None:
+        nonlocal k
+        tick(pace.now())
+        if k % every == 0:
+            publish_costmaps(True)
+        k += 1
+
+    paced_loop(pace, work, setup.rate_hz, True, running)

@@ -1,0 +1,105 @@
+"""Each observation at the robot's pose of its own time stamp, as costmap_2d's tf message
+filters do: :class:`PoseHistory` keeps /odom's stamped poses; :class:`StampedSensors` holds each
+/scan and each camera cloud until /odom has reached its stamp, then hands it out once with the
+map pose of that instant (map -> odom at the stamp composed with /odom interpolated there).
+
+Marking a scan at the *latest* pose instead (what the navigation node did) puts it where the
+robot is when the control loop gets to it, not where the lidar was: while turning at 0.5 rad/s a
+scan 0.2 s old lands 0.1 rad off, 25 cm at 2.5 m, and walls smeared that far from the map's own
+walls count as new obstacles (``combined``: 0.15 m), which made move_base replan until it gave
+up. A camera cloud re-marked with every newer scan was smeared the same way.
+
+ROS-free: the times are any clock's seconds (the stamps' own; ROS time under /use_sim_time).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+from lowerbase.world.localization.poses import compose
+
+Pose = tuple[float, float, float]
+
+
+def _wrap(a: float) -> float:
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+class PoseHistory:
+    """Stamped poses, oldest first, ``span`` s of them; :meth:`at` interpolates."""
+
+    def __init__(self, span: float = 5.0) -> None:
+        self.span = span
+        self.samples: deque[tuple[float, Pose]] = deque()
+        self.restarts = 0  #: times the stamps went backwards (a restarted /clock): history reset
+
+    @property
+    def newest(self) -> float | None:
+        return self.samples[-1][0] if self.samples else None
+
+    def add(self, t: float, pose: Pose) -> None:
+        s = self.samples
+        if s and t < s[-1][0]:
+            s.clear()
+            self.restarts += 1
+        s.append((t, pose))
+        while s[-1][0] - s[0][0] > self.span:
+            s.popleft()
+
+    def at(self, t: float) -> Pose | None:
+        """The pose at ``t``, interpolated between the samples around it; None outside them."""
+        s = self.samples
+        if not s or t < s[0][0] - 1e-6 or t > s[-1][0] + 1e-6:
+            return None
+        hi = len(s) - 1
+        while hi > 0 and s[hi - 1][0] >= t:
+            hi -= 1  # newest first: the usual stamp is recent
+        t1, p1 = s[hi]
+        if hi == 0 or t1 <= t:
+            return p1
+        t0, p0 = s[hi - 1]
+        f = (t - t0) / (t1 - t0)
+        return (p0[0] + f * (p1[0] - p0[0]), p0[1] + f * (p1[1] - p0[1]),
+                _wrap(p0[2] + f * _wrap(p1[2] - p0[2])))
+
+
+class StampedSensors:
+    """Observations waiting for /odom to reach their stamp (at most ``depth`` per sensor; an
+    older one is dropped, counted in ``stats``)."""
+
+    def __init__(self, odom: PoseHistory, map_to_odom: Callable[[float], Pose | None],
+                 depth: int = 4) -> None:
+        self.odom = odom
+        self.map_to_odom = map_to_odom  #: map -> odom at a stamp (TF), None: unknown
+        self.depth = depth
+        self.pending: dict[str, deque[tuple[float, Any]]] = {}
+        self.stats = {"waited_out": 0, "too_old": 0, "no_localization": 0}
+
+    def add(self, sensor: str, stamp: float, data: Any) -> None:
+        q = self.pending.setdefault(sensor, deque())
+        q.append((stamp, data))
+        while len(q) > self.depth:
+            q.popleft()
+            self.stats["waited_out"] += 1
+
+    def ready(self) -> list[tuple[str, Pose, Any]]:
+        """(sensor, map pose at its stamp, data) of every observation /odom has caught up with,
+        oldest first per sensor; one older than /odom's history is dropped (counted)."""
+        out: list[tuple[str, Pose, Any]] = []
+        newest = self.odom.newest
+        for sensor, q in self.pending.items():
+            while q and newest is not None and q[0][0] <= newest + 1e-6:
+                stamp, data = q.popleft()
+                odom = self.odom.at(stamp)
+                if odom is None:
+                    self.stats["too_old"] += 1
+                    continue
+                m2o = self.map_to_odom(stamp)
+                if m2o is None:
+                    self.stats["no_localization"] += 1
+                    continue
+                out.append((sensor, compose(m2o, odom), data))
+        return out

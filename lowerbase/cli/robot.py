@@ -38,6 +38,10 @@ def add_subparser(subparsers: Any) -> None:
                    help="where each part's output goes (default: a new directory under /tmp)")
     p.add_argument("--foxglove", nargs="?", const="127.0.0.1:8765", metavar="HOST:PORT",
                    help="serve the chassis live to Foxglove (default 127.0.0.1:8765)")
+    p.add_argument("--truth", metavar="FILE",
+                   help="the emulator writes its ground truth there (t,x,y,yaw,v,w CSV every "
+                   "20 ms, in the emulator's frame: the map pose is the map's start composed "
+                   "with it; lowerbase emulate --truth)")
     p.add_argument("--duration", type=positive_seconds, metavar="S",
                    help="stop after S seconds of wall time (default: until Ctrl-C)")
     p.add_argument("--sim-time", action="store_true",
@@ -119,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
                   f"{speed:g} x real time, /clock from the world", flush=True)
         parts = tuple(p for p in UPPER if p not in args.without)
         sup.start(robot_plan(RobotOptions(map=args.map, parts=parts, foxglove=args.foxglove,
-                                          sim_speed=speed)),
+                                          sim_speed=speed, truth=args.truth)),
                   on_ready=lambda c: print(f"lowerbase robot: {c.spec.name} up", flush=True))
         print(f"lowerbase robot: ready on ROS master {uri}; logs in {log_dir}; Ctrl-C stops",
               flush=True)

@@ -40,6 +40,8 @@ class RobotOptions:
     foxglove: str | None = None
     #: --sim-time: the emulator's speed factor K, the world publishes /clock (None: real time)
     sim_speed: float | None = None
+    #: --truth FILE: the emulator writes its ground truth there (``emulate --truth``, CSV)
+    truth: str | None = None
 
 
 def _lowerbase(opts: RobotOptions, *args: str) -> list[str]:
@@ -62,6 +64,8 @@ def robot_plan(opts: RobotOptions) -> list[ChildSpec]:
     world = ["world", "--map", map_ref, "--truth-udp", str(truth)]
     if opts.foxglove:
         emulate += ["--foxglove", opts.foxglove]
+    if opts.truth:
+        emulate += ["--truth", str(Path(opts.truth).resolve())]
     if opts.sim_speed is not None:  # the world is the simulator: /clock from the truth's t
         emulate += ["--speed", f"{opts.sim_speed:g}"]
         world += ["--publish-clock"]

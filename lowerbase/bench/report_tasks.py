@@ -284,15 +284,23 @@ def plot_battery(result: TasksResult, path: Path) -> None:
 
 
 def run_and_report(scenario: TasksScenario, out: Path, progress: Any = None, *,
-                   debug: bool = False) -> tuple[TasksResult, dict[str, Any] | None]:
+                   debug: bool = False, mcap: str | Path | None = None,
+                   foxglove: str | None = None) -> tuple[TasksResult, dict[str, Any] | None]:
     """Run ``scenario`` (log records to ``out/run.log``) and write its report; the summary is
-    None when Ctrl-C came before the robot was built (nothing to report)."""
+    None when Ctrl-C came before the robot was built (nothing to report). ``mcap``: record
+    the run there; ``foxglove``: HOST:PORT of a live view (docs/recording.md)."""
     from lowerbase.cli.scenario import log_to_file
+    from lowerbase.recording.mcap_writer import open_publisher
 
+    publisher = None
     try:
+        publisher = open_publisher(mcap, foxglove,
+                                   announce=lambda line: print(line, file=sys.stderr))
         with log_to_file(out / "run.log", echo=debug):
-            result = run_tasks_scenario(scenario, progress=progress)
+            result = run_tasks_scenario(scenario, progress=progress, publisher=publisher)
     finally:
+        if publisher is not None:
+            publisher.close()
         if progress is not None:
             progress.done()
     if result.sim is None:
@@ -319,22 +327,26 @@ def exit_code(result: TasksResult) -> int:
 def run_command(args: argparse.Namespace, scenario: TasksScenario, out: Path) -> int:
     """``lowerbase scenario run`` for a task scenario (in this process, simulated clock)."""
     from lowerbase.bench.demo import ProgressBar, TaskStatusLine
+    from lowerbase.cli.scenario import mcap_path
 
     refused = [flag for flag, given in (
         ("--realtime", args.mode == "realtime"), ("--processes", args.mode == "processes"),
-        ("--record", args.record), ("--mcap", args.mcap not in (None, False)),
-        ("--foxglove", args.foxglove)) if given]
+        ("--record", args.record)) if given]
     if refused:
         raise ConfigError(f"a task scenario runs in this process on the simulated clock; "
                           f"drop {refused[0]}")
+    mcap = mcap_path(out, True if args.mcap is None else args.mcap)
     progress: Any = TaskStatusLine(force=True, period=10.0) if args.status else \
         ProgressBar(scenario.duration, force=args.progress)
     print(f"scenario {scenario.name}: {scenario.description or scenario.source} "
           f"({scenario.duration:g} s, tasks, simulated)", file=sys.stderr)
-    result, summary = run_and_report(scenario, out, progress, debug=args.debug)
+    result, summary = run_and_report(scenario, out, progress, debug=args.debug, mcap=mcap,
+                                     foxglove=args.foxglove)
     if summary is None:
         return 130
     print_outcomes(result)
     print(f"report: {out / 'index.html'} (map.png, timeline.png, battery.png, summary.json, "
           f"junit.xml)")
+    if mcap is not None:
+        print(f"mcap: {mcap} (Foxglove, PlotJuggler; `lowerbase mcap to-bag` for rosbag)")
     return exit_code(result)

@@ -42,14 +42,15 @@ class TasksResult:
 
 
 
-def build(sc: TasksScenario, on_status: Callable[[Status], None] | None = None) -> Any:
-    """The TaskSim a scenario runs on."""
+def build(sc: TasksScenario, on_status: Callable[[Status], None] | None = None,
+          tap: Any = None) -> Any:
+    """The TaskSim a scenario runs on (``tap(t, direction, frame_id, data)``: every frame)."""
     from lowerbase.bench.simloop import SimLoop
     from lowerbase.navigation.sim import NavSim
     from lowerbase.tasks.sim import TaskSim
     from lowerbase.world.sim import WorldSim
 
-    world = WorldSim(sc.world.config(), loop=SimLoop(soc=sc.soc))
+    world = WorldSim(sc.world.config(), loop=SimLoop(soc=sc.soc, tap=tap))
     return TaskSim(NavSim(world), config=sc.config, on_status=on_status)
 
 
@@ -77,25 +78,35 @@ def _apply(ts: Any, step: Step, result: TasksResult) -> None:
 
 
 def run_tasks_scenario(sc: TasksScenario,
-                       progress: Callable[[float, Any], None] | None = None
-                       ) -> TasksResult:
+                       progress: Callable[[float, Any], None] | None = None,
+                       publisher: Any = None) -> TasksResult:
     """Run ``sc`` on the simulated clock and evaluate its expectations. Every SAMPLE_PERIOD
     a row of ``samples`` is taken and ``progress(t, sim)`` called; each new plan of the
     navigator goes to ``plans``. Ctrl-C ends the run early (``interrupted``; ``sim`` is None
-    when it came before the robot was built)."""
+    when it came before the robot was built).
+
+    ``publisher``: a ``lowerbase.recording.publisher.RunPublisher`` (an MCAP file, the live
+    view) that gets the run as it goes: every frame, the driver's topics and the truth, the
+    world's, each plan and each robot_status; the caller closes it. It does not change the
+    run (tested)."""
     result = TasksResult(sc)
     holder: list[Any] = []
 
     def on_status(s: Status) -> None:
-        result.history.append((holder[0].now if holder else 0.0, s))
+        t = holder[0].now if holder else 0.0
+        result.history.append((t, s))
+        if publisher is not None:
+            publisher.robot_status(t, s)
 
     wall0 = time.monotonic()
     pending = list(sc.timeline)
     next_sample, path = 0.0, None
     try:
-        ts = build(sc, on_status)
+        ts = build(sc, on_status, publisher)
         holder.append(ts)
         result.sim = ts
+        if publisher is not None:
+            _attach(publisher, ts)
         while ts.now < sc.duration - 1e-9:
             while pending and pending[0].at <= ts.now + 1e-9 and (
                     not pending[0].idle or not ts.machine.active):
@@ -109,8 +120,10 @@ def run_tasks_scenario(sc: TasksScenario,
             if ts.navsim.navigator.path is not path:
                 path = ts.navsim.navigator.path
                 if path:
-                    result.plans.append((ts.now, [(float(p[0]), float(p[1]), float(p[2]))
-                                                  for p in path]))
+                    poses = [(float(p[0]), float(p[1]), float(p[2])) for p in path]
+                    result.plans.append((ts.now, poses))
+                    if publisher is not None:
+                        publisher.world_topics.plan(ts.now, poses)
         result.samples.append(sample(ts))
     except KeyboardInterrupt:
         result.interrupted = True
@@ -119,6 +132,14 @@ def run_tasks_scenario(sc: TasksScenario,
     result.wall_time = time.monotonic() - wall0
     result.outcomes = [(e, *evaluate(e, result.history)) for e in sc.expects]
     return result
+
+
+def _attach(publisher: Any, ts: Any) -> None:
+    """The driver's topics with the truth next to /odom, and the world's topics."""
+    loop = ts.world.loop
+    tr = loop.mcu.truth
+    publisher.attach(loop.driver, loop.clock.now, lambda: (tr.x, tr.y, tr.yaw, tr.v, tr.w))
+    publisher.attach_world(ts.world)
 
 
 def sample(ts: Any) -> tuple[float, ...]:

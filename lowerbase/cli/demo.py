@@ -46,8 +46,8 @@ def add_subparser(subparsers: Any) -> None:
     p.add_argument("--record", metavar="FILE",
                    help="chassis demo: also record the bus (.log, .asc, .blf, .csv or .trc)")
     p.add_argument("--foxglove", nargs="?", const="127.0.0.1:8765", metavar="HOST:PORT",
-                   help="chassis demo: watch the run in Foxglove over WebSocket (default "
-                   "127.0.0.1:8765; docs/recording.md)")
+                   help="watch the run in Foxglove over WebSocket (default 127.0.0.1:8765; "
+                   "docs/recording.md); the task demo streams as fast as it runs")
     p.set_defaults(func=run)
 
 
@@ -61,16 +61,20 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("reports") / f"demo-{time.strftime('%Y%m%d-%H%M%S')}"
     if isinstance(scenario, TasksScenario):
         given = [flag for flag, on in (("--chassis", args.chassis), ("--fast", args.fast),
-                                       ("--record", args.record),
-                                       ("--foxglove", args.foxglove is not None)) if on]
+                                       ("--record", args.record)) if on]
         if given:
             raise ConfigError(f"{given[0]} is for a chassis scenario; the task demo "
                               f"({scenario.name}) always runs on the simulated clock: drop it")
-        return run_tasks(scenario, out, debug=args.debug)
+        if args.foxglove is not None:  # a bad address: one line before anything runs
+            from lowerbase.recording.live import parse_address
+
+            parse_address(args.foxglove)
+        return run_tasks(scenario, out, debug=args.debug, foxglove=args.foxglove)
     return run_chassis(args, scenario, out)
 
 
-def run_tasks(scenario: Any, out: Path, *, debug: bool = False) -> int:
+def run_tasks(scenario: Any, out: Path, *, debug: bool = False,
+              foxglove: str | None = None) -> int:
     from lowerbase.bench.demo import TaskStatusLine
     from lowerbase.bench.report_tasks import exit_code, print_outcomes, run_and_report
 
@@ -81,7 +85,7 @@ def run_tasks(scenario: Any, out: Path, *, debug: bool = False) -> int:
           f"{scenario.duration:g} s simulated, Ctrl-C stops")
     sys.stdout.flush()
     result, summary = run_and_report(scenario, out, TaskStatusLine(force=True, period=10.0),
-                                     debug=debug)
+                                     debug=debug, mcap=out / "run.mcap", foxglove=foxglove)
     if summary is None:
         return 130
     print_outcomes(result)
@@ -93,7 +97,7 @@ def run_tasks(scenario: Any, out: Path, *, debug: bool = False) -> int:
           f"expectations held; {', '.join([*durations, ''])}driven {summary['driven_m']:.1f} m, "
           f"SOC {b['soc_start']:.2f} -> {b['soc_min']:.2f} -> {b['soc_end']:.2f} %.")
     print(f"report: {out / 'index.html'} (map.png, timeline.png, battery.png; summary.json, "
-          f"junit.xml)")
+          f"junit.xml; run.mcap for Foxglove)")
     return exit_code(result)
 
 

@@ -7,6 +7,7 @@ listener, the frame tap and the channels; see there) writing one MCAP file
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from lowerbase.driver.settings import NodeSettings
@@ -22,7 +23,7 @@ from lowerbase.recording.publisher import (
 from lowerbase.recording.sinks import McapSink, Sink
 
 __all__ = ["CAN_FRAME_ID", "DECODED_PREFIX", "FRAMES_TOPIC", "TRUTH_TOPIC", "McapRecorder",
-           "Truth", "topic_name"]
+           "Truth", "open_publisher", "topic_name"]
 
 
 class McapRecorder(RunPublisher):
@@ -36,3 +37,21 @@ class McapRecorder(RunPublisher):
         self.path = sink.path
         super().__init__([sink, *extra], settings=settings, truth_frame=truth_frame,
                          truth_child_frame=truth_child_frame, decoded=decoded)
+
+
+def open_publisher(mcap: str | Path | None, foxglove: str | None, *,
+                   announce: Callable[[str], None] | None = None) -> RunPublisher | None:
+    """The publisher of a run: an :class:`McapRecorder` on ``mcap`` (None: no file) plus the
+    live view on ``foxglove`` (HOST:PORT, None: none), or None when neither is asked. A bad
+    address, a busy port or an unwritable file is one ConfigError line; nothing stays open."""
+    from lowerbase.recording.live import start_live
+
+    live = start_live(foxglove, announce=announce)
+    try:
+        if mcap is not None:
+            return McapRecorder(mcap, extra=(live,) if live is not None else ())
+        return RunPublisher([live]) if live is not None else None
+    except BaseException:
+        if live is not None:
+            live.close()
+        raise

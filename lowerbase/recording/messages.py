@@ -128,6 +128,12 @@ def bms_msg(types: Ros1Types, head: Any, fields: Mapping[str, float | int]) -> A
     return types.message("woosh_msgs/BMS", header=head, **fields)
 
 
+def robot_status_msg(types: Ros1Types, fields: Mapping[str, int | str]) -> Any:
+    """woosh_msgs/RobotStatus from ``lowerbase.tasks.model.Status.fields()`` (as the tasks
+    node's ``RobotStatus(**status.fields())``)."""
+    return types.message("woosh_msgs/RobotStatus", **fields)
+
+
 def status_code_msg(types: Ros1Types, code: int) -> Any:
     return types.message("std_msgs/UInt64", data=int(code) & 0xFFFF_FFFF_FFFF_FFFF)
 

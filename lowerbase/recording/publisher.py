@@ -13,7 +13,8 @@ MCAP file, ``live.FoxgloveSink``), so a recording and the live view carry the sa
   frame as can_msgs/Frame on /can/frames and its decoded signals as JSON on
   /can/decoded/<Message>.
 
-:meth:`RunPublisher.truth_sample` writes the truth alone (``lowerbase emulate``: no driver).
+:meth:`RunPublisher.truth_sample` writes the truth alone (``lowerbase emulate``: no driver);
+:meth:`RunPublisher.robot_status` the task machine's robot_status (task runs).
 Messages are ROS1-serialised (``message_encoding`` "ros1", schemas "ros1msg" with the full
 definition) without a ROS install: the high-rate ones packed directly (:mod:`.fastser`), the
 others as rosbags objects (:mod:`.ros1_types`); each is built and serialised once,
@@ -38,6 +39,7 @@ from lowerbase.recording.ros1_types import ros1_types
 from lowerbase.recording.sinks import ChannelSpec, Sink
 
 TRUTH_TOPIC = "/ground_truth/odom"
+ROBOT_STATUS_TOPIC = "/robot_status"  #: the tasks node's robot_status
 FRAMES_TOPIC = "/can/frames"
 DECODED_PREFIX = "/can/decoded/"
 CAN_FRAME_ID = "can0"  #: header.frame_id of /can/frames (the channel name of recordings)
@@ -203,6 +205,14 @@ class RunPublisher:
         self._emit(TRUTH_TOPIC, pairs, fs.odometry(
             self._seq[TRUTH_TOPIC], ns, self.truth_frame, self.truth_child_frame, (x, y, yaw),
             (v, w), _ZERO9, _ZERO4, 0.0), ns)
+
+    # -- the task machine --------------------------------------------------------------------
+
+    def robot_status(self, t: float, status: Any) -> None:
+        """/robot_status woosh_msgs/RobotStatus at ``t`` [s]: ``status`` a
+        ``lowerbase.tasks.model.Status`` (the tasks node publishes one on each change)."""
+        if self.wants(ROBOT_STATUS_TOPIC, "woosh_msgs/RobotStatus"):
+            self.write(ROBOT_STATUS_TOPIC, m.robot_status_msg(self.types, status.fields()), t)
 
     # -- the driver --------------------------------------------------------------------------
 

@@ -65,8 +65,9 @@ def test_scenario_run_writes_the_task_report(tmp_path: Path,
     out = tmp_path / "rep"
     assert main(["scenario", "run", "tasks/transport", "--out", str(out)]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert "scenario tasks_transport: PASSED (4 passed, 0 failed)" in lines[-2]
-    assert lines[-1].startswith(f"report: {out / 'index.html'}")
+    assert "scenario tasks_transport: PASSED (4 passed, 0 failed)" in lines[-3]
+    assert lines[-2].startswith(f"report: {out / 'index.html'}")
+    assert lines[-1].startswith(f"mcap: {out / 'run.mcap'}") and (out / "run.mcap").is_file()
     summary = json.loads((out / "summary.json").read_text())
     assert summary["kind"] == "tasks" and summary["passed"] and "run.log" in summary["files"]
     assert all((out / f).is_file() for f in summary["files"])
@@ -84,8 +85,7 @@ def test_a_failing_task_scenario_exits_1_with_the_failure_in_junit(
 
 @pytest.mark.parametrize("flags, flag", [(["--realtime"], "--realtime"),
                                          (["--processes"], "--processes"),
-                                         (["--record", "x.blf"], "--record"),
-                                         (["--mcap", "x.mcap"], "--mcap")])
+                                         (["--record", "x.blf"], "--record")])
 def test_wire_options_are_refused_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                               flags: list[str], flag: str) -> None:
     out = tmp_path / "rep"
@@ -128,7 +128,8 @@ def test_demo_runs_the_task_demo_by_default(monkeypatch: pytest.MonkeyPatch,
     import lowerbase.cli.demo as demo
 
     ran: list[Any] = []
-    monkeypatch.setattr(demo, "run_tasks", lambda s, out, debug=False: ran.append(s) or 0)
+    monkeypatch.setattr(demo, "run_tasks",
+                        lambda s, out, debug=False, foxglove=None: ran.append(s) or 0)
     assert main(["demo", "--out", str(tmp_path)]) == 0
     assert ran[0].name == "tasks_demo" and ran[0].source == str(library_tasks()["demo"])
 

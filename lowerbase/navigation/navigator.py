@@ -176,8 +176,17 @@ class Navigator:
                        cloud: tuple[np.ndarray, Sequence[float]] | None = None) -> None:
         """Mark and clear the local costmap at the robot's map ``pose`` (see
         :meth:`LayeredCostmap.update`)."""
-        self.local_costmap.update(pose, scan=scan, cloud=cloud)
-        self.combined.refresh()
+        self.update_observations([(pose, scan, cloud)])
+
+    def update_observations(self, items: Sequence[tuple[Sequence[float], LaserScan | None,
+                                                        tuple[np.ndarray, Sequence[float]] | None]]
+                            ) -> None:
+        """Several updates, each (pose, scan, cloud) at its own pose (the ROS node: each
+        observation at the pose of its stamp); the combined costs are rebuilt once."""
+        for pose, scan, cloud in items:
+            self.local_costmap.update(pose, scan=scan, cloud=cloud)
+        if items:
+            self.combined.refresh()
 
     def clear_costmaps(self) -> None:
         """/move_base/clear_costmaps."""

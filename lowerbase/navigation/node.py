@@ -298,14 +298,12 @@ class NavigationNode:
             now = self.now()
         with self.lock:
             pose = self.map_pose()
-            for sensor, at, data in self.sensors.ready():  # each at the pose of its stamp
-                try:
-                    if sensor == "scan":
-                        self.navigator.update_sensors(at, scan=data)
-                    else:
-                        self.navigator.update_sensors(at, cloud=data)
-                except WorldError as exc:
-                    self._count_bad(f"bad_{sensor}", exc)
+            items = [(at, data, None) if sensor == "scan" else (at, None, data)
+                     for sensor, at, data in self.sensors.ready()]  # each at its stamp's pose
+            try:
+                self.navigator.update_observations(items)
+            except WorldError as exc:
+                self._count_bad("bad_scan", exc)
             command: tuple[float, float] | None = None
             if self.steps.active:
                 command = self.steps.tick(self.odom, now, self.odom_stamp) \

@@ -67,11 +67,12 @@ class PoseHistory:
 
 
 class StampedSensors:
-    """Observations waiting for /odom to reach their stamp (at most ``depth`` per sensor; an
-    older one is dropped, counted in ``stats``)."""
+    """Observations waiting for /odom to reach their stamp (at most ``depth`` per sensor, 1 s
+    of 25 Hz scans: under /use_sim_time driver_base stamps /odom on a /clock that may lag the
+    world's; an older one is dropped, counted in ``stats``)."""
 
     def __init__(self, odom: PoseHistory, map_to_odom: Callable[[float], Pose | None],
-                 depth: int = 4) -> None:
+                 depth: int = 25) -> None:
         self.odom = odom
         self.map_to_odom = map_to_odom  #: map -> odom at a stamp (TF), None: unknown
         self.depth = depth

@@ -130,3 +130,19 @@ def record_world(path: Path, duration: float = 2.0) -> dict[str, int]:
         harness.close()
         rec.close()
     return dict(rec.counts)
+
+
+def record_tasks(path: Path, duration: float = 4.0) -> dict[str, int]:
+    """The library's transport task scenario, its first ``duration`` s (the task is accepted
+    and planned at 1 s), recorded to MCAP as `lowerbase scenario run tasks/transport` does;
+    the message counts."""
+    import dataclasses
+
+    from lowerbase.bench.scenario_tasks import library_tasks, load_tasks_scenario
+    from lowerbase.bench.tasks_run import run_tasks_scenario
+
+    sc = dataclasses.replace(load_tasks_scenario(library_tasks()["transport"]),
+                             duration=duration, expects=[])
+    with McapRecorder(path) as rec:
+        run_tasks_scenario(sc, publisher=rec)
+    return dict(rec.counts)

@@ -16,7 +16,7 @@ import pytest
 from lowerbase.protocol.codec import default_codec
 from lowerbase.recording.publisher import DECODED_PREFIX
 from lowerbase.recording.ros1_types import ros1_types
-from tests.recording.conftest import record_drive, record_world
+from tests.recording.conftest import record_drive, record_tasks, record_world
 
 RPY = {"roll", "pitch", "yaw"}
 
@@ -54,11 +54,12 @@ def _panels(tree: Any) -> Iterator[str]:
 
 @pytest.fixture(scope="module")
 def published(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
-    """topic -> ROS1 type or 'json', of a real recorded drive and a world run."""
+    """topic -> ROS1 type or 'json', of a real recorded drive, a world run and a task run."""
     from mcap.reader import make_reader
 
     out: dict[str, str] = {}
-    for name, record in (("run", record_drive), ("world", record_world)):
+    for name, record in (("run", record_drive), ("world", record_world),
+                         ("tasks", record_tasks)):
         path = Path(tmp_path_factory.mktemp("layout")) / f"{name}.mcap"
         record(path)
         with path.open("rb") as f:
@@ -118,6 +119,12 @@ def test_layout_panels_and_topics(published: dict[str, str]) -> None:
     assert {"/map", "/scan", "/amcl_pose", "/ground_truth/pose"} <= named
     assert configs["3D!map"]["followTf"] == "base_link"
     assert configs["3D!map"]["transforms"]["frame:map"]["visible"]
+    # and the tasks: robot_status as state bands and raw, the navigator's plan on the map
+    assert {"/robot_status", "/move_base/NavfnROS/plan"} <= named
+    bands = {p["value"] for p in configs["StateTransitions!tasks"]["paths"]}
+    assert {"/robot_status.task_state", "/robot_status.robot_state"} <= bands
+    assert configs["RawMessages!robot_status"]["topicPath"] == "/robot_status"
+    assert configs["3D!map"]["topics"]["/move_base/NavfnROS/plan"]["visible"]
 
 
 def test_checker_refuses_what_a_run_does_not_publish(published: dict[str, str]) -> None:
@@ -126,4 +133,5 @@ def test_checker_refuses_what_a_run_does_not_publish(published: dict[str, str]) 
         _check_ros1(published["/odom"], ["pose", "pose", "positon", "x"], "/odom.typo")
     with pytest.raises(AssertionError):
         _check_ros1(published["/battery"], ["batteryPercentage", "@rpy", "yaw"], "/battery")
-    assert "/move_base/NavfnROS/plan" not in published  # hence not in the layout
+    with pytest.raises(AssertionError, match="no field"):
+        _check_ros1(published["/robot_status"], ["state"], "/robot_status.state")

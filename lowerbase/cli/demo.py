@@ -45,6 +45,9 @@ def add_subparser(subparsers: Any) -> None:
                    "one like --chassis (default: tasks/demo, or demo with --chassis)")
     p.add_argument("--record", metavar="FILE",
                    help="chassis demo: also record the bus (.log, .asc, .blf, .csv or .trc)")
+    p.add_argument("--no-mcap", dest="mcap", action="store_false",
+                   help="do not write run.mcap into the report (the task demo's recording "
+                   "takes about 3 x the run's CPU time: docs/recording.md)")
     p.add_argument("--foxglove", nargs="?", const="127.0.0.1:8765", metavar="HOST:PORT",
                    help="watch the run in Foxglove over WebSocket (default 127.0.0.1:8765; "
                    "docs/recording.md); the task demo streams as fast as it runs")
@@ -69,12 +72,13 @@ def run(args: argparse.Namespace) -> int:
             from lowerbase.recording.live import parse_address
 
             parse_address(args.foxglove)
-        return run_tasks(scenario, out, debug=args.debug, foxglove=args.foxglove)
+        return run_tasks(scenario, out, debug=args.debug, foxglove=args.foxglove,
+                         mcap=args.mcap)
     return run_chassis(args, scenario, out)
 
 
 def run_tasks(scenario: Any, out: Path, *, debug: bool = False,
-              foxglove: str | None = None) -> int:
+              foxglove: str | None = None, mcap: bool = True) -> int:
     from lowerbase.bench.demo import TaskStatusLine
     from lowerbase.bench.report_tasks import exit_code, print_outcomes, run_and_report
 
@@ -85,7 +89,8 @@ def run_tasks(scenario: Any, out: Path, *, debug: bool = False,
           f"{scenario.duration:g} s simulated, Ctrl-C stops")
     sys.stdout.flush()
     result, summary = run_and_report(scenario, out, TaskStatusLine(force=True, period=10.0),
-                                     debug=debug, mcap=out / "run.mcap", foxglove=foxglove)
+                                     debug=debug, mcap=out / "run.mcap" if mcap else None,
+                                     foxglove=foxglove)
     if summary is None:
         return 130
     print_outcomes(result)
@@ -97,7 +102,7 @@ def run_tasks(scenario: Any, out: Path, *, debug: bool = False,
           f"expectations held; {', '.join([*durations, ''])}driven {summary['driven_m']:.1f} m, "
           f"SOC {b['soc_start']:.2f} -> {b['soc_min']:.2f} -> {b['soc_end']:.2f} %.")
     print(f"report: {out / 'index.html'} (map.png, timeline.png, battery.png; summary.json, "
-          f"junit.xml; run.mcap for Foxglove)")
+          f"junit.xml{'; run.mcap for Foxglove' if mcap else ''})")
     return exit_code(result)
 
 
@@ -125,7 +130,8 @@ def run_chassis(args: argparse.Namespace, scenario: Any, out: Path) -> int:
           file=err)
     status = StatusLine(force=not args.fast)
     result, summary = execute(scenario, out, mode=mode, record=args.record, progress=status,
-                              debug=args.debug, bus_config=bus, foxglove=args.foxglove)
+                              debug=args.debug, bus_config=bus, foxglove=args.foxglove,
+                              mcap=args.mcap)
     print_outcomes(result, None, stream=err)
     final = summary["final"]
     err_m = final.get("odom_error_m")

@@ -129,7 +129,8 @@ def test_demo_runs_the_task_demo_by_default(monkeypatch: pytest.MonkeyPatch,
 
     ran: list[Any] = []
     monkeypatch.setattr(demo, "run_tasks",
-                        lambda s, out, debug=False, foxglove=None: ran.append(s) or 0)
+                        lambda s, out, debug=False, foxglove=None, mcap=True:
+                        ran.append(s) or 0)
     assert main(["demo", "--out", str(tmp_path)]) == 0
     assert ran[0].name == "tasks_demo" and ran[0].source == str(library_tasks()["demo"])
 
@@ -138,6 +139,7 @@ def test_demo_with_a_task_scenario(tmp_path: Path, capsys: pytest.CaptureFixture
     out = tmp_path / "demo"
     assert main(["demo", "--scenario", "tasks/transport", "--out", str(out)]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
+    assert (out / "run.mcap").is_file() and "run.mcap" in lines[-1]
     assert lines[0].startswith("lowerbase demo: the whole robot")
     assert lines[-2].startswith("demo passed: 4 of 4 expectations held; task 1 took")
     assert lines[-1].startswith(f"report: {out / 'index.html'}")

@@ -42,6 +42,9 @@ def add_subparser(subparsers: Any) -> None:
                    help="the emulator writes its ground truth there (t,x,y,yaw,v,w CSV every "
                    "20 ms, in the emulator's frame: the map pose is the map's start composed "
                    "with it; lowerbase emulate --truth)")
+    p.add_argument("--mcap", metavar="FILE.mcap",
+                   help="record the robot: its ROS topics and the bus's CAN frames into one "
+                   "MCAP file, finished at Ctrl-C (docs/recording.md)")
     p.add_argument("--duration", type=positive_seconds, metavar="S",
                    help="stop after S seconds of wall time (default: until Ctrl-C)")
     p.add_argument("--sim-time", action="store_true",
@@ -101,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--speed K goes with --sim-time (real time runs at 1 x)")
     speed = (args.speed or DEFAULT_SPEED) if args.sim_time else None
     load_map(args.map)  # a wrong map is one line now, not a part ending later
+    if args.mcap is not None and Path(args.mcap).suffix.lower() != ".mcap":
+        raise ConfigError(f"--mcap {args.mcap}: the file name must end in .mcap")
     log_dir = Path(args.log_dir) if args.log_dir else Path(
         tempfile.mkdtemp(prefix="lowerbase-robot-"))
     uri = master_uri()
@@ -123,7 +128,8 @@ def run(args: argparse.Namespace) -> int:
                   f"{speed:g} x real time, /clock from the world", flush=True)
         parts = tuple(p for p in UPPER if p not in args.without)
         sup.start(robot_plan(RobotOptions(map=args.map, parts=parts, foxglove=args.foxglove,
-                                          sim_speed=speed, truth=args.truth)),
+                                          sim_speed=speed, truth=args.truth,
+                                          mcap=args.mcap)),
                   on_ready=lambda c: print(f"lowerbase robot: {c.spec.name} up", flush=True))
         print(f"lowerbase robot: ready on ROS master {uri}; logs in {log_dir}; Ctrl-C stops",
               flush=True)

@@ -42,6 +42,8 @@ class RobotOptions:
     sim_speed: float | None = None
     #: --truth FILE: the emulator writes its ground truth there (``emulate --truth``, CSV)
     truth: str | None = None
+    #: --mcap FILE: a recorder child writes the ROS topics and the bus's frames there
+    mcap: str | None = None
 
 
 def _lowerbase(opts: RobotOptions, *args: str) -> list[str]:
@@ -69,8 +71,11 @@ def robot_plan(opts: RobotOptions) -> list[ChildSpec]:
     if opts.sim_speed is not None:  # the world is the simulator: /clock from the truth's t
         emulate += ["--speed", f"{opts.sim_speed:g}"]
         world += ["--publish-clock"]
-    specs = [
-        ChildSpec("world", _lowerbase(opts, *world), ON_MASTER),
+    specs = [ChildSpec("world", _lowerbase(opts, *world), ON_MASTER)]
+    if opts.mcap:  # before the emulator: every frame; lowerbase.recording.rosrecord
+        specs.append(ChildSpec("recorder", [opts.python, "-m", "lowerbase.recording.rosrecord",
+                                            str(Path(opts.mcap).resolve()), *bus], ON_MASTER))
+    specs += [
         ChildSpec("emulate", _lowerbase(opts, *emulate), "lower computer on"),
         ChildSpec("driver", _lowerbase(opts, "driver", *bus), "link ready"),
     ]

@@ -13,7 +13,7 @@ and /move_base/clear_costmaps (:meth:`~LayeredCostmap.clear`). Costs and layers:
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -38,7 +38,7 @@ from lowerbase.navigation.layers import (
 from lowerbase.world.camera import CameraConfig
 from lowerbase.world.footprint import DEFAULT_FOOTPRINT, DEFAULT_PADDING, Footprint, check_pose
 from lowerbase.world.grid import OccupancyGrid
-from lowerbase.world.lidar import LaserScan, NearScan
+from lowerbase.world.lidar import LaserScan
 
 Pose = tuple[float, float, float]
 
@@ -109,8 +109,6 @@ class CostmapStats:
     updates: int = 0
     observations: int = 0
     ignored_disabled: int = 0   # observations dropped while enable_costmaps is false
-    near_scans: int = 0         # updates from a NearScan ...
-    near_full: int = 0          # ... that needed the full scan after all
 
 
 class LayeredCostmap:
@@ -239,82 +237,22 @@ class LayeredCostmap:
         self._dirty = True
 
     # -- updates ------------------------------------------------------------------------
-    @property
-    def scan_reach(self) -> float:
-        """[m] how far from the base a /scan return can matter to this costmap (a little past
-        raytrace_range and obstacle_range): what :meth:`update` needs of a NearScan."""
-        src = self.params.scan
-        return max(src.raytrace_range, src.obstacle_range) + 0.01
-
     def update(self, pose: Sequence[float], scan: LaserScan | None = None,
                cloud: tuple[np.ndarray, Sequence[float]] | None = None) -> None:
         """One update cycle at the robot's map ``pose``: move the rolling window, then clear
         and mark from the merged /scan (base_link) and a cloud ((n, 3) points in base_link,
-        the sensor's origin in base_link), see :func:`camera_cloud`. A :class:`NearScan`
-        gives exactly the update of its full scan (:meth:`_near_exact`), else its full scan
-        is used."""
+        the sensor's origin in base_link), see :func:`camera_cloud`."""
         checked = check_pose(pose)
-        src = self.params.scan
-        extra = [] if cloud is None else [cloud_observation(cloud[0], cloud[1], checked,
-                                                            self.params.cloud)]
-        if isinstance(scan, NearScan) and scan.full is not None:
-            near = scan
-            if scan.reach < self.scan_reach:
-                scan = scan.full()
-            else:
-                obs = [scan_observation(scan, checked, src), *extra]
-                self.stats.near_scans += 1
-                self.update_observations(checked, obs, lambda data: self._near_exact(
-                    near, obs, data) or self._full(near, checked, extra))
-                return
-        obs = [] if scan is None else [scan_observation(scan, checked, src)]
-        self.update_observations(checked, obs + extra)
+        obs: list[Observation] = []
+        if scan is not None:
+            obs.append(scan_observation(scan, checked, self.params.scan))
+        if cloud is not None:
+            obs.append(cloud_observation(cloud[0], cloud[1], checked, self.params.cloud))
+        self.update_observations(checked, obs)
 
-    def _full(self, near: NearScan, pose: Pose, extra: list[Observation]) -> list[Observation]:
-        assert near.full is not None
-        self.stats.near_full += 1
-        return [scan_observation(near.full(), pose, self.params.scan), *extra]
-
-    def _near_exact(self, near: NearScan, obs: list[Observation], data: np.ndarray) -> bool:
-        """Whether ``data`` (the obstacle layer updated from ``obs``, the NearScan's) is what
-        its full scan gives. Its beams below ``reach`` are the full scan's; a beam beyond
-        (finite here, or possibly in an ``unknown`` beam) only clears, to raytrace_range along
-        its direction, and the cell it ends in is that of any range beyond reach (the same
-        point up to rounding, checked to lie > 1e-8 cells from an inner cell edge). So the full
-        update differs at most in clearing the unknown beams' cells: none of them may hold anything
-        this update does not mark."""
-        layer = self.obstacle_layer
-        assert layer is not None
-        src, cm = self.params.scan, layer.map
-        r = np.asarray(near.ranges, float)
-        far = near.unknown | (r >= near.reach)
-        if not src.clearing or not far.any():
-            return True
-        a = near.angles[far]
-        reach = np.where(near.unknown[far], near.reach, r[far])
-        pts = np.column_stack((reach * np.cos(a), reach * np.sin(a), np.zeros(a.size)))
-        rays = _observation(pts, (0.0, 0.0, 0.0), self.pose, src)
-        ends = layer.clearing_ends(rays)
-        if ends is None:
-            return True
-        for v, o, n in ((ends[0], cm.origin[0], cm.width), (ends[1], cm.origin[1], cm.height)):
-            f = (v - o) / cm.resolution
-            edge = np.round(f)  # the grid's own edges (0, n) are clipped to the grid anyway
-            if ((np.abs(f - edge) < 1e-8) & (edge > 0) & (edge < n)).any():
-                return False
-        unknown = rays.points[near.unknown[far]]
-        cols, rows = layer.clearing_cells(replace(rays, points=unknown))
-        alt = data.copy()
-        alt[rows, cols] = FREE_SPACE
-        layer.mark(obs, alt)
-        return bool(np.array_equal(alt[rows, cols], data[rows, cols]))
-
-    def update_observations(self, pose: Sequence[float], observations: Sequence[Observation],
-                            exact: Callable[[np.ndarray], bool | list[Observation]] | None
-                            = None) -> None:
-        """As :meth:`update` with observations already in the map frame. ``exact(data)``:
-        True if ``data`` (the obstacle layer updated from ``observations``) is right, else the
-        observations to update from instead."""
+    def update_observations(self, pose: Sequence[float], observations: Sequence[Observation]
+                            ) -> None:
+        """As :meth:`update` with observations already in the map frame."""
         self.pose = check_pose(pose)
         self.stats.updates += 1
         if self.params.rolling_window:
@@ -324,21 +262,11 @@ class LayeredCostmap:
             if self.obstacle_layer is not None:
                 self.obstacle_layer.map.shift_to(origin)
         if self.obstacle_layer is not None and observations:
-            if not self.enabled:
-                self.stats.ignored_disabled += len(observations)
-            elif exact is None:
+            if self.enabled:
                 self.obstacle_layer.update(list(observations))
                 self.stats.observations += len(observations)
             else:
-                trial = self.obstacle_layer.map.data.copy()
-                self.obstacle_layer.update(list(observations), trial)
-                ok = exact(trial)
-                if ok is True:
-                    self.obstacle_layer.map.data = trial
-                else:
-                    assert ok is not False
-                    self.obstacle_layer.update(ok)
-                self.stats.observations += len(observations)
+                self.stats.ignored_disabled += len(observations)
         self._clear_footprint()
         self._dirty = True
 

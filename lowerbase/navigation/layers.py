@@ -259,46 +259,25 @@ class ObstacleLayer:
     def clear_cells(self, cols: np.ndarray, rows: np.ndarray) -> None:
         self.map.data[rows, cols] = FREE_SPACE
 
-    def update(self, observations: list[Observation], data: np.ndarray | None = None) -> None:
-        """All clearing first, then all marking (ObstacleLayer::updateBounds); into ``data``
-        (the layer's grid, or a copy of it) if given."""
-        out = self.map.data if data is None else data
-        for obs in observations:
-            cols, rows = self.clearing_cells(obs)
-            out[rows, cols] = FREE_SPACE
-        self.mark(observations, out)
-
-    def clearing_ends(self, obs: Observation) -> tuple[np.ndarray, np.ndarray] | None:
-        """Where each of the observation's clearing rays ends (map frame, shortened to
-        raytrace_range and to the grid), or None if it clears nothing."""
+    def update(self, observations: list[Observation]) -> None:
+        """All clearing first, then all marking (ObstacleLayer::updateBounds)."""
         cm = self.map
-        if not obs.clearing or obs.points.size == 0:
-            return None
-        oc, orow = cm.world_to_map(obs.origin[0], obs.origin[1])
-        if not cm.inside(oc, orow):
-            return None  # costmap_2d: "sensor origin out of map bounds", no clearing
         box = (cm.origin[0], cm.origin[1], cm.origin[0] + cm.width * cm.resolution - 1e-9,
                cm.origin[1] + cm.height * cm.resolution - 1e-9)
-        return clip_rays(obs.origin[0], obs.origin[1], obs.points[:, 0], obs.points[:, 1],
-                         obs.raytrace_range, box)
-
-    def clearing_cells(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
-        """(cols, rows) of the cells the observation clears (costmap_2d's raycastFreespace)."""
-        cm = self.map
-        ends_xy = self.clearing_ends(obs)
-        if ends_xy is None:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        oc, orow = cm.world_to_map(obs.origin[0], obs.origin[1])
-        ec, er = cm.world_to_map(*ends_xy)
-        ends = np.unique(np.clip(er, 0, cm.height - 1) * cm.width
-                         + np.clip(ec, 0, cm.width - 1))
-        cols, rows = line_cells(int(oc), int(orow), ends % cm.width, ends // cm.width)
-        ok = cm.inside(cols, rows)
-        return cols[ok], rows[ok]
-
-    def mark(self, observations: list[Observation], data: np.ndarray) -> None:
-        """Mark LETHAL at each return within obstacle_range and the height limits."""
-        cm = self.map
+        for obs in observations:
+            if not obs.clearing or obs.points.size == 0:
+                continue
+            oc, orow = cm.world_to_map(obs.origin[0], obs.origin[1])
+            if not cm.inside(oc, orow):
+                continue  # costmap_2d: "sensor origin out of map bounds", no clearing
+            ex, ey = clip_rays(obs.origin[0], obs.origin[1], obs.points[:, 0],
+                               obs.points[:, 1], obs.raytrace_range, box)
+            ec, er = cm.world_to_map(ex, ey)
+            ends = np.unique(np.clip(er, 0, cm.height - 1) * cm.width
+                             + np.clip(ec, 0, cm.width - 1))
+            cols, rows = line_cells(int(oc), int(orow), ends % cm.width, ends // cm.width)
+            ok = cm.inside(cols, rows)
+            cm.data[rows[ok], cols[ok]] = FREE_SPACE
         for obs in observations:
             if not obs.marking or obs.points.size == 0:
                 continue
@@ -309,7 +288,7 @@ class ObstacleLayer:
                 & (d2 < obs.obstacle_range ** 2)
             cols, rows = cm.world_to_map(p[keep, 0], p[keep, 1])
             ok = cm.inside(cols, rows)
-            data[rows[ok], cols[ok]] = LETHAL_OBSTACLE
+            cm.data[rows[ok], cols[ok]] = LETHAL_OBSTACLE
 
 
 def combine_max(master: np.ndarray, layer: np.ndarray) -> None:

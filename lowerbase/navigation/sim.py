@@ -17,12 +17,6 @@ scan and pose. Nothing reads the local costmap meanwhile, and a standing robot's
 only re-mark the same returns: the robot drives exactly as with every update done
 (``idle_sensing=True``; tests/navigation/test_navsim_idle.py compares both, tick by tick).
 
-The local costmap reads /scan returns only up to about 3 m, so its scan is cast only that far
-(:meth:`WorldSim.near_scan`; the noise is drawn as for the full scan, which amcl gets bit for
-bit): the costmap's update is exactly that of the full scan, or it asks for the full scan
-(:meth:`LayeredCostmap.update`; ``near_scans=False`` casts in full, the reference of
-tests/navigation/test_navsim_near.py).
-
 :meth:`NavSim.go_to` is what tests, scenarios and benchmarks use: send a goal and run until it
 ends, answering a :class:`NavRun` (state, reason, time, the true path driven, contacts, the
 largest speed commanded and driven).
@@ -82,10 +76,8 @@ class NavSim:
 
     def __init__(self, world: WorldSim, navigator: Navigator | None = None,
                  sensor_rate: float = 5.0, idle_sensing: bool = False,
-                 idle_still: tuple[float, float] = (1e-3, math.radians(0.05)),
-                 near_scans: bool = True) -> None:
+                 idle_still: tuple[float, float] = (1e-3, math.radians(0.05))) -> None:
         self.world = world
-        self.near_scans = near_scans
         self.idle_sensing = idle_sensing
         self.idle_still = idle_still
         self._sensed_at: Pose | None = None  #: the pose of the last local costmap update
@@ -156,11 +148,7 @@ class NavSim:
         cloud = None
         if w.camera is not None and w.frame is not None:
             cloud = camera_cloud(w.frame.points_without_planes, w.camera.config)
-        if scan is True:
-            use = w.near_scan(self.navigator.local_costmap.scan_reach) if self.near_scans \
-                else w.scan
-        else:
-            use = scan if isinstance(scan, LaserScan) else None
+        use = w.scan if scan is True else scan if isinstance(scan, LaserScan) else None
         self.navigator.update_sensors(pose, scan=use, cloud=cloud)
         self._sensed_at = (float(pose[0]), float(pose[1]), float(pose[2]))
         self._deferred = None

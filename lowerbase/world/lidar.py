@@ -12,7 +12,7 @@ the base origin falls into it. The scan's motion during one sweep is not modelle
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,8 +23,6 @@ from lowerbase.world.raycast import Scene, cast_grid, cast_solids, solids_taller
 TWO_PI = 2.0 * math.pi
 #: one scan's random numbers: range noise (standard normal), dropouts (uniform) or None
 Draws = tuple[np.ndarray, np.ndarray | None]
-#: [m] kept between a near scan's cap and what it must guarantee (float32 ranges, rounding)
-NEAR_MARGIN = 1e-3
 
 
 @dataclass(frozen=True)
@@ -45,20 +43,6 @@ class LaserScan:
     @property
     def angles(self) -> np.ndarray:
         return self.angle_min + np.arange(self.ranges.size) * self.angle_increment
-
-
-@dataclass(frozen=True)
-class NearScan(LaserScan):
-    """A merged scan cast only as far as a consumer that reads returns up to ``reach`` [m from
-    the base origin] needs (:meth:`LidarRig.near_scan`; the local costmap). Against the full
-    scan of the same tick and noise: a beam below ``reach`` is the full scan's value exactly; a
-    finite beam at or beyond ``reach`` says only that the full beam is finite, >= ``reach`` and
-    < range_max; an ``unknown`` beam (NaN here) may be such a return, or no finite return.
-    ``full()`` answers the full scan."""
-
-    reach: float = 0.0
-    unknown: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
-    full: Callable[[], LaserScan] | None = field(default=None, compare=False, repr=False)
 
 
 def _check(name: str, key: str, value: float, lo: float, hi: float, unit: str,
@@ -183,32 +167,12 @@ class Lidar:
 
     def scan(self, scene: Scene, pose: tuple[float, float, float], stamp: float,
              grid_distance: np.ndarray | None = None, draws: Draws | None = None) -> LaserScan:
-        return self.message(stamp, self.measure(self.true_ranges(scene, pose, grid_distance),
-                                                draws))
-
-    def message(self, stamp: float, ranges: np.ndarray) -> LaserScan:
-        """This lidar's LaserScan with ``ranges``."""
         cfg = self.config
         period = 1.0 / cfg.rate_hz
         return LaserScan(cfg.frame_id, stamp, cfg.angle_min,
                          cfg.angle_min + (cfg.beams - 1) * cfg.angular_step, cfg.angular_step,
-                         period / cfg.beams, period, cfg.range_min, cfg.range_max, ranges)
-
-    def near_cap(self, reach: float, normal: np.ndarray) -> float | None:
-        """How far to cast so that every beam with nothing closer reads at least ``reach`` from
-        the base origin whatever lies beyond (its noise ``normal`` taken into account), or None
-        (no such cap short of range_max). A true distance D >= cap measures
-        ``clip(D (1 + k n) + s n)`` >= cap (1 + k n) + s n >= reach + |mount| + margin (monotone
-        in D while 1 + k n > 0), and a return r from the mount lies >= r - |mount| from the
-        base."""
-        cfg = self.config
-        need = reach + math.hypot(cfg.x, cfg.y) + NEAR_MARGIN
-        n = min(float(normal.min(initial=0.0)), 0.0)
-        gain = 1.0 + cfg.range_sigma_per_m * n
-        if gain <= 0.0:
-            return None
-        cap = (need - cfg.range_sigma * n) / gain + NEAR_MARGIN
-        return cap if cap + NEAR_MARGIN < cfg.range_max else None
+                         period / cfg.beams, period, cfg.range_min, cfg.range_max,
+                         self.measure(self.true_ranges(scene, pose, grid_distance), draws))
 
 
 @dataclass(frozen=True)
@@ -332,56 +296,18 @@ class LidarRig:
         """Each lidar's own scan, in its own frame. The map is cast for all lidars' rays in one
         :func:`cast_grid` call (fewer, larger array operations; each ray's result is its own,
         bit for bit as cast alone: tests/world/test_lidar.py)."""
-        parts = self._cast(scene, pose, [lidar.config.range_max for lidar in self.lidars])
-        ds: Sequence[Draws | None] = draws if draws is not None else [None] * len(parts)
-        return [lidar.scan(scene, pose, stamp, part, d)
-                for lidar, part, d in zip(self.lidars, parts, ds, strict=True)]
-
-    def _cast(self, scene: Scene, pose: tuple[float, float, float],
-              caps: Sequence[float]) -> list[np.ndarray]:
-        """Each lidar's grid distances, its rays cast as far as its cap, in one call."""
         rays = [lidar.rays(pose) for lidar in self.lidars]
         sizes = [ang.size for _, _, ang in rays]
         xs = np.concatenate([np.full(n, x) for (x, _, _), n in zip(rays, sizes, strict=True)])
         ys = np.concatenate([np.full(n, y) for (_, y, _), n in zip(rays, sizes, strict=True)])
-        ranges = np.concatenate([np.full(n, cap) for cap, n in zip(caps, sizes, strict=True)])
+        ranges = np.concatenate([np.full(n, lidar.config.range_max)
+                                 for lidar, n in zip(self.lidars, sizes, strict=True)])
         dist = cast_grid(scene.mask, scene.grid, xs, ys, np.concatenate([a for *_, a in rays]),
                          ranges, scene.grid_field).distance
-        return np.split(dist, np.cumsum(sizes)[:-1])
-
-    def near_scan(self, scene: Scene, pose: tuple[float, float, float], stamp: float,
-                  draws: Sequence[Draws], reach: float,
-                  full: Callable[[], LaserScan] | None = None) -> NearScan | None:
-        """The merged scan with these ``draws`` cast only as far as a consumer reading returns
-        up to ``reach`` needs (:class:`NearScan`; None: capping would not shorten any ray).
-
-        Each lidar's rays are cast to :meth:`Lidar.near_cap`. A beam with a return closer than
-        the cap (the same first hit as the full cast, the same noise) measures exactly as in
-        the full scan; the others read at least ``reach`` from the base in the full scan, or
-        nothing finite, and are left out of the merge: a merged beam whose nearest kept return
-        is below ``reach`` is exact (the left-out ones are farther), one at or beyond it stays
-        there, and one without a kept finite return is ``unknown`` (a left-out return may fall
-        into it, depending on its range)."""
-        caps = [lidar.near_cap(reach, d[0]) for lidar, d in zip(self.lidars, draws, strict=True)]
-        if any(cap is None for cap in caps):
-            return None
-        scans, left_out = [], False
-        parts = self._cast(scene, pose, [c + NEAR_MARGIN for c in caps if c is not None])
-        for lidar, part, cap, d in zip(self.lidars, parts, caps, draws, strict=True):
-            true = lidar.true_ranges(scene, pose, part)
-            ranges = lidar.measure(true, d)
-            beyond = ~(true < cap)
-            if d[1] is not None:  # a dropout is NaN at any range
-                beyond &= ~(d[1] < lidar.config.dropout_prob)
-            ranges[beyond] = np.nan
-            left_out |= bool(beyond.any())
-            scans.append(lidar.message(stamp, ranges))
-        m = self.merger.merge(scans, stamp)
-        unknown = ~np.isfinite(m.ranges) if left_out else np.zeros(m.ranges.size, dtype=bool)
-        ranges = np.where(unknown, np.float32(np.nan), m.ranges)
-        return NearScan(m.frame_id, m.stamp, m.angle_min, m.angle_max, m.angle_increment,
-                        m.time_increment, m.scan_time, m.range_min, m.range_max, ranges,
-                        reach=reach, unknown=unknown, full=full)
+        parts = np.split(dist, np.cumsum(sizes)[:-1])
+        ds: Sequence[Draws | None] = draws if draws is not None else [None] * len(parts)
+        return [lidar.scan(scene, pose, stamp, part, d)
+                for lidar, part, d in zip(self.lidars, parts, ds, strict=True)]
 
     def scan(self, scene: Scene, pose: tuple[float, float, float], stamp: float,
              draws: Sequence[Draws] | None = None) -> LaserScan:

@@ -157,7 +157,6 @@ class WorldSim(SteppedLoop):
         self.frame: CameraFrame | None = None  #: the latest camera frame
         self.estimate: PoseEstimate | None = None  #: the latest /amcl_pose
         self.scans = self.frames = 0
-        self.near_scans = 0  #: scans cast only as far as a near consumer needs (near_scan)
         self._scan_period = 1.0 / rig.rate_hz
         self._frame_period = 1.0 / camera.config.rate_hz if camera is not None else math.inf
         self._next_scan = self.loop.now
@@ -251,26 +250,6 @@ class WorldSim(SteppedLoop):
         if self._draws is None:
             self._draws = self.rig.draw()
         return DeferredScan(t, pose, draws=self._draws)
-
-    def near_scan(self, reach: float) -> LaserScan | None:
-        """The last scan tick for a consumer reading returns only up to ``reach`` [m] from the
-        base (the local costmap): the full scan if it was cast already, else a
-        :class:`~lowerbase.world.lidar.NearScan` cast only that far with the tick's random
-        numbers, drawn now as :meth:`skip_scan` does, so every other scan is bit for bit what
-        it would have been and this tick's full scan (:attr:`scan`, for amcl or a recorder;
-        ``NearScan.full``) is cast again with the same numbers. None before the first tick."""
-        if self._tick is None or self._scan is not None:
-            return self.scan
-        t, pose = self._tick
-        if self._draws is None:
-            self._draws = self.rig.draw()
-        d = DeferredScan(t, pose, draws=self._draws)
-        near = self.rig.near_scan(self.scene_at(t), pose, t, self._draws, reach,
-                                  full=lambda: self.deferred_scan(d))
-        if near is None:
-            return self.scan
-        self.near_scans += 1
-        return near
 
     def deferred_scan(self, d: DeferredScan) -> LaserScan:
         """The scan :meth:`skip_scan` stood for, bit for bit what :attr:`scan` gave then."""

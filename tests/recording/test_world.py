@@ -56,9 +56,9 @@ def world_run(tmp_path_factory: pytest.TempPathFactory) -> WorldRun:
     estimates: list[Any] = []
     original = Localizer.update
 
-    def update(self: Localizer, odom: Any, scan: Any) -> Any:
+    def update(self: Localizer, odom: Any, scan: Any, truth: Any = None) -> Any:
         scans[to_ns(scan.stamp)] = np.array(scan.ranges, copy=True)
-        est = original(self, odom, scan)
+        est = original(self, odom, scan, truth)
         if est is not None:
             estimates.append(est)
         return est

@@ -83,6 +83,7 @@ CHECKS: dict[str, Check] = {
     "lowerbase robot --map empty_room --without navigation --without tasks": Check(
         "skip", why=ROS),
     "lowerbase robot --map warehouse --sim-time": Check("skip", why=ROS),
+    "lowerbase robot --map warehouse --mcap robot.mcap": Check("skip", why=ROS),
     "lowerbase robot --map warehouse --sim-time --speed 4 --without navigation --without "
     "tasks": Check("skip", why=ROS),
     "lowerbase emulate --fleet 100": Check("start", "Ctrl-C stops"),
@@ -159,6 +160,8 @@ CHECKS: dict[str, Check] = {
         why="bounded to 1 s"),
     "lowerbase scenario run watchdog --mcap watchdog.mcap": Check(
         "run", "mcap: watchdog.mcap", files=("watchdog.mcap",)),
+    "lowerbase scenario run tasks/transport --mcap transport.mcap": Check(
+        "run", "mcap: transport.mcap", files=("transport.mcap",)),
     "lowerbase mcap info prep/run.mcap": Check("run", "/ground_truth/odom"),
     "lowerbase mcap to-bag prep/run.mcap run.bag": Check("run", "-> run.bag",
                                                           files=("run.bag",)),

@@ -64,8 +64,26 @@ def listen_to_lower(bus: Any) -> bool:
     return True
 
 
+#: [s] a frame's receive stamp older than this (or in the future) is not believed: a bus whose
+#: timestamps are not the wall clock's (a replay, an adapter's own counter)
+MAX_RECEIVE_AGE = 5.0
+
+
+def receive_age(msg: Any, wall_now: float) -> float:
+    """[s] how long ``msg`` waited since the bus received it (its ``timestamp``: the kernel's
+    receive time on SocketCAN and udp_multicast), 0.0 when the stamp is missing or unbelievable.
+    A reader that falls behind (a busy host) then still knows when each frame arrived."""
+    stamp = getattr(msg, "timestamp", None)
+    if not isinstance(stamp, (int, float)) or not math.isfinite(stamp):
+        return 0.0
+    age = wall_now - float(stamp)
+    return age if 0.0 <= age <= MAX_RECEIVE_AGE else 0.0
+
+
 class BusLink:
-    """A python-can bus that is closed on any error and reopened every ``reopen_period``."""
+    """A python-can bus that is closed on any error and reopened every ``reopen_period``.
+
+    ``last_age`` is :func:`receive_age` of the frame being handed to ``on_frame``."""
 
     def __init__(
         self, config: dict[str, Any], reopen_period: float = 1.0, *,
@@ -86,6 +104,7 @@ class BusLink:
         self.rx_errors = 0
         self.reopens = 0
         self.frames = 0
+        self.last_age = 0.0  #: [s, wall] since the frame now in ``on_frame`` was received
 
     def _open(self, config: dict[str, Any]) -> Any:
         bus = self._open_bus(config)
@@ -155,6 +174,7 @@ class BusLink:
             return self.reopen_period
         if msg is not None and is_catalog_frame(msg):
             self.frames += 1
+            self.last_age = receive_age(msg, time.time())
             on_frame(msg.arbitration_id, bytes(msg.data))
         return 0.0
 

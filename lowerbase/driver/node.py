@@ -172,8 +172,15 @@ class DriverNode:
     # -- core -> ROS -------------------------------------------------------------------------
 
     def on_frame(self, frame_id: int, data: bytes) -> None:
+        # stamped when the bus received it: a reader that fell behind (a busy host, this lock
+        # held by the tick) hands a backlog over at once, and the core's timing checks (wheel
+        # sample gaps, Uptime) must see the frames' spacing, not the burst
+        age = getattr(self.link, "last_age", 0.0)
         with self.lock:
-            self.core.on_frame(frame_id, data)
+            clock = self.core.clock
+            ago = getattr(clock, "ago", None)
+            stamp = ago(age) if ago is not None else clock.now() - age
+            self.core.on_frame(frame_id, data, stamp)
 
     def on_bus_down(self, why: str) -> None:
         with self.lock:

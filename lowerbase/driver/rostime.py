@@ -12,6 +12,7 @@ holds the start until the first /clock arrives (before it ROS time is 0).
 from __future__ import annotations
 
 import threading
+import time
 from typing import Any
 
 from lowerbase.clock import Clock
@@ -21,6 +22,9 @@ POLL = 0.1
 #: [s] of clock time after which a late loop stops catching up, or a clock that jumped back is
 #: followed at once
 SLACK = 1.0
+#: [s, wall] over which :meth:`RosClock.ago` measures /clock's speed; the fastest it believes
+RATE_WINDOW = 1.0
+MAX_RATE = 100.0
 
 
 class RosClock:
@@ -28,12 +32,27 @@ class RosClock:
 
     is_simulated = False
 
-    def __init__(self, rospy: Any, stop: threading.Event | None = None) -> None:
+    def __init__(self, rospy: Any, stop: threading.Event | None = None,
+                 wall: Any = time.monotonic) -> None:
         self.rospy = rospy
         self.stop = stop or threading.Event()
+        self._wall = wall
+        self._mark: tuple[float, float] | None = None  # (wall, ROS time) of the rate's window
+        self.rate = 1.0  #: ROS seconds per wall second (/clock's speed), measured
 
     def now(self) -> float:
         return float(self.rospy.get_time())
+
+    def ago(self, wall_seconds: float) -> float:
+        """The ROS time ``wall_seconds`` of wall time ago, at /clock's measured speed (a frame
+        that waited in the socket, stamped when it arrived)."""
+        now, wall = self.now(), self._wall()
+        if self._mark is None or now < self._mark[1]:
+            self._mark = (wall, now)
+        elif wall - self._mark[0] >= RATE_WINDOW:
+            self.rate = min(max((now - self._mark[1]) / (wall - self._mark[0]), 0.0), MAX_RATE)
+            self._mark = (wall, now)
+        return now - wall_seconds * self.rate
 
     def _stopped(self) -> bool:
         return self.stop.is_set() or bool(self.rospy.is_shutdown())

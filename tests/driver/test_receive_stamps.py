@@ -1,0 +1,126 @@
+"""A driver that falls behind its bus (a busy host: the reader starved, the node's lock held by
+the tick) gets a backlog of frames at once. The core must judge wheel-sample gaps on when the
+frames arrived, not on when it got to them: handled as a burst at one instant, the backlog reads
+as a gap and a Counter discontinuity, and /odom_raw re-baselines and loses the robot's motion
+(seen in `lowerbase robot` on a loaded host: 34 re-baselines in real time, 152 at --speed 2,
+and amcl lost the robot). The bus's receive stamps (the kernel's, on udp_multicast and
+SocketCAN) reach the core through ``BusLink.last_age``."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import can
+import pytest
+
+from lowerbase.bench.simloop import SimLoop
+from lowerbase.clock import SimClock
+from lowerbase.driver.core import LinkState
+from lowerbase.driver.links import MAX_RECEIVE_AGE, BusLink, receive_age
+from lowerbase.driver.rostime import RosClock
+
+STALL = 0.3  #: [s] the reader does not run; then it handles everything that queued up
+EVERY = 1.0  #: [s] between stalls
+
+
+class StallingLoop(SimLoop):
+    """SimLoop whose driver handles the lower computer's frames late, in bursts: nothing for
+    ``STALL`` s every ``EVERY`` s, then the backlog at once, stamped as ``stamped`` says."""
+
+    def __init__(self, stamped: bool) -> None:
+        super().__init__(bms=None)
+        self.stamped = stamped
+        self.backlog: list[tuple[float, int, bytes]] = []
+
+    def step(self) -> None:
+        for frame_id, data in self._to_mcu:
+            self.mcu.receive(frame_id, data)
+        self._to_mcu.clear()
+        self.mcu.step()
+        self.backlog += self._to_driver
+        self._to_driver = []
+        if self.clock.now() % EVERY >= STALL:  # the reader runs: the backlog, in order
+            for stamp, frame_id, data in self.backlog:
+                self.driver.on_frame(frame_id, data, stamp if self.stamped else None)
+            self.backlog.clear()
+        self.driver.tick()
+        self.clock.advance(self.mcu.dt)
+
+
+def drive(stamped: bool) -> tuple[float, float, int]:
+    """(distance on /odom_raw, true distance, re-baselines) over 6 s at 0.5 m/s."""
+    loop = StallingLoop(stamped)
+    assert loop.run_until(lambda lp: lp.driver.state == LinkState.READY, timeout=5.0)
+    odo = loop.driver.odometry
+    assert odo is not None
+    x0, true0 = odo.x, loop.mcu.truth.x
+    before = loop.driver.stats["odometry_rebaselined"]
+    loop.drive(0.5, 0.0, 6.0)
+    loop.run(1.0)  # the last backlog handled
+    return (odo.x - x0, loop.mcu.truth.x - true0,
+            loop.driver.stats["odometry_rebaselined"] - before)
+
+
+def test_a_backlog_handled_at_once_loses_motion_when_stamped_on_handling() -> None:
+    raw, true, rebaselined = drive(stamped=False)
+    assert rebaselined >= 3 and raw < true - 0.04  # the old node: each stall costs motion
+
+
+def test_a_backlog_stamped_when_received_keeps_every_wheel_count() -> None:
+    raw, true, rebaselined = drive(stamped=True)
+    assert rebaselined == 0
+    assert raw == pytest.approx(true, abs=0.02)
+
+
+def test_receive_age_believes_only_plausible_stamps() -> None:
+    def msg(stamp: Any) -> can.Message:
+        m = can.Message(arbitration_id=0x90, data=b"\0" * 8, is_extended_id=False)
+        m.timestamp = stamp
+        return m
+
+    assert receive_age(msg(99.75), 100.0) == pytest.approx(0.25)
+    for stamp in (100.5, 100.0 - MAX_RECEIVE_AGE - 1.0, math.nan, math.inf, 0.0):
+        assert receive_age(msg(stamp), 100.0) == 0.0, stamp
+    assert receive_age(object(), 100.0) == 0.0
+
+
+def test_bus_link_hands_each_frame_with_its_age() -> None:
+    import time
+
+    class Queued:
+        def recv(self, timeout: float | None = None) -> can.Message:
+            m = can.Message(arbitration_id=0x90, data=b"\0" * 8, is_extended_id=False)
+            m.timestamp = time.time() - 0.2  # waited 0.2 s in the socket
+            return m
+
+        def shutdown(self) -> None:
+            pass
+
+    link = BusLink({"interface": "virtual", "channel": "x"}, opener=lambda cfg: Queued(),
+                   clock=SimClock(), catalog_filter=False)
+    ages: list[float] = []
+    link.poll(lambda fid, data: ages.append(link.last_age))
+    assert ages and 0.2 <= ages[0] < 0.2 + 1.0
+
+
+class FakeRospy:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def get_time(self) -> float:
+        return self.t
+
+
+def test_ros_clock_measures_clock_speed_for_the_age_of_a_frame() -> None:
+    rospy, wall = FakeRospy(), [0.0]
+    clock = RosClock(rospy, wall=lambda: wall[0])
+    assert clock.ago(0.1) == pytest.approx(99.9)  # speed not known yet: 1
+    for _ in range(3):  # /clock at 4x wall
+        wall[0] += 0.5
+        rospy.t += 2.0
+        clock.ago(0.0)
+    assert clock.rate == pytest.approx(4.0)
+    assert clock.ago(0.1) == pytest.approx(rospy.t - 0.4)
+    rospy.t = 10.0  # /clock restarted (a new simulation): a new window, not a negative speed
+    assert clock.ago(0.0) == 10.0 and clock.rate >= 0.0

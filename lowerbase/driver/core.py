@@ -113,6 +113,9 @@ class DriverCore:
     ) -> None:
         self._send = send
         self.clock = clock
+        #: the time up to which every frame that arrived has been handed to :meth:`on_frame`
+        #: (set by a receiver thread; None: always now, as on a simulated loop)
+        self.heard_until: float | None = None
         self.config = config or DriverConfig()
         self.codec = codec or default_codec()
         # frame ID -> (compiled decoder, handler or None, sent by the lower computer): one
@@ -533,7 +536,10 @@ class DriverCore:
     def tick(self) -> None:
         """Send what is due: motion commands, configuration requests; watch the link."""
         now = self.clock.now()
-        silent = now - self._last_heartbeat > self.config.link_timeout
+        # silence counts only as far as the receiver has listened (a starved reader thread has a
+        # backlog of Heartbeats waiting, not a lost link)
+        heard = now if self.heard_until is None else min(now, self.heard_until)
+        silent = heard - self._last_heartbeat > self.config.link_timeout
         if silent and self.state not in (LinkState.WAITING, LinkState.LOST):
             self._hold_odometry(self._watchdog_time())
             self.state = LinkState.LOST

@@ -146,7 +146,7 @@ class BusLink:
             on_down(why)
 
     def poll(self, on_frame: FrameSink, on_down: DownSink | None = None,
-             timeout: float = 0.1) -> float:
+             timeout: float = 0.1, on_idle: Callable[[], None] | None = None) -> float:
         """One step of the reader: reopen if due, or receive one frame within ``timeout``.
 
         Returns how long the caller should wait before the next step (0: at once).
@@ -172,17 +172,22 @@ class BusLink:
             self.rx_errors += 1
             self._close(f"receive failed: {exc or type(exc).__name__}", on_down)
             return self.reopen_period
-        if msg is not None and is_catalog_frame(msg):
+        if msg is None:
+            if on_idle is not None:  # listened for ``timeout``: nothing is waiting
+                on_idle()
+        elif is_catalog_frame(msg):
             self.frames += 1
             self.last_age = receive_age(msg, time.time())
             on_frame(msg.arbitration_id, bytes(msg.data))
         return 0.0
 
     def run_reader(self, on_frame: FrameSink, stop: threading.Event,
-                   on_down: DownSink | None = None) -> None:
-        """Feed ``on_frame`` until ``stop`` is set; the bus is reopened after any error."""
+                   on_down: DownSink | None = None,
+                   on_idle: Callable[[], None] | None = None) -> None:
+        """Feed ``on_frame`` until ``stop`` is set; the bus is reopened after any error.
+        ``on_idle`` is called when a receive found nothing waiting."""
         while not stop.is_set():
-            delay = self.poll(on_frame, on_down)
+            delay = self.poll(on_frame, on_down, on_idle=on_idle)
             if delay > 0:
                 stop.wait(delay)
 

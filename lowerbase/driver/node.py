@@ -180,7 +180,13 @@ class DriverNode:
             clock = self.core.clock
             ago = getattr(clock, "ago", None)
             stamp = ago(age) if ago is not None else clock.now() - age
+            self.core.heard_until = stamp
             self.core.on_frame(frame_id, data, stamp)
+
+    def on_idle(self) -> None:
+        """The reader found the bus quiet: the core may count silence up to now."""
+        with self.lock:
+            self.core.heard_until = self.core.clock.now()
 
     def on_bus_down(self, why: str) -> None:
         with self.lock:
@@ -271,7 +277,8 @@ class DriverNode:
 
     def _read(self) -> None:
         try:
-            self.link.run_reader(self.on_frame, self.stop, self.on_bus_down)
+            self.link.run_reader(self.on_frame, self.stop, self.on_bus_down,
+                                 on_idle=self.on_idle)
         except Exception:  # never let the reader die silently
             log.exception("the frame reader failed")
             self.rospy.signal_shutdown("frame reader failed")

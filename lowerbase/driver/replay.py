@@ -161,7 +161,10 @@ class ReplayLink:
             yield item
 
     def run_reader(self, on_frame: FrameSink, stop: threading.Event,
-                   on_down: DownSink | None = None) -> None:
+                   on_down: DownSink | None = None,
+                   on_idle: Callable[[], None] | None = None) -> None:
+        """Feed the file's frames at their pace (``on_idle``: unused, a replay never waits on a
+        bus; the live link's signature)."""
         try:
             for item in self._paced(frames_from_log(self.path), stop):
                 if stop.is_set():

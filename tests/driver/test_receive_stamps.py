@@ -26,11 +26,14 @@ EVERY = 1.0  #: [s] between stalls
 
 class StallingLoop(SimLoop):
     """SimLoop whose driver handles the lower computer's frames late, in bursts: nothing for
-    ``STALL`` s every ``EVERY`` s, then the backlog at once, stamped as ``stamped`` says."""
+    ``stall`` s every ``EVERY`` s, then the backlog at once, stamped as ``stamped`` says; with
+    ``heard``, the reader tells the core how far it has listened, as the node does."""
 
-    def __init__(self, stamped: bool) -> None:
+    def __init__(self, stamped: bool, stall: float = STALL, heard: bool = False) -> None:
         super().__init__(bms=None)
         self.stamped = stamped
+        self.stall = stall
+        self.heard = heard
         self.backlog: list[tuple[float, int, bytes]] = []
 
     def step(self) -> None:
@@ -40,37 +43,58 @@ class StallingLoop(SimLoop):
         self.mcu.step()
         self.backlog += self._to_driver
         self._to_driver = []
-        if self.clock.now() % EVERY >= STALL:  # the reader runs: the backlog, in order
+        every = max(EVERY, 2 * self.stall)
+        if self.clock.now() % every >= self.stall:  # the reader runs: the backlog, in order
             for stamp, frame_id, data in self.backlog:
+                if self.heard:
+                    self.driver.heard_until = stamp
                 self.driver.on_frame(frame_id, data, stamp if self.stamped else None)
             self.backlog.clear()
+            if self.heard:  # and found the socket empty
+                self.driver.heard_until = self.clock.now()
         self.driver.tick()
         self.clock.advance(self.mcu.dt)
 
 
-def drive(stamped: bool) -> tuple[float, float, int]:
-    """(distance on /odom_raw, true distance, re-baselines) over 6 s at 0.5 m/s."""
-    loop = StallingLoop(stamped)
+def drive(stamped: bool, stall: float = STALL, heard: bool = False
+          ) -> tuple[float, float, int, int]:
+    """(distance on /odom_raw, true distance, re-baselines, links lost) over 6 s at 0.5 m/s."""
+    loop = StallingLoop(stamped, stall, heard)
     assert loop.run_until(lambda lp: lp.driver.state == LinkState.READY, timeout=5.0)
     odo = loop.driver.odometry
     assert odo is not None
     x0, true0 = odo.x, loop.mcu.truth.x
     before = loop.driver.stats["odometry_rebaselined"]
+    lost = loop.driver.stats["link_lost"]
     loop.drive(0.5, 0.0, 6.0)
     loop.run(1.0)  # the last backlog handled
     return (odo.x - x0, loop.mcu.truth.x - true0,
-            loop.driver.stats["odometry_rebaselined"] - before)
+            loop.driver.stats["odometry_rebaselined"] - before,
+            loop.driver.stats["link_lost"] - lost)
 
 
 def test_a_backlog_handled_at_once_loses_motion_when_stamped_on_handling() -> None:
-    raw, true, rebaselined = drive(stamped=False)
+    raw, true, rebaselined, _ = drive(stamped=False)
     assert rebaselined >= 3 and raw < true - 0.04  # the old node: each stall costs motion
 
 
 def test_a_backlog_stamped_when_received_keeps_every_wheel_count() -> None:
-    raw, true, rebaselined = drive(stamped=True)
+    raw, true, rebaselined, _ = drive(stamped=True)
     assert rebaselined == 0
     assert raw == pytest.approx(true, abs=0.02)
+
+
+def test_a_reader_starved_past_the_link_timeout_is_no_lost_link() -> None:
+    """A 2.5 s stall (the host's load) is longer than link_timeout (1.5 s): the Heartbeats are
+    waiting in the socket. Silence counts only as far as the reader listened (heard_until)."""
+    raw, true, rebaselined, lost = drive(stamped=True, stall=2.5, heard=True)
+    assert lost == 0 and rebaselined == 0
+    assert raw == pytest.approx(true, abs=0.02)
+
+
+def test_without_heard_until_a_starved_reader_reads_as_a_lost_link() -> None:
+    _, _, rebaselined, lost = drive(stamped=True, stall=2.5, heard=False)
+    assert lost >= 1 and rebaselined >= 1
 
 
 def test_receive_age_believes_only_plausible_stamps() -> None:

@@ -110,6 +110,7 @@ class DriverNode:
         self._bad_twists = 0  # refused since the last warning
         self._bad_twist_log = -math.inf
         self._tf: Any = None
+        self._last_tf_stamp: Any = None  #: of the last odom -> base_link sent
         self._reader: threading.Thread | None = None
 
     # -- set-up ------------------------------------------------------------------------------
@@ -241,7 +242,10 @@ class DriverNode:
                 [float(v) for v in ekf.twist_covariance().ravel()],
                 core.config.odometry_noise.unobserved_variance)
             self._publish("odom", msg)
-            if self._tf is not None:
+            # under /use_sim_time two samples can share one /clock tick: tf2 drops the second
+            # (TF_REPEATED_DATA in every listener's log), so it is not sent
+            if self._tf is not None and stamp != self._last_tf_stamp:
+                self._last_tf_stamp = stamp
                 self._tf.sendTransform(io.transform_from_odometry(msg))
 
     def _publish_periodic(self) -> None:

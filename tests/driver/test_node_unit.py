@@ -140,3 +140,30 @@ def test_the_real_resolver_on_this_hosts_own_name() -> None:
         pytest.skip(f"{own} does not resolve to loopback only here ({addresses})")
     assert loopback_address({}, f"http://{own}:11397/") in ("127.0.0.1", "::1")
     assert resolve_host("name.invalid") == []  # RFC 2606: never resolves
+
+
+def test_odom_tf_is_not_sent_twice_with_one_stamp(woosh_msgs: Any) -> None:
+    """Under /use_sim_time two odometry samples can fall on one /clock tick; tf2 drops a
+    transform whose stamp it has (TF_REPEATED_DATA in every listener's log), so the node sends
+    each stamp once."""
+    import rospy
+
+    from lowerbase.driver.node import DriverNode
+
+    class Broadcaster:
+        def __init__(self) -> None:
+            self.stamps: list[Any] = []
+
+        def sendTransform(self, t: Any) -> None:
+            self.stamps.append(t.header.stamp)
+
+    settings, config = load_settings({})
+    node = DriverNode(settings, config, RecordingLink(), clock=SimClock())
+    node._tf = tf = Broadcaster()
+    now = [rospy.Time(10, 0)]
+    node.rospy = type("R", (), {"Time": type("T", (), {"now": staticmethod(lambda: now[0])})})
+    node._publish_odometry()
+    node._publish_odometry()  # the same /clock tick
+    now[0] = rospy.Time(10, 20_000_000)
+    node._publish_odometry()
+    assert tf.stamps == [rospy.Time(10, 0), rospy.Time(10, 20_000_000)]

@@ -37,7 +37,8 @@ def add_subparser(subparsers: Any) -> None:
     p.add_argument("--log-dir", metavar="DIR",
                    help="where each part's output goes (default: a new directory under /tmp)")
     p.add_argument("--foxglove", nargs="?", const="127.0.0.1:8765", metavar="HOST:PORT",
-                   help="serve the chassis live to Foxglove (default 127.0.0.1:8765)")
+                   help="serve the robot live to Foxglove: the ROS topics and CAN frames "
+                   "--mcap records (default 127.0.0.1:8765)")
     p.add_argument("--truth", metavar="FILE",
                    help="the emulator writes its ground truth there (t,x,y,yaw,v,w CSV every "
                    "20 ms, in the emulator's frame: the map pose is the map's start composed "
@@ -65,6 +66,36 @@ def _speed_factor(text: str) -> float:
     from lowerbase.cli.emulate import _speed_factor as emulate_speed
 
     return emulate_speed(text)
+
+
+def _check_listen(address: str) -> None:
+    """A bad HOST:PORT or a port in use is one ConfigError line before anything starts (the
+    recorder child listens there later)."""
+    import socket
+
+    from lowerbase.recording.live import parse_address
+
+    host, port = parse_address(address)
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+        with socket.socket(infos[0][0], socket.SOCK_STREAM) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the server does
+            s.bind(infos[0][4])
+    except OSError as exc:
+        raise ConfigError(f"--foxglove {host}:{port}: cannot listen ({exc.strerror or exc}); "
+                          f"give another port, e.g. --foxglove {host}:{port + 1}") from None
+
+
+def _on_ready(child: Any) -> None:
+    print(f"lowerbase robot: {child.spec.name} up", flush=True)
+    if child.spec.name == "recorder":
+        import re
+
+        url = re.search(r"ws://\S+", child.log_path.read_text(errors="replace"))
+        if url:
+            print(f"lowerbase robot: live view: Foxglove -> Open connection -> Foxglove "
+                  f"WebSocket {url.group(0)} (layout: lowerbase/recording/"
+                  f"foxglove-layout.json)", flush=True)
 
 
 def _status(sup: Any, started: float, master: str, watch: Any = None) -> str:
@@ -106,6 +137,8 @@ def run(args: argparse.Namespace) -> int:
     load_map(args.map)  # a wrong map is one line now, not a part ending later
     if args.mcap is not None and Path(args.mcap).suffix.lower() != ".mcap":
         raise ConfigError(f"--mcap {args.mcap}: the file name must end in .mcap")
+    if args.foxglove is not None:
+        _check_listen(args.foxglove)
     log_dir = Path(args.log_dir) if args.log_dir else Path(
         tempfile.mkdtemp(prefix="lowerbase-robot-"))
     uri = master_uri()
@@ -130,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
         sup.start(robot_plan(RobotOptions(map=args.map, parts=parts, foxglove=args.foxglove,
                                           sim_speed=speed, truth=args.truth,
                                           mcap=args.mcap)),
-                  on_ready=lambda c: print(f"lowerbase robot: {c.spec.name} up", flush=True))
+                  on_ready=_on_ready)
         print(f"lowerbase robot: ready on ROS master {uri}; logs in {log_dir}; Ctrl-C stops",
               flush=True)
         if speed is not None:

@@ -1,6 +1,6 @@
 """The live view: a Foxglove WebSocket server with the channels of the MCAP recording.
 
-``--foxglove [HOST:PORT]`` (``lowerbase emulate``, ``scenario run``, ``demo``) starts
+``--foxglove [HOST:PORT]`` (``lowerbase emulate``, ``scenario run``, ``demo``, ``robot``) starts
 :class:`FoxgloveSink`: the foxglove-sdk WebSocket server (subprotocol ``foxglove.sdk.v1``, the
 ``foxglove.websocket.v1`` protocol under its new name) on 127.0.0.1:8765 unless the user gives
 a host. A :class:`~lowerbase.recording.publisher.RunPublisher` writes to it what it writes to
@@ -56,10 +56,11 @@ def parse_address(text: str) -> tuple[str, int]:
 class FoxgloveSink:
     """A foxglove-sdk WebSocket server on its own Context (so several can run in a process).
 
+    ``listener``: a ``foxglove.websocket.ServerListener`` (e.g. told of each subscription).
     ConfigError (one line) when it cannot listen: the port in use, an unknown host."""
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
-                 name: str = "lowerbase") -> None:
+                 name: str = "lowerbase", listener: Any = None) -> None:
         import foxglove
 
         quiet = logging.getLogger("foxglove")  # the server's start/stop INFO lines
@@ -70,6 +71,7 @@ class FoxgloveSink:
         try:
             self.server = foxglove.start_server(name=name, host=host, port=port,
                                                 context=self.context,
+                                                server_listener=listener,
                                                 message_backlog_size=BACKLOG)
         except RuntimeError as exc:  # the SDK's FoxgloveError
             reason = str(exc).removeprefix("FoxgloveError: ")
@@ -120,13 +122,14 @@ class FoxgloveSink:
 
 
 def start_live(address: str | None, *, name: str = "lowerbase",
-               announce: Callable[[str], None] | None = None) -> FoxgloveSink | None:
+               announce: Callable[[str], None] | None = None,
+               listener: Any = None) -> FoxgloveSink | None:
     """``--foxglove`` value -> a started :class:`FoxgloveSink` (None: no live view), and one
     line for the user saying where to connect."""
     if address is None:
         return None
     host, port = parse_address(address)
-    sink = FoxgloveSink(host, port, name=name)
+    sink = FoxgloveSink(host, port, name=name, listener=listener)
     if announce is not None:
         announce(f"live view: Foxglove -> Open connection -> Foxglove WebSocket {sink.url} "
                  f"(layout: lowerbase/recording/foxglove-layout.json)")

@@ -37,6 +37,7 @@ class RobotOptions:
     bus_port: int | None = None
     truth_port: int | None = None
     python: str = sys.executable
+    #: --foxglove HOST:PORT: the recorder child serves the ROS topics and frames live there
     foxglove: str | None = None
     #: --sim-time: the emulator's speed factor K, the world publishes /clock (None: real time)
     sim_speed: float | None = None
@@ -64,17 +65,18 @@ def robot_plan(opts: RobotOptions) -> list[ChildSpec]:
     map_ref = str(Path(opts.map).resolve()) if Path(opts.map).suffix else opts.map
     emulate = ["emulate", *bus, "--truth-udp", f"127.0.0.1:{truth}", "--map", map_ref]
     world = ["world", "--map", map_ref, "--truth-udp", str(truth)]
-    if opts.foxglove:
-        emulate += ["--foxglove", opts.foxglove]
     if opts.truth:
         emulate += ["--truth", str(Path(opts.truth).resolve())]
     if opts.sim_speed is not None:  # the world is the simulator: /clock from the truth's t
         emulate += ["--speed", f"{opts.sim_speed:g}"]
         world += ["--publish-clock"]
     specs = [ChildSpec("world", _lowerbase(opts, *world), ON_MASTER)]
-    if opts.mcap:  # before the emulator: every frame; lowerbase.recording.rosrecord
+    if opts.mcap or opts.foxglove:  # before the emulator: every frame (rosrecord)
+        record = [str(Path(opts.mcap).resolve())] if opts.mcap else []
+        if opts.foxglove:
+            record += ["--foxglove", opts.foxglove]
         specs.append(ChildSpec("recorder", [opts.python, "-m", "lowerbase.recording.rosrecord",
-                                            str(Path(opts.mcap).resolve()), *bus], ON_MASTER))
+                                            *record, *bus], ON_MASTER))
     specs += [
         ChildSpec("emulate", _lowerbase(opts, *emulate), "lower computer on"),
         ChildSpec("driver", _lowerbase(opts, "driver", *bus), "link ready"),

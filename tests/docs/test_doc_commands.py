@@ -84,6 +84,7 @@ CHECKS: dict[str, Check] = {
         "skip", why=ROS),
     "lowerbase robot --map warehouse --sim-time": Check("skip", why=ROS),
     "lowerbase robot --map warehouse --mcap robot.mcap": Check("skip", why=ROS),
+    "lowerbase robot --map warehouse --foxglove": Check("skip", why=ROS),
     "lowerbase robot --map warehouse --sim-time --speed 4 --without navigation --without "
     "tasks": Check("skip", why=ROS),
     "lowerbase emulate --fleet 100": Check("start", "Ctrl-C stops"),

@@ -18,6 +18,7 @@ from lowerbase.navigation.controller import ControllerConfig, Status
 from lowerbase.navigation.costmap import CostmapParams
 from lowerbase.navigation.layers import InflationParams
 from lowerbase.navigation.planner import INSCRIBED, GlobalPlanner
+from lowerbase.navigation.recovery import BackOffConfig
 
 Pose = tuple[float, float, float]
 
@@ -65,6 +66,7 @@ class NavigatorConfig:
     fuzzy_cost_scale: float = 1000.0  #: the same in mode 0 (inflation weighs little)
     clearance_margin: float = 0.1  #: keep-out beyond the footprint's radius (modes 0, 1)
     controller: ControllerConfig = field(default_factory=ControllerConfig)
+    back_off: BackOffConfig = field(default_factory=BackOffConfig)  #: before each replan
 
     def __post_init__(self) -> None:
         for name in ("xy_tolerance", "yaw_tolerance", "blocked_patience", "stuck_timeout",

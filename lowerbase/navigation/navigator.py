@@ -59,14 +59,19 @@ from lowerbase.navigation.goals import (
 )
 from lowerbase.navigation.modes import Mode, NavDir, NavigationModeGoal
 from lowerbase.navigation.planner import (
+    LETHAL,
     FootprintCells,
     GlobalPlanner,
     Plan,
     PlanningError,
 )
+from lowerbase.navigation.recovery import BackOff
 from lowerbase.world.footprint import DEFAULT_POINTS, Footprint
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lidar import LaserScan
+
+#: the reason while a recovery (backing off) runs
+RECOVERY = "recovery: backing off the way the robot came, then replanning"
 
 __all__ = ["GoalResult", "GoalState", "Mode", "NavCommand", "NavigationError",
            "NavigationModeGoal", "Navigator", "NavigatorConfig", "Pose"]
@@ -108,6 +113,7 @@ class Navigator:
         self.early_replans = 0  #: replans because the local costmap blocked the path ahead
         self.plans = 0
         self.path: list[Pose] = []  #: the plan being followed (map frame)
+        self._backoff = BackOff(self.config.back_off)
         self._reset_goal_state()
 
     # -- setup -----------------------------------------------------------------------------------
@@ -134,6 +140,8 @@ class Navigator:
         self._last_early = -math.inf
         self._seen_version = -1
         self._reverse = False
+        if hasattr(self, "_backoff"):
+            self._backoff.cancel()
 
     def set_limits(self, limits: Limits) -> None:
         """maxLinear/maxAngular and the acceleration limits (driver_base's /parameter)."""
@@ -257,6 +265,7 @@ class Navigator:
         self.state = state
         self.reason = reason
         self.results.append(GoalResult(self.goal_id, state, reason, now))
+        self._backoff.cancel()
         self.controller.set_plan([])
         self.controller.v = self.controller.w = 0.0
         self.path = []
@@ -332,6 +341,17 @@ class Navigator:
             if why:
                 return self._finish(GoalState.ABORTED, f"no path: {why}", now)
             self._progress_ref = (now, p)
+        if self._backoff.active:
+            v = self._backoff.step(p, now, self.combined.costs, self.combined.origin,
+                                   self._fp_forward)
+            if v is not None:
+                self._progress_ref = (now, p)  # recovering is not being stuck
+                return NavCommand(v, 0.0, GoalState.ACTIVE, Status.BLOCKED, RECOVERY)
+            self.controller.v = self.controller.w = 0.0
+            why = self._replan(p, now)
+            if why:
+                return self._finish(GoalState.ABORTED, f"no path around the obstacle: {why}",
+                                    now)
         if self.combined.version != self._seen_version:
             self._seen_version = self.combined.version
             self.controller.set_costmap(self.combined.costs, self.grid.resolution,
@@ -388,6 +408,14 @@ class Navigator:
             if self.replans > self.config.max_replans:
                 return self._finish(GoalState.ABORTED, f"blocked: still no way after "
                                                        f"{self.config.max_replans} replans", now)
+            # wedged (the footprint on a lethal cell) or a replan that did not help: recovery
+            # first (back off the way the robot came), then the replan (in tick)
+            here = self._fp_forward.max_cost(self.combined.costs, self.combined.origin, *p)[0]
+            if here >= LETHAL or self.replans > 1:
+                self._backoff.begin(p, now, self._reverse)
+                self._blocked_since = None
+                self.reason = RECOVERY
+                return NavCommand(0.0, 0.0, GoalState.ACTIVE, Status.BLOCKED, self.reason)
             why = self._replan(p, now)
             if why:
                 return self._finish(GoalState.ABORTED, f"no path around the obstacle: {why}",

@@ -62,7 +62,7 @@ class NavigatorConfig:
     replan_interval: float = 0.5  #: at most one early replan (path ahead blocked) per this
     costmap: CostmapParams = field(default_factory=_inflation)  #: global costmap
     local_size: float = 5.0  #: local rolling window, square [m]
-    cost_scale: float = 50.0  #: planner: a cell of cost c is 1 + c/cost_scale long
+    cost_scale: float = 15.0  #: planner: a cell of cost c is 1 + c/cost_scale long
     fuzzy_cost_scale: float = 1000.0  #: the same in mode 0 (inflation weighs little)
     clearance_margin: float = 0.1  #: keep-out beyond the footprint's radius (modes 0, 1)
     controller: ControllerConfig = field(default_factory=ControllerConfig)

@@ -134,11 +134,11 @@ def test_emulate_speed_runs_the_truth_on_the_sped_up_time(tmp_path: Path) -> Non
     assert "4 x real time" in out.stdout
     rows = truth.read_text().splitlines()
     t = [float(r.split(",")[0]) for r in rows[1:]]
-    # --duration and the 50 Hz sampling are in the clock's time: 2 s of it, rows on the 20 ms
-    # grid (a loaded host may make the loop skip some: the exact rate is the hook's test below)
+    # --duration and the 50 Hz sampling are in the clock's time: 2 s of it, about a row per
+    # 20 ms (a loaded host makes the 4x loop late or skip periods: the exact grid is the hook's
+    # deterministic test below)
     assert t[-1] - t[0] == pytest.approx(2.0, abs=0.08)
     assert 50 <= len(t) <= 101
-    assert all(b - a >= 0.016 - 1e-9 for a, b in itertools.pairwise(t))
 
 
 class _Stepped:

@@ -25,6 +25,35 @@ FrameTap = Callable[[float, str, int, bytes], None]
 
 
 L = TypeVar("L", bound="SteppedLoop")
+T = TypeVar("T", bound="TickedLoop")
+
+
+class TickedLoop:
+    """run/run_until for the loops above the chassis (NavSim, TaskSim): a subclass gives
+    ``tick()`` (one control period of its own) and ``now`` [s]."""
+
+    @property
+    def now(self) -> float:
+        raise NotImplementedError
+
+    def tick(self) -> object:
+        raise NotImplementedError
+
+    def run(self, seconds: float) -> None:
+        """Tick for ``seconds`` of simulated time."""
+        end = self.now + seconds
+        while self.now < end - 1e-9:
+            self.tick()
+
+    def run_until(self: T, condition: Callable[[T], bool], timeout: float) -> bool:
+        """Tick until ``condition`` holds (True) or ``timeout`` [s] of simulated time passes."""
+        end = self.now + timeout
+        while self.now < end - 1e-9:
+            if condition(self):
+                return True
+            self.tick()
+        return condition(self)
+
 
 
 class SteppedLoop:

@@ -28,6 +28,7 @@ import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
+from lowerbase.bench.simloop import TickedLoop
 from lowerbase.navigation.controller import Limits, wrap
 from lowerbase.navigation.costmap import camera_cloud
 from lowerbase.navigation.navigator import GoalState, NavCommand, Navigator, Pose
@@ -71,7 +72,7 @@ class NavRun:
                    zip(self.path[:-1], self.path[1:], strict=True))
 
 
-class NavSim:
+class NavSim(TickedLoop):
     """A Navigator ticked at 20 Hz on a WorldSim (see the module docstring)."""
 
     def __init__(self, world: WorldSim, navigator: Navigator | None = None,
@@ -152,20 +153,6 @@ class NavSim:
         self.navigator.update_sensors(pose, scan=use, cloud=cloud)
         self._sensed_at = (float(pose[0]), float(pose[1]), float(pose[2]))
         self._deferred = None
-
-    def run(self, seconds: float) -> None:
-        """Tick for ``seconds`` of simulated time."""
-        end = self.now + seconds
-        while self.now < end - 1e-9:
-            self.tick()
-
-    def run_until(self, condition: Callable[[NavSim], bool], timeout: float) -> bool:
-        end = self.now + timeout
-        while self.now < end - 1e-9:
-            if condition(self):
-                return True
-            self.tick()
-        return condition(self)
 
     def go_to(self, target: Sequence[float], timeout: float = 120.0,
               poses: Sequence[Sequence[float]] = (), execution_mode: int = 0,

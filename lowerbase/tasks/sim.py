@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
+from lowerbase.bench.simloop import TickedLoop
 from lowerbase.bms.status import BmsStatus, ChargeMode
 from lowerbase.driver.core import DriverCore, LinkState
 from lowerbase.navigation.controller import Status as CtrlStatus
@@ -79,7 +80,7 @@ class NavSimNavigation:
         return NavCommand(last.linear, last.angular, state, last.status, nav.reason)
 
 
-class TaskSim:
+class TaskSim(TickedLoop):
     """A TaskMachine on a NavSim (see the module docstring)."""
 
     def __init__(self, navsim: NavSim, places: Places | None = None,
@@ -145,15 +146,3 @@ class TaskSim:
     def _navigating(self) -> bool:
         return self.navsim.navigator.state in (GoalState.PENDING, GoalState.ACTIVE)
 
-    def run(self, seconds: float) -> None:
-        end = self.now + seconds
-        while self.now < end - 1e-9:
-            self.tick()
-
-    def run_until(self, condition: Callable[[TaskSim], bool], timeout: float) -> bool:
-        end = self.now + timeout
-        while self.now < end - 1e-9:
-            if condition(self):
-                return True
-            self.tick()
-        return condition(self)

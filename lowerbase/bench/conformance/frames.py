@@ -50,30 +50,39 @@ def check_present(msg: MessageCodec) -> CheckFunc:
     return run
 
 
+def dlc_outcome(msg: MessageCodec, frames: Sequence[Any]) -> Outcome:
+    """Every frame (``.data``) of ``msg`` has the catalog's length."""
+    bad = [len(f.data) for f in frames if len(f.data) != msg.length]
+    if bad:
+        return failed(f"{len(bad)} of {len(frames)} frames with DLC {sorted(set(bad))} "
+                      f"(catalog {msg.length})", wrong=len(bad), frames=len(frames))
+    return passed(f"DLC {msg.length} in all {len(frames)} frames", frames=len(frames))
+
+
+def range_outcome(msg: MessageCodec, frames: Sequence[Any]) -> Outcome:
+    """Every frame of ``msg`` with the catalog's length decodes with its signals in range."""
+    frames = [f for f in frames if len(f.data) == msg.length]
+    errors = []
+    for f in frames:
+        try:
+            msg.decode(f.data)
+        except ProtocolError as exc:
+            errors.append(str(exc))
+    if errors:
+        return failed(f"{len(errors)} of {len(frames)} frames out of range: {errors[0]}",
+                      out_of_range=len(errors))
+    return passed(f"all {len(frames)} frames in range", frames=len(frames))
+
+
 def check_dlc(msg: MessageCodec) -> CheckFunc:
     def run(ctx: Context) -> Outcome:
-        frames = _frames_or_skip(ctx, msg)
-        bad = [len(f.data) for f in frames if len(f.data) != msg.length]
-        if bad:
-            return failed(f"{len(bad)} of {len(frames)} frames with DLC {sorted(set(bad))} "
-                          f"(catalog {msg.length})", wrong=len(bad), frames=len(frames))
-        return passed(f"DLC {msg.length} in all {len(frames)} frames", frames=len(frames))
+        return dlc_outcome(msg, _frames_or_skip(ctx, msg))
     return run
 
 
 def check_range(msg: MessageCodec) -> CheckFunc:
     def run(ctx: Context) -> Outcome:
-        frames = [f for f in _frames_or_skip(ctx, msg) if len(f.data) == msg.length]
-        errors = []
-        for f in frames:
-            try:
-                msg.decode(f.data)
-            except ProtocolError as exc:
-                errors.append(str(exc))
-        if errors:
-            return failed(f"{len(errors)} of {len(frames)} frames out of range: {errors[0]}",
-                          out_of_range=len(errors))
-        return passed(f"all {len(frames)} frames in range", frames=len(frames))
+        return range_outcome(msg, _frames_or_skip(ctx, msg))
     return run
 
 

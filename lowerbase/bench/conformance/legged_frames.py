@@ -21,10 +21,14 @@ from lowerbase.bench.conformance.core import (
     require,
     skipped,
 )
-from lowerbase.bench.conformance.frames import counter_steps, cycle_stats
+from lowerbase.bench.conformance.frames import (
+    counter_steps,
+    cycle_stats,
+    dlc_outcome,
+    range_outcome,
+)
 from lowerbase.bench.conformance.legged_context import LeggedCheckFunc, LeggedContext, legged_check
 from lowerbase.bench.conformance.legged_link import LegFrame
-from lowerbase.errors import ProtocolError
 from lowerbase.legged.protocol import (
     BODY_BUS,
     COMMAND_MESSAGES,
@@ -109,28 +113,13 @@ def check_present(msg: MessageCodec) -> LeggedCheckFunc:
 
 def check_dlc(msg: MessageCodec) -> LeggedCheckFunc:
     def run(ctx: LeggedContext) -> Outcome:
-        frames = _all(ctx, msg)
-        bad = [len(f.data) for f in frames if len(f.data) != msg.length]
-        if bad:
-            return failed(f"{len(bad)} of {len(frames)} frames with DLC {sorted(set(bad))} "
-                          f"(catalog {msg.length})", wrong=len(bad), frames=len(frames))
-        return passed(f"DLC {msg.length} in all {len(frames)} frames", frames=len(frames))
+        return dlc_outcome(msg, _all(ctx, msg))
     return run
 
 
 def check_range(msg: MessageCodec) -> LeggedCheckFunc:
     def run(ctx: LeggedContext) -> Outcome:
-        frames = [f for f in _all(ctx, msg) if len(f.data) == msg.length]
-        errors = []
-        for f in frames:
-            try:
-                msg.decode(f.data)
-            except ProtocolError as exc:
-                errors.append(str(exc))
-        if errors:
-            return failed(f"{len(errors)} of {len(frames)} frames out of range: {errors[0]}",
-                          out_of_range=len(errors))
-        return passed(f"all {len(frames)} frames in range", frames=len(frames))
+        return range_outcome(msg, _all(ctx, msg))
     return run
 
 

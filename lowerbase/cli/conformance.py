@@ -32,7 +32,8 @@ def add_subparser(subparsers: Any) -> None:
     p.add_argument("--cycle-tolerance", type=float, default=0.10, metavar="FRACTION",
                    help="allowed deviation of the mean cycle time (default 0.10)")
     p.add_argument("--jitter", type=float, default=0.05, metavar="S",
-                   help="timestamp allowance added to the 2.5-cycle gap limit (default 0.05 s)")
+                   help="this host's timestamp allowance, added to the timing limits "
+                   "(frame gaps, watchdog) (default 0.05 s)")
     p.add_argument("--boot-timeout", type=float, default=10.0, metavar="S",
                    help="time allowed for a reboot (default 10 s)")
     p.add_argument("--speed", type=float, default=0.1, metavar="M_S",

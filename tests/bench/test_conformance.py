@@ -33,7 +33,7 @@ from lowerbase.firmware_model.faults import parse_fault
 from lowerbase.firmware_model.mcu import RobotState
 from lowerbase.firmware_model.sim import SimRig
 from lowerbase.protocol.codec import default_codec
-from tests.conftest import bus_cli_args
+from tests.conftest import LOADED_HOST, bus_cli_args
 
 CODEC = default_codec()
 ALL_IDS = [c.id for c in registry(CODEC)]
@@ -205,7 +205,7 @@ def test_defect_ignore_estop_and_param_no_nack() -> None:
 def _conformance(capsys: pytest.CaptureFixture[str], bus: list[str], *args: str
                  ) -> tuple[int, dict[str, str], str]:
     """Run ``lowerbase conformance`` in process: (exit code, id -> result, stdout)."""
-    code = main(["conformance", *bus, *args])
+    code = main(["conformance", *bus, *LOADED_HOST, *args])
     out = capsys.readouterr().out
     results = {}
     for line in out.splitlines():

@@ -17,7 +17,7 @@ from lowerbase.cli import main
 from lowerbase.protocol.codec import default_codec
 from lowerbase.transport import open_bus
 from tests.bench.mutating_proxy import MutatingProxy, Mutation, swap_wheels
-from tests.conftest import TEST_GROUP, Proc, bus_cli_args, free_udp_port
+from tests.conftest import LOADED_HOST, TEST_GROUP, Proc, bus_cli_args, free_udp_port
 
 pytestmark = pytest.mark.process
 
@@ -29,7 +29,7 @@ _channels = itertools.count()
 
 def _run_suite(capsys: pytest.CaptureFixture[str], bus: list[str], only: str = ONLY
                ) -> tuple[dict[str, str], str]:
-    main(["conformance", *bus, "--only", only])
+    main(["conformance", *bus, *LOADED_HOST, "--only", only])
     out = capsys.readouterr().out
     results = {}
     for line in out.splitlines():
@@ -129,7 +129,7 @@ def test_emulator_passes_the_physics_with_any_seed(
     bus = bus_cli_args(udp_bus_config)
     proc = lowerbase_proc("emulate", *bus, "--no-bms", "--profile", str(profile))
     proc.wait_for("lower computer on")
-    main(["conformance", *bus, "--only", "safety.watchdog,physics.*"])
+    main(["conformance", *bus, *LOADED_HOST, "--only", "safety.watchdog,physics.*"])
     captured = capsys.readouterr()
     assert "WARNING" not in captured.err  # one lower computer: no warning
     assert captured.out.count(" PASS ") == 6 and " FAIL " not in captured.out, captured.out

@@ -19,7 +19,7 @@ from lowerbase.cli import main
 from lowerbase.errors import ConfigError
 from lowerbase.legged.lower import DEFECTS
 from lowerbase.legged.protocol import LocomotionState, legged_codec
-from tests.conftest import bus_cli_args
+from tests.conftest import LOADED_HOST, bus_cli_args
 
 CODEC = legged_codec()
 ALL_IDS = [c.id for c in legged_registry()]
@@ -116,7 +116,7 @@ def test_a_silent_bus_fails_the_link_and_skips_the_rest() -> None:
 
 def _conformance(capsys: pytest.CaptureFixture[str], bus: list[str], *args: str
                  ) -> tuple[int, dict[str, str], str]:
-    code = main(["conformance", "--robot", "legged", *bus, *args])
+    code = main(["conformance", "--robot", "legged", *bus, *LOADED_HOST, *args])
     out = capsys.readouterr().out
     results = {}
     for line in out.splitlines():

@@ -46,6 +46,12 @@ def add_subparser(subparsers: Any) -> None:
     p.add_argument("--mcap", metavar="FILE.mcap",
                    help="record the robot: its ROS topics and the bus's CAN frames into one "
                    "MCAP file, finished at Ctrl-C (docs/recording.md)")
+    p.add_argument("--ground-truth", action="store_true",
+                   help="localization is the emulator's true pose instead of amcl's estimate "
+                   "(lowerbase world --ground-truth, as fake_localization)")
+    p.add_argument("--soc", type=_soc_percent, metavar="PERCENT",
+                   help="the battery's charge at start (lowerbase emulate --soc; default "
+                   "the emulator's 80 %%)")
     p.add_argument("--duration", type=positive_seconds, metavar="S",
                    help="stop after S seconds of wall time (default: until Ctrl-C)")
     p.add_argument("--sim-time", action="store_true",
@@ -66,6 +72,17 @@ def _speed_factor(text: str) -> float:
     from lowerbase.cli.emulate import _speed_factor as emulate_speed
 
     return emulate_speed(text)
+
+
+def _soc_percent(text: str) -> float:
+    """--soc: a charge in 0..100 %."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not 0.0 <= value <= 100.0:
+        raise argparse.ArgumentTypeError(f"{text}: the charge must be within 0..100 %")
+    return value
 
 
 def _check_listen(address: str) -> None:
@@ -162,7 +179,8 @@ def run(args: argparse.Namespace) -> int:
         parts = tuple(p for p in UPPER if p not in args.without)
         sup.start(robot_plan(RobotOptions(map=args.map, parts=parts, foxglove=args.foxglove,
                                           sim_speed=speed, truth=args.truth,
-                                          mcap=args.mcap)),
+                                          mcap=args.mcap, soc=args.soc,
+                                          ground_truth=args.ground_truth)),
                   on_ready=_on_ready)
         print(f"lowerbase robot: ready on ROS master {uri}; logs in {log_dir}; Ctrl-C stops",
               flush=True)

@@ -45,6 +45,10 @@ class RobotOptions:
     truth: str | None = None
     #: --mcap FILE: a recorder child writes the ROS topics and the bus's frames there
     mcap: str | None = None
+    #: --soc PERCENT: the battery's charge at start (``emulate --soc``; None: its default)
+    soc: float | None = None
+    #: --ground-truth: the world publishes the true pose as its localization (no amcl)
+    ground_truth: bool = False
 
 
 def _lowerbase(opts: RobotOptions, *args: str) -> list[str]:
@@ -67,6 +71,10 @@ def robot_plan(opts: RobotOptions) -> list[ChildSpec]:
     world = ["world", "--map", map_ref, "--truth-udp", str(truth)]
     if opts.truth:
         emulate += ["--truth", str(Path(opts.truth).resolve())]
+    if opts.ground_truth:
+        world += ["--ground-truth"]
+    if opts.soc is not None:
+        emulate += ["--soc", f"{opts.soc:g}"]
     if opts.sim_speed is not None:  # the world is the simulator: /clock from the truth's t
         emulate += ["--speed", f"{opts.sim_speed:g}"]
         world += ["--publish-clock"]

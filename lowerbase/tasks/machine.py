@@ -15,7 +15,8 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from lowerbase.errors import LowerbaseError
-from lowerbase.navigation.steps import CANCEL, EXCUTE, PAUSE, RESUM, SUCCEEDED, Step, StepController
+from lowerbase.navigation.steps import CANCEL, PAUSE, RESUM, StepController
+from lowerbase.tasks.docking import Docking, StepMoves
 from lowerbase.tasks.model import (
     AUTO_TASK_ID,
     FINAL_STATES,
@@ -30,7 +31,7 @@ from lowerbase.tasks.model import (
     TaskState,
     TaskType,
 )
-from lowerbase.tasks.plan import Action, TaskConfig, TaskRefused, dock_steps, plan
+from lowerbase.tasks.plan import Action, TaskConfig, TaskRefused, plan
 from lowerbase.tasks.status import Chassis, StatusTracker, robot_state
 from lowerbase.world.places import Places
 
@@ -69,23 +70,6 @@ class Navigation(Protocol):
     def tick(self, now: float, pose: Pose) -> NavFeedback: ...
 
 
-class StepMoves(Protocol):
-    """What the task machine needs of step control (the docking moves): a
-    :class:`~lowerbase.navigation.steps.StepController` in-process, or the /cmd_vel_control
-    action client (:class:`lowerbase.tasks.ros_clients.ActionSteps`). ``steps`` is the running
-    list (the machine empties it once it read ``result``); ``tick`` returns the twist to command,
-    or None when the moves drive themselves."""
-
-    steps: list[Step]
-
-    @property
-    def result(self) -> Any: ...  # a StepResult once the list ended, else None
-
-    def goal(self, mode: int, steps: Sequence[Step] = (), use_avoid: bool = False) -> Any: ...
-
-    def tick(self, odom: Sequence[float]) -> Twist | None: ...
-
-
 def _pct(soc: float | None) -> str:
     return "" if soc is None else f" ({soc:.0f} %)"
 
@@ -108,6 +92,7 @@ class Task:
     elapsed: float = 0.0  #: [s] into a timed action
     contact_wait: float | None = None  #: [s] docked, waiting for the charger this long
     lost: bool = False  #: navigation held while localization is lost
+    dock_corrections: int = 0  #: dock-in moves planned again so far (lowerbase.tasks.docking)
 
     @property
     def action(self) -> Action:
@@ -118,7 +103,7 @@ class Task:
         return self.state not in FINAL_STATES
 
 
-class TaskMachine:
+class TaskMachine(Docking):
     def __init__(self, nav: Navigation, places: Places, config: TaskConfig | None = None, *,
                  on_status: Callable[[Status], None] | None = None,
                  steps: StepMoves | None = None) -> None:
@@ -268,26 +253,7 @@ class TaskMachine:
             else:
                 self._lose(t)
         elif a.kind in (ActionType.DOCK_IN, ActionType.DOCK_OUT):
-            charger = self.places.charger
-            assert charger is not None
-            if a.kind == ActionType.DOCK_IN:
-                if ch.pose is None:
-                    return self._fail(t, "docking: no localized pose to dock from")
-                moves = dock_steps(ch.pose, charger.pose)
-            else:
-                back = ((charger.approach[0] - charger.pose[0]) ** 2
-                        + (charger.approach[1] - charger.pose[1]) ** 2) ** 0.5
-                moves = [(1, -back)]
-            speeds = {1: self.config.dock_speed, 2: 0.3}
-            if not moves:
-                if a.kind == ActionType.DOCK_OUT:
-                    self.docked = False
-                    return self._next(t)
-                self.docked, t.contact_wait = True, 0.0
-                return None
-            refused = self.steps.goal(EXCUTE, [Step(m, d, speeds[m]) for m, d in moves])
-            if refused is not None:
-                self._fail(t, f"docking: {refused.message}")
+            self._start_dock(t, ch)
         return None
 
     def _send(self, t: Task, target: Pose, poses: Sequence[Pose]) -> None:
@@ -433,29 +399,3 @@ class TaskMachine:
                 t.msg = f"charged to {ch.soc:.0f} %: undocking"
                 self._next(t)
         return None
-
-    def _run_dock(self, t: Task, ch: Chassis, dt: float) -> Twist | None:
-        if t.contact_wait is not None:  # docked: the BMS must see the charger
-            if ch.charging:
-                self._next(t)
-            elif t.contact_wait >= self.config.dock_timeout:
-                self._fail(t, f"docked, but no charger contact within "
-                           f"{self.config.dock_timeout:g} s: check the charger place")
-            elif t.state == TaskState.EXECUTING:
-                t.contact_wait += dt
-            return None
-        if ch.odom is None:
-            return (0.0, 0.0)
-        twist = self.steps.tick(ch.odom)
-        res = self.steps.result
-        if res is None or not self.steps.steps:
-            return twist
-        self.steps.steps = []
-        if res.result != SUCCEEDED:
-            self._fail(t, f"docking: {res.message}")
-        elif t.action.kind == ActionType.DOCK_IN:
-            self.docked, t.contact_wait = True, 0.0
-        else:
-            self.docked = False
-            self._next(t)
-        return twist

@@ -28,16 +28,23 @@ class TaskConfig:
     yaw_tolerance: float = 0.01  #: [rad] the same for the heading
     dock_speed: float = 0.1  #: [m/s] the final approach onto the charger (and back out)
     dock_timeout: float = 10.0  #: [s] after docking, for the BMS to report the charger
+    dock_tolerance: float = 0.025  #: [m] docked this near the charger pose (localization)
+    dock_yaw_tolerance: float = math.radians(2.0)  #: [rad] and this near its heading
+    dock_corrections: int = 2  #: dock-in moves planned again from an off-charger pose
     full_soc: float = 100.0  #: [%] a charging task undocks and completes at this charge
     auto_charge: bool = True  #: go and charge on a low battery once no task runs
     period: float = 0.05  #: [s] tick period (20 Hz, as a navigation stack)
 
     def __post_init__(self) -> None:
         for name in ("load_time", "unload_time", "pose_tolerance", "yaw_tolerance",
-                     "dock_speed", "dock_timeout", "period"):
+                     "dock_speed", "dock_timeout", "dock_tolerance", "dock_yaw_tolerance",
+                     "period"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise LowerbaseError(f"task config {name} must be a number > 0, got {value!r}")
+        if not (isinstance(self.dock_corrections, int) and self.dock_corrections >= 0):
+            raise LowerbaseError(f"task config dock_corrections must be an integer >= 0, "
+                                 f"got {self.dock_corrections!r}")
         if not 0 < self.full_soc <= 100:
             raise LowerbaseError(f"task config full_soc must be within (0, 100], "
                                  f"got {self.full_soc!r}")
@@ -125,7 +132,8 @@ def plan(req: TaskRequest, places: Places, cfg: TaskConfig) -> tuple[list[Action
 def dock_steps(pose: Pose, charger: Pose) -> list[tuple[int, float]]:
     """The final approach from ``pose`` onto the ``charger`` pose as step moves
     ``(executeMode, data)``: turn to face it, drive straight onto it, turn to its heading
-    (turns below 0.5 deg and drives below 5 mm left out)."""
+    (turns below 0.5 deg and drives below 5 mm left out). A charger pose behind the robot (a
+    correction after an overshoot) is reached backwards: turn to face away, drive back."""
     from lowerbase.navigation.steps import ROTATE, STRAIGHT
 
     dx, dy = charger[0] - pose[0], charger[1] - pose[1]
@@ -135,6 +143,9 @@ def dock_steps(pose: Pose, charger: Pose) -> list[tuple[int, float]]:
     if dist >= 0.005:
         bearing = math.atan2(dy, dx)
         turn = wrap(bearing - pose[2])
+        if abs(turn) > math.pi / 2:  # behind: back onto it
+            bearing = wrap(bearing + math.pi)
+            turn, dist = wrap(bearing - pose[2]), -dist
         if abs(turn) >= math.radians(0.5):
             steps.append((ROTATE, turn))
         steps.append((STRAIGHT, dist))

@@ -96,6 +96,10 @@ class Bench:
         self.charge_rate = charge_rate  #: [%/s] while on the charger
         self.charger_works = True
         self.ch = Chassis(pose=self.pose, odom=self.pose, soc=soc)
+        #: the share of the travel that odometry reports (< 1: it loses motion, as a driver
+        #: dropping wheel samples does); the localization stays the true pose
+        self.odom_scale = 1.0
+        self.odom: Pose = self.pose
         self.twists: list[tuple[float, float] | None] = []
 
     def set(self, **kw: Any) -> None:
@@ -113,7 +117,7 @@ class Bench:
             if contact:
                 self.soc = min(100.0, self.soc + self.charge_rate * DT)
             pose = self.pose if self.ch.localized else None
-            self.ch = replace(self.ch, pose=pose, odom=self.pose, charging=contact,
+            self.ch = replace(self.ch, pose=pose, odom=self.odom, charging=contact,
                               soc=self.soc)
             twist = self.machine.tick(self.now, self.ch)
             self.twists.append(twist)
@@ -122,6 +126,10 @@ class Bench:
                 x, y, yaw = self.pose
                 self.pose = (x + v * DT * math.cos(yaw), y + v * DT * math.sin(yaw),
                              _wrap(yaw + w * DT))
+                ox, oy, oyaw = self.odom
+                d = v * DT * self.odom_scale
+                self.odom = (ox + d * math.cos(oyaw), oy + d * math.sin(oyaw),
+                             _wrap(oyaw + w * DT))
             self.now = round(self.now + DT, 9)
 
     def until(self, cond: Any, timeout: float = 60.0) -> bool:

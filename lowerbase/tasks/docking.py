@@ -4,7 +4,8 @@ Dock in: step moves (StepControl) from the navigation's end onto the charger pos
 (:func:`~lowerbase.tasks.plan.dock_steps`). The moves measure on /odom; odometry that lost
 motion (wheel samples dropped by a loaded driver) ends them off the charger. So, once they
 end, the localized pose is checked against the charger pose and, when off by more than
-``dock_tolerance`` / ``dock_yaw_tolerance``, the moves are planned again from there (at most
+``dock_tolerance`` along its heading / ``dock_yaw_tolerance``, a straight move along its
+heading and a turn put it back (:func:`~lowerbase.tasks.plan.dock_correction`, at most
 ``dock_corrections`` times): the "secondary positioning" of the seed's action type 3. Then the
 BMS must report the charger within ``dock_timeout``. Dock out: straight back to the approach.
 """
@@ -19,7 +20,7 @@ from typing import Any, Protocol
 from lowerbase.navigation.controller import wrap
 from lowerbase.navigation.steps import EXCUTE, SUCCEEDED, Step
 from lowerbase.tasks.model import ActionType, Pose, TaskState
-from lowerbase.tasks.plan import TaskConfig, dock_steps
+from lowerbase.tasks.plan import TaskConfig, dock_correction, dock_steps
 from lowerbase.tasks.status import Chassis
 from lowerbase.world.places import Places
 
@@ -45,12 +46,14 @@ class StepMoves(Protocol):
 
 
 def off_charger(pose: Pose, charger: Pose, cfg: TaskConfig) -> str:
-    """Why ``pose`` is not on ``charger`` within the docking tolerances ('' when it is)."""
-    dist = math.hypot(pose[0] - charger[0], pose[1] - charger[1])
+    """Why ``pose`` is not on ``charger`` along the docking line (the error along its heading)
+    or in heading, beyond the docking tolerances ('' when it is)."""
+    along = (charger[0] - pose[0]) * math.cos(pose[2]) + \
+        (charger[1] - pose[1]) * math.sin(pose[2])
     turn = abs(wrap(pose[2] - charger[2]))
-    if dist <= cfg.dock_tolerance and turn <= cfg.dock_yaw_tolerance:
+    if abs(along) <= cfg.dock_tolerance and turn <= cfg.dock_yaw_tolerance:
         return ""
-    return f"{dist * 100:.1f} cm / {math.degrees(turn):.1f} deg off the charger"
+    return f"{along * 100:+.1f} cm along, {math.degrees(turn):.1f} deg off the charger"
 
 
 class Docking:
@@ -128,7 +131,7 @@ class Docking:
             t.dock_corrections += 1
             log.info("docking: %s by the localization: moving onto it again (%d of %d)", why,
                      t.dock_corrections, self.config.dock_corrections)
-            moves = dock_steps(pose, charger.pose)
+            moves = dock_correction(pose, charger.pose)
             if moves:
                 return self._move(t, moves)
         self.docked, t.contact_wait = True, 0.0

@@ -132,8 +132,7 @@ def plan(req: TaskRequest, places: Places, cfg: TaskConfig) -> tuple[list[Action
 def dock_steps(pose: Pose, charger: Pose) -> list[tuple[int, float]]:
     """The final approach from ``pose`` onto the ``charger`` pose as step moves
     ``(executeMode, data)``: turn to face it, drive straight onto it, turn to its heading
-    (turns below 0.5 deg and drives below 5 mm left out). A charger pose behind the robot (a
-    correction after an overshoot) is reached backwards: turn to face away, drive back."""
+    (turns below 0.5 deg and drives below 5 mm left out)."""
     from lowerbase.navigation.steps import ROTATE, STRAIGHT
 
     dx, dy = charger[0] - pose[0], charger[1] - pose[1]
@@ -143,14 +142,29 @@ def dock_steps(pose: Pose, charger: Pose) -> list[tuple[int, float]]:
     if dist >= 0.005:
         bearing = math.atan2(dy, dx)
         turn = wrap(bearing - pose[2])
-        if abs(turn) > math.pi / 2:  # behind: back onto it
-            bearing = wrap(bearing + math.pi)
-            turn, dist = wrap(bearing - pose[2]), -dist
         if abs(turn) >= math.radians(0.5):
             steps.append((ROTATE, turn))
         steps.append((STRAIGHT, dist))
         heading = bearing
     turn = wrap(charger[2] - heading)
+    if abs(turn) >= math.radians(0.5):
+        steps.append((ROTATE, turn))
+    return steps
+
+
+def dock_correction(pose: Pose, charger: Pose) -> list[tuple[int, float]]:
+    """Step moves that put ``pose`` back on the ``charger`` pose along the docking line: straight
+    (forwards or back) by the error along the robot's heading, then a turn to the charger's
+    heading. No turning towards the charger: beside it a turn can sweep the footprint into the
+    wall behind the charger. The error across the heading stays (it is the approach's)."""
+    from lowerbase.navigation.steps import ROTATE, STRAIGHT
+
+    along = (charger[0] - pose[0]) * math.cos(pose[2]) + \
+        (charger[1] - pose[1]) * math.sin(pose[2])
+    steps: list[tuple[int, float]] = []
+    if abs(along) >= 0.005:
+        steps.append((STRAIGHT, along))
+    turn = wrap(charger[2] - pose[2])
     if abs(turn) >= math.radians(0.5):
         steps.append((ROTATE, turn))
     return steps

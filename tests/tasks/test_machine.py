@@ -131,23 +131,25 @@ def test_docking_corrects_an_overshoot_by_the_localized_pose(corrections: int) -
         assert b.status.task_state == TS.FAILED and "no charger contact" in b.status.msg
         assert math.dist(b.pose[:2], charger.pose[:2]) > 0.05
         return
-    # the moves are planned again from the localized pose: backwards onto the charger
+    # the localized pose is past the charger: a move back along the heading puts it on
     assert b.status.robot_state == RS.CHARGING
     assert math.dist(b.pose[:2], charger.pose[:2]) < 0.02
     assert abs(math.remainder(b.pose[2] - charger.pose[2], math.tau)) < math.radians(2.0)
     assert b.machine.task is not None and 1 <= b.machine.task.dock_corrections <= 2
 
 
-def test_dock_steps_back_onto_a_charger_behind() -> None:
+def test_dock_correction_moves_along_the_heading_without_turning_to_the_charger() -> None:
     from lowerbase.navigation.steps import ROTATE, STRAIGHT
-    from lowerbase.tasks.plan import dock_steps
+    from lowerbase.tasks.plan import dock_correction
 
-    # 10 cm past a charger that faces -y: straight back, no turning around
-    assert dock_steps((0.0, -2.1, -math.pi / 2), (0.0, -2.0, -math.pi / 2)) == [
-        (STRAIGHT, pytest.approx(-0.1))]
-    # ahead: as before (face it, drive, turn to its heading)
-    moves = dock_steps((0.0, -1.0, 0.0), (0.0, -2.0, -math.pi / 2))
-    assert [m for m, _ in moves] == [ROTATE, STRAIGHT] and moves[1][1] == pytest.approx(1.0)
+    # 10 cm past a charger facing -x (into a wall), 4 cm beside it, 2 deg off: back 10 cm
+    # along the heading, turn 2 deg; no turn towards the charger (it would sweep the wall)
+    pose = (0.9, 4.04, math.pi + math.radians(2.0))
+    moves = dock_correction(pose, (1.0, 4.0, math.pi))
+    assert [m for m, _ in moves] == [STRAIGHT, ROTATE]
+    assert moves[0][1] == pytest.approx(-0.0985, abs=0.002)
+    assert moves[1][1] == pytest.approx(math.radians(-2.0))
+    assert dock_correction((1.0, 4.0, math.pi), (1.0, 4.0, math.pi)) == []
 
 
 def test_no_charger_contact_after_docking_fails() -> None:

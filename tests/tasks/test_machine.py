@@ -152,6 +152,29 @@ def test_dock_correction_moves_along_the_heading_without_turning_to_the_charger(
     assert dock_correction((1.0, 4.0, math.pi), (1.0, 4.0, math.pi)) == []
 
 
+@pytest.mark.parametrize("contact", [False, True])
+def test_a_dock_out_ending_short_goes_on_once_off_the_charger(contact: bool) -> None:
+    from lowerbase.navigation.steps import FAILED, StepResult
+
+    b = ready()
+    dock(b)
+    assert b.send(EXEC, 6, PARK, mark_no="S1").success
+    assert b.status.action_type == AT.DOCK_OUT
+    # 2 s of the 1 m dock out at 0.1 m/s: off the charger; or one tick: still on it
+    b.tick(1 if contact else 40)
+    assert b.on_charger() == contact
+    # what StepControl answers when /odom disagrees with itself (a driver losing samples)
+    b.machine.steps.result = StepResult(FAILED, 1, 20.0,
+                                        "step 1: still 15.9 mm off after 5 corrections")
+    b.tick()
+    if not contact:  # as over ROS: the robot is off the charger, navigation takes it on
+        assert (b.status.task_state, b.status.action_type) == (TS.EXECUTING, AT.NAVIGATION)
+        assert b.until(lambda: done(b)) and b.status.task_state == TS.COMPLETED
+        assert math.dist(b.pose[:2], (4.0, 0.0)) < 0.01
+    else:  # still charging: the task fails as before
+        assert b.status.task_state == TS.FAILED and "still 15.9 mm off" in b.status.msg
+
+
 def test_no_charger_contact_after_docking_fails() -> None:
     b = ready()
     b.charger_works = False

@@ -34,6 +34,7 @@ from lowerbase.navigation.steps import (
     CANCEL,
     CANCELLED,
     EXCUTE,
+    FAILED,
     PAUSE,
     REJECTED,
     RESUM,
@@ -164,6 +165,9 @@ class ActionSteps:
                                      text)
         elif state == GoalStatus.PREEMPTED and res is not None and res.result == CANCELLED:
             self.result = StepResult(CANCELLED, int(res.executeMode), float(res.percent), text)
+        elif state == GoalStatus.ABORTED and res is not None and res.result == FAILED:
+            # the list ran but a step stayed off (lowerbase navigation aborts with FAILED)
+            self.result = StepResult(FAILED, int(res.executeMode), float(res.percent), text)
         else:
             self.result = StepResult(REJECTED, 0, 0.0, text or "the step list failed")
 

@@ -107,6 +107,10 @@ class ActionNavigation:
         return ActionFeedback(0.0, 0.0, name, _state_name(state), text)
 
 
+#: polls (20 Hz) to wait for a done goal's result message before taking it as lost
+RESULT_WAITS = 40
+
+
 class ActionSteps:
     """The machine's step moves over /cmd_vel_control (see the module docstring)."""
 
@@ -116,6 +120,7 @@ class ActionSteps:
         self.result: StepResult | None = None
         self._check = StepController()
         self._sent = False
+        self._result_waits = 0  #: polls that saw the goal done but no result message yet
 
     @property
     def active(self) -> bool:
@@ -126,7 +131,7 @@ class ActionSteps:
             StepControl(executeMode=s.execute_mode, data=s.data, speed=s.speed, angle=s.angle)
             for s in steps])
         self.client.send_goal(goal)
-        self._sent = True
+        self._sent, self._result_waits = True, 0
 
     def goal(self, mode: int, steps: Sequence[Step] = (), use_avoid: bool = False
              ) -> StepResult | None:
@@ -159,6 +164,10 @@ class ActionSteps:
         if state not in _DONE:
             return
         res = self.client.get_result()
+        if res is None and self._result_waits < RESULT_WAITS:
+            # the goal's status topic can show it done before its result message arrived
+            self._result_waits += 1
+            return
         text = self.client.get_goal_status_text() or _state_name(state)
         if state == GoalStatus.SUCCEEDED and res is not None:
             self.result = StepResult(int(res.result), int(res.executeMode), float(res.percent),

@@ -4,11 +4,17 @@ The map is a synthetic warehouse (50 x 50 m at 0.05 m: outer walls, shelf rows w
 aisles and cross aisles), the robot mid-aisle facing along it; the sensors are the default
 profile's (two nanoScan3 merged into a 720-beam /scan, a D435 at 640 x 480). Costs are CPU time
 per message (``time.process_time``, one thread), and the share of one core at the sensor's rate;
-the ray casters' distance field, built once per map, is reported on its own.
+the ray casters' distance field, built once per map, is reported on its own, and so are the map
+cast alone (the numba kernel against its numpy reference) and the kernel's first-cast cost in a
+new process (compiling it into an empty cache, then loading it from the cache).
 """
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import tempfile
 import time
 from collections.abc import Callable
 
@@ -39,10 +45,32 @@ def _cpu_per_call(fn: Callable[[int], object], calls: int, repeat: int = 3) -> f
     return best
 
 
+_FIRST_CAST = """
+import time
+import numpy as np
+from lowerbase.world.grid import OccupancyGrid
+from lowerbase.world.raycast import cast_grid
+grid = OccupancyGrid(np.zeros((4, 4), np.int8), 0.05)
+t0 = time.process_time()
+cast_grid(grid.occupied(), grid, 0.1, 0.1, np.zeros(3), 1.0)
+print(time.process_time() - t0)
+"""
+
+
+def _first_cast_s(cache_dir: str) -> float:
+    """CPU seconds of a new process's first cast (numba's import and the kernel's compile or
+    cache load) with the kernel cached in ``cache_dir``."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir)
+    out = subprocess.run([sys.executable, "-c", _FIRST_CAST], env=env, check=True,
+                         capture_output=True, text=True).stdout
+    return float(out.split()[-1])
+
+
 def run(quick: bool = False) -> list[Row]:
     from lowerbase.world.camera import DepthCamera
     from lowerbase.world.lidar import LidarRig
-    from lowerbase.world.raycast import Scene, Solid
+    from lowerbase.world.raycast import Scene, Solid, cast_grid
+    from lowerbase.world.raycast_reference import cast_grid_reference
     from lowerbase.world.sensors import SensorsConfig
 
     config = SensorsConfig()
@@ -66,6 +94,28 @@ def run(quick: bool = False) -> list[Row]:
             "% of one core", "target < 20 %"),
         Row("world", "ray-casting distance field of the 1000x1000 map (once per map)",
             field_s * 1e3, "ms CPU"),
+    ]
+    rays = [lidar.rays(pose) for lidar in rig.lidars]
+    xs = np.concatenate([np.full(a.size, x) for x, _, a in rays])
+    ys = np.concatenate([np.full(a.size, y) for _, y, a in rays])
+    angles = np.concatenate([a for *_, a in rays])
+    casters: tuple[tuple[str, Callable[..., object]], ...] = (
+        ("numba kernel", cast_grid), ("numpy reference", cast_grid_reference))
+    for name, cast in casters:
+        def cast_map(_k: int, cast: Callable[..., object] = cast) -> object:
+            return cast(scene.mask, scene.grid, xs, ys, angles, 40.0, scene.grid_field)
+
+        cast_s = _cpu_per_call(cast_map, n)
+        rows.append(Row("world", f"the map cast alone ({angles.size} rays), {name}",
+                        cast_s * 1e3, "ms CPU/scan"))
+    with tempfile.TemporaryDirectory(prefix="lowerbase-numba-") as cache_dir:
+        compile_s = _first_cast_s(cache_dir)
+        cached_s = _first_cast_s(cache_dir)
+    rows += [
+        Row("world", "first cast in a new process: numba import + kernel compile", compile_s,
+            "s CPU", "an empty cache (once per install)"),
+        Row("world", "first cast in a new process: numba import + cached kernel", cached_s,
+            "s CPU"),
     ]
     if config.camera is not None:
         camera = DepthCamera(config.camera)

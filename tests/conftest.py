@@ -30,10 +30,11 @@ ROOT = Path(__file__).resolve().parents[1]
 #: a multicast group of the tests' own; each test also gets its own port
 TEST_GROUP = "239.74.163.99"
 #: ``lowerbase conformance`` against an emulator process on the test host: the suite's limits
-#: add the host's timestamp allowance (--jitter, 0.05 s for a bench host). A 2-core machine
-#: running the test suite schedules the emulator and the suite up to ~0.1 s late, so the
-#: process tests allow 0.15 s; the timing defects they must catch are 0.3 s late.
-LOADED_HOST = ("--jitter", "0.15")
+#: add the host's timestamp allowance (--jitter, 0.05 s for a bench host) and allow a mean cycle
+#: 10 % off. A 2-core machine running the test suite schedules the emulator and the suite up to
+#: ~0.1 s late and stretches a 10 ms cycle by ~12 %, so the process tests allow 0.15 s and 30 %;
+#: the defects they must catch are 0.3 s late or a cycle twice as long.
+LOADED_HOST = ("--jitter", "0.15", "--cycle-tolerance", "0.3")
 
 
 def free_udp_port() -> int:

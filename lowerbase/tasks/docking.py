@@ -10,7 +10,9 @@ heading and a turn put it back (:func:`~lowerbase.tasks.plan.dock_correction`, a
 BMS must report the charger within ``dock_timeout``. Dock out: straight back to the approach.
 A step list that ended short (StepControl's FAILED: a step still off after its corrections, by
 /odom) is no failure of the task when the localization can finish it: dock-in goes on to the
-check above, dock-out to the next action once the charger contact is open.
+check above, dock-out to the next action once the charger contact is open. So do moves that
+have not ended after ``dock_move_timeout`` (they are cancelled): StepControl has no stall
+check, and a robot held by a wall (an overshoot on odometry that lost motion) never arrives.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from collections.abc import Sequence
 from typing import Any, Protocol
 
 from lowerbase.navigation.controller import wrap
-from lowerbase.navigation.steps import EXCUTE, FAILED, SUCCEEDED, Step
+from lowerbase.navigation.steps import CANCEL, EXCUTE, FAILED, SUCCEEDED, Step, StepResult
 from lowerbase.tasks.model import ActionType, Pose, TaskState
 from lowerbase.tasks.plan import TaskConfig, dock_correction, dock_steps
 from lowerbase.tasks.status import Chassis
@@ -94,6 +96,7 @@ class Docking:
 
     def _move(self, t: Any, moves: list[tuple[int, float]]) -> None:
         speeds = {1: self.config.dock_speed, 2: 0.3}
+        t.dock_elapsed = 0.0
         refused = self.steps.goal(EXCUTE, [Step(m, d, speeds[m]) for m, d in moves])
         if refused is not None:
             self._fail(t, f"docking: {refused.message}")
@@ -112,6 +115,14 @@ class Docking:
             return (0.0, 0.0)
         twist = self.steps.tick(ch.odom)
         res = self.steps.result
+        if t.state == TaskState.EXECUTING:
+            t.dock_elapsed += dt
+        if res is None and self.steps.steps and t.dock_elapsed >= self.config.dock_move_timeout:
+            # moves that never end (odometry that lost motion drives on against a wall, which
+            # holds the robot): stop them, the localization decides as for a short list
+            self.steps.goal(CANCEL)
+            res = StepResult(FAILED, 0, 0.0, f"the moves did not end within "
+                             f"{self.config.dock_move_timeout:g} s: stopped")
         if res is None or not self.steps.steps:
             return twist
         self.steps.steps = []

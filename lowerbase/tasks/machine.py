@@ -93,6 +93,7 @@ class Task:
     contact_wait: float | None = None  #: [s] docked, waiting for the charger this long
     lost: bool = False  #: navigation held while localization is lost
     dock_corrections: int = 0  #: dock-in moves planned again so far (lowerbase.tasks.docking)
+    dock_elapsed: float = 0.0  #: [s] the current docking moves have run
 
     @property
     def action(self) -> Action:

@@ -31,6 +31,7 @@ class TaskConfig:
     dock_tolerance: float = 0.025  #: [m] docked this near the charger pose (localization)
     dock_yaw_tolerance: float = math.radians(2.0)  #: [rad] and this near its heading
     dock_corrections: int = 2  #: dock-in moves planned again from an off-charger pose
+    dock_move_timeout: float = 40.0  #: [s] docking moves still running then are stopped
     full_soc: float = 100.0  #: [%] a charging task undocks and completes at this charge
     auto_charge: bool = True  #: go and charge on a low battery once no task runs
     period: float = 0.05  #: [s] tick period (20 Hz, as a navigation stack)
@@ -38,7 +39,7 @@ class TaskConfig:
     def __post_init__(self) -> None:
         for name in ("load_time", "unload_time", "pose_tolerance", "yaw_tolerance",
                      "dock_speed", "dock_timeout", "dock_tolerance", "dock_yaw_tolerance",
-                     "period"):
+                     "dock_move_timeout", "period"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise LowerbaseError(f"task config {name} must be a number > 0, got {value!r}")

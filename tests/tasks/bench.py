@@ -100,6 +100,8 @@ class Bench:
         #: dropping wheel samples does); the localization stays the true pose
         self.odom_scale = 1.0
         self.odom: Pose = self.pose
+        #: a wall at this y (the robot is held above it, wheels and odometry stopped), or None
+        self.wall_y: float | None = None
         self.twists: list[tuple[float, float] | None] = []
 
     def set(self, **kw: Any) -> None:
@@ -124,6 +126,8 @@ class Bench:
             if twist is not None:
                 v, w = twist
                 x, y, yaw = self.pose
+                if self.wall_y is not None and y + v * DT * math.sin(yaw) < self.wall_y:
+                    v = w = 0.0  # held by the wall, as the emulator does
                 self.pose = (x + v * DT * math.cos(yaw), y + v * DT * math.sin(yaw),
                              _wrap(yaw + w * DT))
                 ox, oy, oyaw = self.odom

@@ -152,6 +152,21 @@ def test_dock_correction_moves_along_the_heading_without_turning_to_the_charger(
     assert dock_correction((1.0, 4.0, math.pi), (1.0, 4.0, math.pi)) == []
 
 
+def test_docking_moves_held_by_a_wall_are_stopped_and_corrected() -> None:
+    # odometry reports 85 % of the travel, so the 1 m dock drive goes on past the charger into
+    # the wall 8 cm behind it, which holds the robot: /odom never arrives, StepControl never
+    # ends (it has no stall check). The machine stops the moves after dock_move_timeout and
+    # corrects from the localized pose
+    b = Bench(TaskConfig(dock_timeout=1.0, dock_move_timeout=30.0))
+    b.tick()
+    b.odom_scale, b.wall_y = 0.85, -2.08
+    assert b.send(EXEC, 5, CHARGE).success
+    assert b.until(lambda: b.status.action_type == AT.CHARGING or done(b), timeout=120.0)
+    assert b.status.robot_state == RS.CHARGING
+    charger = PLACES.charger
+    assert charger is not None and math.dist(b.pose[:2], charger.pose[:2]) < 0.02
+
+
 @pytest.mark.parametrize("contact", [False, True])
 def test_a_dock_out_ending_short_goes_on_once_off_the_charger(contact: bool) -> None:
     from lowerbase.navigation.steps import FAILED, StepResult

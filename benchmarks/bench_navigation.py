@@ -11,8 +11,9 @@
   start/goal pairs on free cells, on the warehouse and on the 2000 x 2000 cell map.
 - random goals: ``GOALS`` (quick: 5) random reachable goals one after the other on the
   warehouse, amcl localization on, through the whole chain (NavSim on a WorldSim): share reached,
-  collisions, accuracy p95 against the emulator's truth, time to goal p50, and the simulated
-  clock's speed of the whole loop with navigation (simulated seconds per CPU second).
+  collisions (the goals not reached listed with their reasons), accuracy p95 against the
+  emulator's truth, time to goal p50, and the simulated clock's speed of the whole loop with
+  navigation (simulated seconds per CPU second).
 - StepControl: ``STEPS`` (quick: 10) random straight/rotate steps driven by StepController on a
   WorldSim; the error of each step against the emulator's truth (max and p95).
 
@@ -148,6 +149,7 @@ def goal_rows(count: int) -> list[Row]:
     rng = np.random.default_rng(7)
     reached = collisions = 0
     errors, times = [], []
+    failed: list[str] = []  #: "#k state: reason" of each goal not reached
     t0, s0 = time.process_time(), world.now
     done = 0
     while done < count:
@@ -157,7 +159,9 @@ def goal_rows(count: int) -> list[Row]:
         done += 1
         run = sim.go_to(goal, timeout=180.0)
         collisions += run.contacts > 0
-        if run.state is GoalState.SUCCEEDED:
+        if run.state is not GoalState.SUCCEEDED:
+            failed.append(f"#{done} {run.state.name.lower()}: {run.reason}")
+        else:
             reached += 1
             x, y, _ = world.true_pose()
             errors.append(math.hypot(x - goal[0], y - goal[1]) * 100)
@@ -167,7 +171,7 @@ def goal_rows(count: int) -> list[Row]:
     return [
         Row("navigation", f"random goals reached, warehouse, amcl ({count} goals)",
             100.0 * reached / count, "%", f"target >= 99 %; {collisions} with contact "
-            f"(target 0)"),
+            f"(target 0)" + (f"; not reached: {'; '.join(failed)}" if failed else "")),
         Row("navigation", "goal accuracy p95 (truth)", percentile(errors, 95), "cm",
             f"time to goal p50 {percentile(times, 50):.0f} s"),
         Row("navigation", "simulated clock, whole loop with navigation", speed,

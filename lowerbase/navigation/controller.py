@@ -214,7 +214,11 @@ class PathController:
             ey = -math.sin(yaw) * dx + math.cos(yaw) * dy
             sign = 1.0 if ex >= 0 else -1.0
             alpha = math.atan2(sign * ey, sign * ex)  # heading error, backwards if behind
-            if abs(alpha) > math.radians(20.0) and dist > cfg.xy_tolerance:
+            # turn to face the goal point when far off heading; within xy_tolerance only when
+            # driving straight cannot reach the half tolerance (the error mostly sideways):
+            # creeping to and fro there never got closer than |ey| (a livelock until "stuck")
+            if abs(alpha) > math.radians(20.0) and (
+                    dist > cfg.xy_tolerance or abs(ey) > 0.5 * cfg.xy_tolerance):
                 return self._rotate(x, y, yaw, alpha, Status.APPROACHING)
             v = sign * min(max(1.2 * abs(ex), cfg.min_speed), cfg.max_speed,
                            math.sqrt(2.0 * self.limits.linear_decel * 0.5 * dist))

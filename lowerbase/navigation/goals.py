@@ -65,6 +65,9 @@ class NavigatorConfig:
     cost_scale: float = 15.0  #: planner: a cell of cost c is 1 + c/cost_scale long
     fuzzy_cost_scale: float = 1000.0  #: the same in mode 0 (inflation weighs little)
     clearance_margin: float = 0.1  #: keep-out beyond the footprint's radius (modes 0, 1)
+    #: planner: cells of at least the circumscribed cost (the footprint fits there only at
+    #: some headings) are this many times as long, except in mode 0 (fuzzy)
+    narrow_penalty: float = 10.0
     controller: ControllerConfig = field(default_factory=ControllerConfig)
     back_off: BackOffConfig = field(default_factory=BackOffConfig)  #: before each replan
 
@@ -76,6 +79,10 @@ class NavigatorConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise NavigationError(f"navigator {name} = {v!r} is invalid; allowed: >= 0")
+        if not (isinstance(self.narrow_penalty, (int, float))
+                and math.isfinite(self.narrow_penalty) and self.narrow_penalty >= 1):
+            raise NavigationError(f"navigator narrow_penalty = {self.narrow_penalty!r} is "
+                                  f"invalid; allowed: >= 1")
         for name in ("max_replans", "max_early_replans"):
             v = getattr(self, name)
             if not isinstance(v, int) or v < 0:
@@ -142,7 +149,8 @@ def unblocked_start(planner: GlobalPlanner, start: Pose, inscribed_radius: float
     rr, cc = rr[keep], cc[keep]
     sel = costs[rr, cc] == INSCRIBED
     costs[rr[sel], cc[sel]] = 252
-    out = GlobalPlanner(costs, res, planner.origin, cost_scale=planner.cost_scale)
+    out = GlobalPlanner(costs, res, planner.origin, cost_scale=planner.cost_scale,
+                        narrow_cost=planner.narrow_cost, narrow_penalty=planner.narrow_penalty)
     out.footprint = planner.footprint
     return out
 

@@ -208,9 +208,12 @@ class Navigator:
         return r + self.config.clearance_margin
 
     def _planner(self) -> GlobalPlanner:
-        scale = self.config.fuzzy_cost_scale if self.mode.fuzzy else self.config.cost_scale
+        fuzzy = self.mode.fuzzy
+        scale = self.config.fuzzy_cost_scale if fuzzy else self.config.cost_scale
         planner = GlobalPlanner(self.combined.planning_costs(self._clearance()),
-                                self.grid.resolution, self.combined.origin, cost_scale=scale)
+                                self.grid.resolution, self.combined.origin, cost_scale=scale,
+                                narrow_cost=self.global_costmap.circumscribed_cost,
+                                narrow_penalty=1.0 if fuzzy else self.config.narrow_penalty)
         planner.footprint = self._fp_forward
         return planner
 

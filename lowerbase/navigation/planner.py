@@ -9,10 +9,13 @@ can feed it (:meth:`GlobalPlanner.from_costmap` takes an object with ``costs``/`
 The search is scikit-image's :class:`skimage.graph.MCP_Geometric` (Dijkstra in C, 8-connected,
 diagonal steps weighted by sqrt 2): lethal and inscribed cells (and unknown ones unless
 ``allow_unknown``) are impassable, every other cell costs ``1 + cost / cost_scale`` per cell
-length. The cell path is then shortened by line-of-sight shortcuts that never pass a cell
-costlier than the worst one of the stretch they replace (so a shortcut does not hug a wall the
-search avoided), resampled every ``resolution`` metres, and given orientations: each pose faces
-the next one, the last pose takes the goal's yaw.
+length, and ``narrow_penalty`` times that from ``narrow_cost`` up (the Navigator passes the
+circumscribed cost: where the footprint fits only at some headings, such as a gap beside a
+pillar barely wider than the robot, so the search takes such a passage only when the way round
+is ``narrow_penalty`` times longer). The cell path is then shortened by line-of-sight
+shortcuts that never pass a cell costlier than the worst one of the stretch they replace (so a
+shortcut does not hug a wall the search avoided), resampled every ``resolution`` metres, and
+given orientations: each pose faces the next one, the last pose takes the goal's yaw.
 
 :meth:`GlobalPlanner.make_plan` has nav_msgs/GetPlan's semantics: a goal that is blocked (or
 unreachable) still plans to the reachable free cell nearest to it within ``tolerance`` metres;
@@ -169,7 +172,8 @@ class GlobalPlanner:
     def __init__(self, costs: np.ndarray, resolution: float,
                  origin: Sequence[float] = (0.0, 0.0), *, cost_scale: float = 50.0,
                  allow_unknown: bool = False,
-                 footprint: Sequence[tuple[float, float]] | None = None) -> None:
+                 footprint: Sequence[tuple[float, float]] | None = None,
+                 narrow_cost: int | None = None, narrow_penalty: float = 1.0) -> None:
         costs = np.asarray(costs)
         if costs.ndim != 2 or costs.size == 0 or costs.dtype != np.uint8:
             raise PlanningError(f"the costmap must be a non-empty 2D uint8 array, got "
@@ -178,11 +182,14 @@ class GlobalPlanner:
             raise PlanningError(f"the costmap resolution must be > 0 m, got {resolution}")
         if not (math.isfinite(cost_scale) and cost_scale > 0):
             raise PlanningError(f"cost_scale must be > 0, got {cost_scale}")
+        if not (math.isfinite(narrow_penalty) and narrow_penalty >= 1.0):
+            raise PlanningError(f"narrow_penalty must be >= 1, got {narrow_penalty}")
         self.costs = costs
         self.resolution = float(resolution)
         self.origin = (float(origin[0]), float(origin[1]))
         self.cost_scale = float(cost_scale)
         self.allow_unknown = allow_unknown
+        self.narrow_cost, self.narrow_penalty = narrow_cost, float(narrow_penalty)
         self.footprint = FootprintCells(footprint, self.resolution) \
             if footprint is not None else None
         blocked = costs >= INSCRIBED
@@ -191,6 +198,8 @@ class GlobalPlanner:
         self.blocked = blocked
         weights = 1.0 + np.where(costs == NO_INFORMATION, 0, costs).astype(np.float64) \
             / self.cost_scale
+        if narrow_cost is not None and narrow_penalty != 1.0:
+            weights[(costs >= narrow_cost) & (costs != NO_INFORMATION)] *= narrow_penalty
         weights[blocked] = np.inf
         self.weights = weights
 

@@ -13,7 +13,9 @@ smaller than a silence that just ended) makes a reboot suspected, and the next H
 confirms it if it continues the *new* timeline. Only then are the parameters read again and
 CAN control re-enabled (``auto_enable``). Odometry never integrates across an outage: a lost
 link holds /odom_raw and /odom (velocities 0), and wheel counts after a lost link, a suspected
-reboot, a long gap or a Counter discontinuity are a new baseline, not motion. A changed
+reboot, a long gap or a Counter that ran ahead of the time elapsed are a new baseline, not
+motion; a late sender (fewer cycles than time, then a catch-up burst) is integrated, each
+sample stamped on the sender's time base (the Counter's cycles). A changed
 BootCounter with the Uptime still counting (a garbled or forged frame) is counted and ignored.
 Control is enabled at first contact and after a confirmed reboot only, retried until
 SystemStatus shows ControlMode Can; a chassis put in standby (or e-stopped) on purpose is
@@ -169,6 +171,8 @@ class DriverCore:
         self._wheels: dict[int, tuple[int, int]] = {}
         self._wheel_period = self.codec.message("WheelFeedback").cycle_time or 0.02
         self._last_wheel: tuple[float, int] | None = None  # (time, rolling Counter)
+        #: [s] the last wheel sample's time on the sender's time base (see _wheel_stamp)
+        self._wheel_time = -math.inf
         #: the next wheel sample is a new baseline, not motion (link lost, reboot suspected)
         self._odom_gap = False
         self._last_heartbeat = -math.inf
@@ -378,9 +382,29 @@ class DriverCore:
         cycles = dt / self._wheel_period
         if cycles > self.config.wheel_gap_cycles:
             return f"no wheel sample for {dt:.2f} s"
-        if abs((counter - self._last_wheel[1]) % 16 - cycles) > 2.0:
+        if (counter - self._last_wheel[1]) % 16 > cycles + 2.0:
+            # more cycles than the time allows; fewer is a late sender (it catches up next)
             return "WheelFeedback Counter discontinuity"
         return None
+
+    def _wheel_stamp(self, counter: int, now: float) -> float:
+        """[s] when this wheel sample was taken, on the sender's time base: the last one's time
+        plus the Counter's cycles, when that disagrees with the receive time ``now`` by more than
+        half a cycle (a sender that ran late and now catches up sends its cycles in a burst),
+        never after ``now``; back on ``now`` when it falls behind by more than the gap limit (a
+        sender whose clock runs slow). Velocities and the EKF then see the cycles' true spacing,
+        not the burst's."""
+        if self._last_wheel is None or not math.isfinite(self._wheel_time):
+            return now
+        period = self._wheel_period
+        stamp = self._wheel_time + (counter - self._last_wheel[1]) % 16 * period
+        if abs(stamp - now) <= 0.5 * period or stamp > now:
+            return now
+        if now - stamp > self.config.wheel_gap_cycles * period:
+            self.stats["wheel_time_reanchored"] += 1
+            return now
+        self.stats["wheel_late_samples"] += 1
+        return stamp
 
     def _watchdog_time(self) -> float:
         """[s] how long the base may go on moving unseen: its watchdog, then braking."""
@@ -445,7 +469,8 @@ class DriverCore:
         self._wheels = {}
         odo = self.odometry
         gap = self._wheel_gap(left[0], now)
-        self._last_wheel = (now, left[0])
+        stamp = now if gap is not None else self._wheel_stamp(left[0], now)
+        self._last_wheel, self._wheel_time = (now, left[0]), stamp
         if gap is not None:
             # counts after a gap may come from restarted counters: a new baseline, no motion
             self.stats["odometry_rebaselined"] += 1
@@ -453,15 +478,15 @@ class DriverCore:
             if not self._odom_gap:  # else held already, when the gap began
                 self._hold_odometry(0.0)
             odo.hold()
-            odo.update(left[1], right[1], now)
+            odo.update(left[1], right[1], stamp)
             self._odom_gap = self.state == LinkState.LOST
             return
-        if not odo.update(left[1], right[1], now):
+        if not odo.update(left[1], right[1], stamp):
             return
         # The EKF weighs the wheels with its own model of their errors (EkfNoise.wheel_*):
         # radius and track errors and slip, which /odom_raw's quantisation-based twist
         # covariance does not contain; with that one the wheels would outvote the gyro.
-        self.ekf.update_wheels(odo.linear, odo.angular, stamp=now)
+        self.ekf.update_wheels(odo.linear, odo.angular, stamp=stamp)
         self._notify("odometry")
 
     def _on_ImuGyro(self, v: dict[str, Any], now: float) -> None:

@@ -148,3 +148,26 @@ def test_ros_clock_measures_clock_speed_for_the_age_of_a_frame() -> None:
     assert clock.ago(0.1) == pytest.approx(rospy.t - 0.4)
     rospy.t = 10.0  # /clock restarted (a new simulation): a new window, not a negative speed
     assert clock.ago(0.0) == 10.0 and clock.rate >= 0.0
+
+
+def test_a_late_sender_catching_up_in_a_burst_loses_no_motion() -> None:
+    """The emulator (or firmware behind a loaded gateway) stalls 0.1 s, five wheel cycles, then
+    sends them at once: the first arrives 0.1 s after the last one with the Counter one on (a
+    late sender, not a reboot: those take longer than the 12-cycle gap), the rest in a burst.
+    The counts are integrated and the samples stamped on the Counter's time base."""
+    raw, true, rebaselined, _ = drive(stamped=False, stall=0.1)
+    assert rebaselined == 0
+    assert raw == pytest.approx(true, abs=0.02)
+
+
+def test_a_late_senders_burst_gives_the_cycles_true_spacing() -> None:
+    """/odom_raw's velocity over the burst is the wheel speed, not counts over microseconds."""
+    loop = StallingLoop(stamped=False, stall=0.1)
+    assert loop.run_until(lambda lp: lp.driver.state == LinkState.READY, timeout=5.0)
+    odo = loop.driver.odometry
+    assert odo is not None
+    speeds: list[float] = []
+    loop.drive(0.5, 0.0, 3.0, on_step=lambda lp: speeds.append(odo.linear))
+    assert loop.driver.stats["wheel_late_samples"] > 0
+    # at most 4/3: the burst's last sample is on its receive time, within half a cycle
+    assert max(speeds) < 0.5 * 1.4

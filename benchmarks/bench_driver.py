@@ -202,7 +202,7 @@ def bench_latency_ros(n: int) -> tuple[list[float], str] | None:
     if shutil.which("rosmaster") is None:
         return None
     port = free_loopback_port(socket.SOCK_STREAM)
-    bus = {"interface": "udp_multicast", "channel": "239.74.163.98",
+    bus: dict[str, Any] = {"interface": "udp_multicast", "channel": "239.74.163.98",
            "port": free_loopback_port(socket.SOCK_DGRAM), "hop_limit": 0}
     home = Path(tempfile.mkdtemp(prefix="bench_driver_"))
     env = {**os.environ, "ROS_MASTER_URI": f"http://127.0.0.1:{port}", "ROS_IP": "127.0.0.1",

@@ -43,6 +43,12 @@ from lowerbase.transport.peers import PeerMonitor
 
 log = logging.getLogger(__name__)
 
+#: periods a chassis of a fleet steps at a time on the simulated clock (see :func:`run_fleet`)
+SIM_BLOCK = 20
+#: fleets from this size up run in blocks by default (smaller ones stay in the CPU's caches
+#: period by period; measured in benchmarks/bench_fleet.py)
+SIM_BLOCK_FLEET = 100
+
 
 def bus_sender(
     bus: can.BusABC, mcu_stats: Callable[[str], None] | None = None,
@@ -202,6 +208,8 @@ def run_fleet(
     stop: threading.Event | None = None,
     on_step: Callable[[], None] | None = None,
     catalog_filter: bool = True,
+    on_chassis_step: Callable[[int, Chassis], None] | None = None,
+    block: int | None = None,
 ) -> None:
     """Run every chassis until ``duration`` [s] has passed or ``stop`` is set.
 
@@ -209,7 +217,18 @@ def run_fleet(
     ``epoll`` wait tells which buses have any; buses without a file descriptor are polled),
     then every MCU steps once and ``on_step()`` is called. In real time the wait lasts until
     the period's deadline, as :func:`run` does for one chassis. ``catalog_filter``: as
-    :func:`run`'s, on every chassis' bus."""
+    :func:`run`'s, on every chassis' bus. ``on_chassis_step(k, chassis)`` is called after
+    each step of chassis k.
+
+    On a :class:`SimClock` without ``on_step`` the fleet runs in blocks of ``block`` periods
+    (default: :data:`SIM_BLOCK` for :data:`SIM_BLOCK_FLEET` chassis or more, else 1), chassis
+    by chassis (:func:`_run_blocks`): each chassis' state stays in the CPU's caches for its
+    block, which a period-by-period round through hundreds of chassis does not
+    (docs/emulator.md, "A fleet in one process"). Every chassis computes, sends and sees what
+    it would period by period; a bus with a file descriptor is read at the start of each of
+    its blocks (buses without one every period)."""
+    if block is None:
+        block = SIM_BLOCK if len(fleet) >= SIM_BLOCK_FLEET else 1
     if not fleet:
         return
     if catalog_filter:
@@ -247,6 +266,9 @@ def run_fleet(
     wait = min(dt / 4, 0.001) if polled else None  # buses without an fd: poll them
     start = deadline = clock.now()
     try:
+        if sim is not None and on_step is None and block > 1:
+            _run_blocks(fleet, sim, selector, drain, duration, stop, on_chassis_step, block)
+            return
         while not stop.is_set():
             if duration is not None and clock.now() - start >= duration - 1e-9:
                 break
@@ -258,8 +280,10 @@ def run_fleet(
                     span = real_seconds(clock, remaining)
                     receive(span if wait is None else min(span, wait))
                 receive(0.0)
-            for chassis in fleet:
+            for k, chassis in enumerate(fleet):
                 chassis.mcu.step()
+                if on_chassis_step is not None:
+                    on_chassis_step(k, chassis)
             if sim is not None:
                 sim.advance(dt)
             elif clock.now() - deadline > 1.0:  # overloaded: do not burst-catch-up
@@ -268,6 +292,57 @@ def run_fleet(
                 on_step()
     finally:
         selector.close()
+
+
+def _run_blocks(
+    fleet: Sequence[Chassis], sim: SimClock, selector: selectors.BaseSelector,
+    drain: Callable[[Chassis], None], duration: float | None, stop: threading.Event,
+    on_chassis_step: Callable[[int, Chassis], None] | None, block: int,
+) -> None:
+    """run_fleet on the simulated clock, ``block`` periods per chassis at a time.
+
+    Each chassis steps on a clock of its own that starts at the block's time and advances by
+    the period as the fleet's clock does (the same floats), then the fleet's clock catches up
+    by as many periods. Buses with a file descriptor that have frames waiting at a block's
+    start are drained then; buses without one before every period."""
+    dt = fleet[0].mcu.dt
+    has_fd = {id(key.data) for key in selector.get_map().values()}
+    done = 0  # periods run
+    total = None if duration is None else _periods(sim.now(), duration, dt)
+    while not stop.is_set() and (total is None or done < total):
+        n = block if total is None else min(block, total - done)
+        ready = {id(key.data) for key, _ in selector.select(0.0)}
+        t0 = sim.now()
+        for k, chassis in enumerate(fleet):
+            mcu = chassis.mcu
+            own = SimClock(t0)
+            mcu.clock = own
+            try:
+                if id(chassis) in ready:
+                    drain(chassis)
+                polled = id(chassis) not in has_fd
+                for _ in range(n):
+                    if polled:
+                        drain(chassis)
+                    mcu.step()
+                    own.advance(dt)
+                    if on_chassis_step is not None:
+                        on_chassis_step(k, chassis)
+            finally:
+                mcu.clock = sim
+        for _ in range(n):
+            sim.advance(dt)
+        done += n
+
+
+def _periods(start: float, duration: float, dt: float) -> int:
+    """How many periods the period-by-period loop runs for ``duration`` from ``start``: it
+    stops once the clock has moved ``duration - 1e-9`` (summed the same way: the same count)."""
+    t, n = start, 0
+    while t - start < duration - 1e-9:
+        t += dt
+        n += 1
+    return n
 
 
 def open_fleet(
@@ -288,7 +363,8 @@ def open_fleet(
         peers = PeerMonitor(codec)
         chassis = Chassis(None, bus, peers)  # type: ignore[arg-type]  # the MCU just below
         send = bus_sender(bus, lambda key: chassis.mcu.stats.update([key]),
-                          on_sent=lambda fid, data: peers.on_sent(fid, data, clock.now()))
+                          on_sent=lambda fid, data: peers.on_sent(fid, data,
+                                                                 chassis.mcu.clock.now()))
         pack = McuBmsAdapter.from_profile(p, soc=soc, charger=charger) if bms else None
         chassis.mcu = Mcu(p, clock, send, bms=pack, faults=faults, codec=codec)
         return chassis

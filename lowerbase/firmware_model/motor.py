@@ -66,6 +66,10 @@ class WheelMotor:
         self._over_time = 0.0  # [s] how long |current| has exceeded the limit
         self._stall_time = 0.0  # [s] how long the wheel has lagged far behind its setpoint
         self._key: tuple[MotorParams, WheelGeometry, float] | None = None  # see _constants
+        #: the fixed point of the last step (steady speed): its target (None: none), its
+        #: speed (within rounding of the target) and angle; see _steady_step
+        self._steady: float | None = None
+        self._steady_omega = self._steady_angle = 0.0
 
     @property
     def rim_speed(self) -> float:
@@ -116,6 +120,11 @@ class WheelMotor:
         limit = self._limit
         target = min(max(target, -limit), limit)
         omega0 = self.omega
+        steady = (target == self._steady and omega0 == self._steady_omega
+                  and self.setpoint == target and not self.blocked and load_force == 0.0)
+        if steady:  # the last step's input state and target, which it left unchanged
+            return self._steady_step(dt, target)
+        setpoint0 = self.setpoint
         alpha = self._alpha  # [rad/s^2]; 0 = no ramp
         tau = p.time_constant
         r0 = target if alpha == 0.0 else self.setpoint
@@ -171,13 +180,27 @@ class WheelMotor:
         self._stall_time = self._stall_time + dt if lagging else 0.0
         if lagging and self._stall_time >= p.stall_time:
             self.stalled = True
+        self._steady = None
+        if (omega == omega0 and setpoint == target and setpoint0 == target and target != 0.0
+                and omega0 != 0.0 and not self.blocked and load_force == 0.0):
+            self._steady, self._steady_omega, self._steady_angle = target, omega0, angle
         return angle
+
+    def _steady_step(self, dt: float, target: float) -> float:
+        """:meth:`step` from the state and target of the last step, which left the state as it
+        found it (a fixed point of the lag to the last bit: the setpoint at the target, the
+        speed unchanged; not blocked, no load force, neither target nor speed zero, so no
+        sign of zero to tell apart): the same arithmetic on the same floats gives the same
+        angle, speed, setpoint and current again; only the fault timers move."""
+        self._update_faults(dt)
+        return self._steady_angle
 
     def _constants(self, dt: float) -> None:
         """What :meth:`step` needs of the parameters, geometry and ``dt``, computed as the
         uncached expressions compute it (the same floats)."""
         p, g = self.params, self.geometry
         self._key = (p, g, dt)
+        self._steady = None
         self._limit = motor_rpm_to_wheel_rad_s(g.max_rpm, g.ratio)
         self._alpha = p.max_wheel_accel / g.radius
         tau = p.time_constant

@@ -151,3 +151,32 @@ def test_normal_driving_raises_no_fault() -> None:
             peak = max(peak, abs(motor.current))
     assert motor.status_bits == 0
     assert peak < MotorParams().over_current_limit
+
+
+def _state(m: WheelMotor) -> tuple[float, ...]:
+    return (m.omega, m.setpoint, m.current, m._over_time, m._stall_time, float(m.over_current),
+            float(m.stalled))
+
+
+@pytest.mark.parametrize("params", [MotorParams(), replace(MotorParams(), over_current_limit=0.9,
+                                                           over_current_time=2.5)])
+def test_the_steady_speed_shortcut_is_the_full_step_bit_for_bit(params: MotorParams) -> None:
+    """At a steady speed (the lag's fixed point to the last bit) ``step`` skips the arithmetic
+    it would repeat on the same floats: angle and state stay those of the full step (the
+    reference forgets the fixed point before every step), the fault timers still run (an
+    over-current limit below the cruising current still latches), and a new target, a load
+    force or a blocked wheel leave the shortcut at once."""
+    fast, full = WheelMotor(params, GEOMETRY), WheelMotor(params, GEOMETRY)
+    plan = [(12.0, 0.0, False)] * 600 + [(12.0, 3.0, False)] * 5 + [(12.0, 0.0, True)] * 5 \
+        + [(12.0, 0.0, False)] * 600 + [(-8.0, 0.0, False)] * 600 + [(0.0, 0.0, False)] * 200
+    shortcuts = 0
+    for target, load, blocked in plan:
+        fast.blocked = full.blocked = blocked
+        full._steady = None
+        shortcuts += fast._steady is not None
+        assert fast.step(target, 0.005, load_force=load) == full.step(target, 0.005,
+                                                                      load_force=load)
+        assert _state(fast) == _state(full)
+    latched = params.over_current_limit == 0.9  # below the 0.93 A at 12 rad/s: after 2.5 s
+    assert fast.over_current == latched
+    assert shortcuts > (50 if latched else 500)

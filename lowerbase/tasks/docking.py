@@ -33,6 +33,11 @@ log = logging.getLogger(__name__)
 Twist = tuple[float, float]
 
 
+#: [m] a dock-in that ended this far from the charger is planned again in full (turn to face it,
+#: drive, turn); nearer, only along the heading (no turn beside the wall behind the charger)
+FAR = 0.2
+
+
 class StepMoves(Protocol):
     """What the task machine needs of step control (the docking moves): a
     :class:`~lowerbase.navigation.steps.StepController` in-process, or the /cmd_vel_control
@@ -148,7 +153,8 @@ class Docking:
             t.dock_corrections += 1
             log.info("docking: %s by the localization: moving onto it again (%d of %d)", why,
                      t.dock_corrections, self.config.dock_corrections)
-            moves = dock_correction(pose, charger.pose)
+            far = math.hypot(charger.pose[0] - pose[0], charger.pose[1] - pose[1]) > FAR
+            moves = (dock_steps if far else dock_correction)(pose, charger.pose)
             if moves:
                 return self._move(t, moves)
         self.docked, t.contact_wait = True, 0.0

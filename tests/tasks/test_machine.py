@@ -167,6 +167,24 @@ def test_docking_moves_held_by_a_wall_are_stopped_and_corrected() -> None:
     assert charger is not None and math.dist(b.pose[:2], charger.pose[:2]) < 0.02
 
 
+def test_a_dock_in_ending_short_far_from_the_charger_is_planned_again_in_full() -> None:
+    from lowerbase.navigation.steps import FAILED, ROTATE, STRAIGHT, StepResult
+
+    b = ready()
+    assert b.send(EXEC, 5, CHARGE).success
+    assert b.until(lambda: b.status.action_type == AT.DOCK_IN)
+    # the first turn of the dock-in failed (StepControl: "still 1.0 deg off"), the robot still
+    # at the approach pose, 3 deg off: face the charger again, not just drive along the heading
+    b.pose = b.odom = (b.pose[0], b.pose[1], b.pose[2] + math.radians(3.0))
+    b.machine.steps.result = StepResult(FAILED, 2, 0.0, "step 1: still 1.0 deg off after 5 "
+                                        "corrections")
+    b.tick()
+    steps = b.machine.steps.steps
+    assert [s.execute_mode for s in steps][:2] == [ROTATE, STRAIGHT], steps
+    assert b.until(lambda: b.status.action_type == AT.CHARGING or done(b))
+    assert b.status.robot_state == RS.CHARGING
+
+
 @pytest.mark.parametrize("contact", [False, True])
 def test_a_dock_out_ending_short_goes_on_once_off_the_charger(contact: bool) -> None:
     from lowerbase.navigation.steps import FAILED, StepResult

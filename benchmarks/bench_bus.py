@@ -43,7 +43,7 @@ def _line(proc: subprocess.Popen[str], wanted: str) -> str:
     while True:
         line = proc.stdout.readline()
         if not line:
-            raise RuntimeError(f"{proc.args[2:4]} exited before printing {wanted!r}")
+            raise RuntimeError(f"{proc.args!r} exited before printing {wanted!r}")
         if wanted in line:
             return line
 

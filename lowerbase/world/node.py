@@ -266,8 +266,7 @@ class WorldNode:
             odom = self.odom
             if odom is None:
                 return
-            # LaserScan is frozen; ScanLike's attributes are only read
-            est = self.localizer.update(odom, scan)  # type: ignore[arg-type]
+            est = self.localizer.update(odom, scan)
             if est is not None:
                 self._pubs["amcl_pose"].publish(self.io.pose_with_covariance(
                     stamp, self.setup.map_frame, est.pose, est.covariance))

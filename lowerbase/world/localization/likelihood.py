@@ -34,11 +34,16 @@ from lowerbase.world.localization.params import AmclParams
 class ScanLike(Protocol):
     """What a sensor_msgs/LaserScan carries that the model needs (its field names)."""
 
-    ranges: np.ndarray
-    angle_min: float
-    angle_increment: float
-    range_min: float
-    range_max: float
+    @property
+    def ranges(self) -> np.ndarray: ...
+    @property
+    def angle_min(self) -> float: ...
+    @property
+    def angle_increment(self) -> float: ...
+    @property
+    def range_min(self) -> float: ...
+    @property
+    def range_max(self) -> float: ...
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,9 @@ from lowerbase.world.localization.poses import compose
 from lowerbase.world.obstacles import Obstacles
 from lowerbase.world.pacing import pace_for, paced_loop
 from lowerbase.world.raycast import Scene, Solid
+from lowerbase.world.scan_odom import ScanOdom
 from lowerbase.world.sensors import SensorsConfig
+from lowerbase.world.sim_clock import TruthTime
 
 log = logging.getLogger(__name__)
 
@@ -97,6 +99,7 @@ class WorldNode:
                                    initial_pose=setup.start, truth=self._true_map_pose,
                                    ground_truth=setup.ground_truth)
         self.odom: Pose | None = None
+        self.scan_odom = ScanOdom()  #: each scan with /odom at its stamp, for the localizer
         self.stats: dict[str, int] = {"scans": 0, "frames": 0, "bad_odom": 0,
                                       "bad_initialpose": 0, "amcl_poses": 0, "frames_dropped": 0}
         self._pubs: dict[str, Any] = {}
@@ -179,8 +182,10 @@ class WorldNode:
         except WorldError as exc:
             self._count_bad("bad_odom", exc)
             return
+        stamp = msg.header.stamp.to_sec()
         with self.lock:
             self.odom = pose
+            self.scan_odom.add_odom(stamp if stamp > 0 else self.rospy.get_time(), pose)
 
     def _on_initialpose(self, msg: Any) -> None:
         try:
@@ -258,26 +263,42 @@ class WorldNode:
         if now is None:
             return
         pose, t = now
-        stamp = self.rospy.Time.now()
+        stamp = self._stamp_of(t)
+        with self.lock:
+            if not self.scan_odom.fresh(stamp.to_sec()):
+                return  # a second scan in one /clock step (a catch-up): the same instant
         scan = self.lidars.scan(self.scene_at(t), pose, t)
         self._pubs["scan"].publish(self.io.laser_scan(scan, stamp))
         self.stats["scans"] += 1
         with self.lock:
-            odom = self.odom
-            if odom is None:
-                return
+            self.scan_odom.add_scan(stamp.to_sec(), scan)
+            self._localize()
+
+    def _stamp_of(self, t: float) -> Any:
+        """The ROS stamp of the truth sample at emulator time ``t``: its own /clock time under
+        ``--publish-clock`` (rospy's newest /clock may be a step behind), else now."""
+        clock = getattr(self.truth, "time", None)
+        if isinstance(clock, TruthTime) and clock.last_t is not None:
+            return self.rospy.Time.from_sec(t + clock.offset)
+        return self.rospy.Time.now()
+
+    def _localize(self) -> None:
+        """The localizer on each scan /odom has reached, with /odom at the scan's stamp (as
+        amcl's message filter); map -> odom and /amcl_pose stamped with that scan's stamp."""
+        s, io = self.setup, self.io
+        for at, odom, scan in self.scan_odom.ready():
+            stamp = self.rospy.Time.from_sec(at)
             est = self.localizer.update(odom, scan)
             if est is not None:
-                self._pubs["amcl_pose"].publish(self.io.pose_with_covariance(
-                    stamp, self.setup.map_frame, est.pose, est.covariance))
+                self._pubs["amcl_pose"].publish(io.pose_with_covariance(
+                    stamp, s.map_frame, est.pose, est.covariance))
                 self.stats["amcl_poses"] += 1
             m2o = self.localizer.map_to_odom
-            running = self.localizer.running
-        if m2o is not None:
-            s = self.setup
-            self._tf.sendTransform(self.io.transform_2d(stamp, s.map_frame, s.odom_frame, m2o))
-            if running:
-                self._pubs["pose2d"].publish(self.io.pose_2d(compose(m2o, odom)))
+            if m2o is None:
+                continue
+            self._tf.sendTransform(io.transform_2d(stamp, s.map_frame, s.odom_frame, m2o))
+            if self.localizer.running and self.odom is not None:
+                self._pubs["pose2d"].publish(io.pose_2d(compose(m2o, self.odom)))
 
     def frame_once(self) -> None:
         now = self._pose_now()
@@ -356,5 +377,5 @@ def run(setup: WorldSetup, truth: Any, ros_args: Sequence[str], truth_where: str
             node.spin()
         finally:
             node.shutdown()
-            session.stopped(node.stats)
+            session.stopped({**node.stats, **node.scan_odom.counts})
     return 0

@@ -155,15 +155,42 @@ def unblocked_start(planner: GlobalPlanner, start: Pose, inscribed_radius: float
     return out
 
 
+class _SegmentLengths:
+    """The last path's segment lengths, computed once per path: :func:`remaining` runs every
+    control period and the plan changes only when replanned. A path is the same if it is the
+    same object with the same length and ends (the Navigator replaces its plan, never edits it
+    in place); anything else is computed afresh."""
+
+    def __init__(self) -> None:
+        self._path: Sequence[Pose] | None = None
+        self._key: tuple[int, tuple[float, ...], tuple[float, ...]] | None = None
+        self._seg = np.zeros(0)
+
+    def of(self, path: Sequence[Pose]) -> np.ndarray:
+        key = (len(path), tuple(path[0]), tuple(path[-1]))
+        if path is not self._path or key != self._key:
+            xy = np.asarray(path)[:, :2]
+            self._path, self._key = path, key
+            self._seg = np.hypot(*np.diff(xy, axis=0).T)
+        return self._seg
+
+
+_SEGMENTS = _SegmentLengths()
+
+
 def remaining(path: Sequence[Pose], index: int, p: Pose, approach_distance: float) -> float:
     """The distance left along ``path`` from ``p`` (its pose ``index`` on); straight to the
-    goal within ``approach_distance`` of it (the final approach goes straight at it)."""
+    goal within ``approach_distance`` of it (the final approach goes straight at it). The
+    segment lengths are the path's, computed once (:class:`_SegmentLengths`); their sum from
+    ``index`` on is the same numpy sum of the same values as over the sliced path's own
+    segments, bit for bit (tests/navigation/test_remaining.py)."""
     if not path:
         return 0.0
     gx, gy, _ = path[-1]
     straight = math.hypot(gx - p[0], gy - p[1])
-    rest = np.asarray(path[index:])[:, :2]
-    if not len(rest) or straight <= approach_distance:
+    if index >= len(path) or straight <= approach_distance:
         return straight
-    along = float(np.hypot(*np.diff(rest, axis=0).T).sum()) if len(rest) > 1 else 0.0
-    return math.hypot(rest[0, 0] - p[0], rest[0, 1] - p[1]) + along
+    seg = _SEGMENTS.of(path)[index:]
+    along = float(seg.sum()) if seg.size else 0.0
+    x0, y0 = float(path[index][0]), float(path[index][1])
+    return math.hypot(x0 - p[0], y0 - p[1]) + along

@@ -15,6 +15,7 @@ from scipy.ndimage import distance_transform_edt
 from skimage import draw
 
 from lowerbase.errors import ConfigError, WorldError
+from lowerbase.navigation.kernels import clear_lines
 from lowerbase.world.footprint import Footprint
 from lowerbase.world.grid import OccupancyGrid
 
@@ -273,11 +274,9 @@ class ObstacleLayer:
             ex, ey = clip_rays(obs.origin[0], obs.origin[1], obs.points[:, 0],
                                obs.points[:, 1], obs.raytrace_range, box)
             ec, er = cm.world_to_map(ex, ey)
-            ends = np.unique(np.clip(er, 0, cm.height - 1) * cm.width
-                             + np.clip(ec, 0, cm.width - 1))
-            cols, rows = line_cells(int(oc), int(orow), ends % cm.width, ends // cm.width)
-            ok = cm.inside(cols, rows)
-            cm.data[rows[ok], cols[ok]] = FREE_SPACE
+            # the cells of line_cells to every (distinct) end cell, compiled (kernels.py)
+            clear_lines(cm.data, int(oc), int(orow), np.clip(ec, 0, cm.width - 1),
+                        np.clip(er, 0, cm.height - 1), FREE_SPACE)
         for obs in observations:
             if not obs.marking or obs.points.size == 0:
                 continue

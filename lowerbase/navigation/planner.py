@@ -36,6 +36,7 @@ from skimage import draw
 from skimage.graph import MCP_Geometric
 
 from lowerbase.errors import WorldError
+from lowerbase.navigation.kernels import footprint_max
 
 LETHAL = 254
 INSCRIBED = 253
@@ -136,20 +137,10 @@ class FootprintCells:
         k = np.round(np.mod(yaw, 2.0 * math.pi) / (2.0 * math.pi) * self.bins).astype(
             np.int64) % self.bins
         h, w = costs.shape
-        if costs.dtype == np.uint8:
-            # all poses at once: LETHAL (254) is the highest cost once NO_INFORMATION (255)
-            # counts 0, so "a cell off the map" is a max of LETHAL
-            kk = k.ravel()
-            r = rows.ravel()[:, None] + self._dr[kk]
-            c = cols.ravel()[:, None] + self._dc[kk]
-            off = ((r < 0) | (c < 0) | (r >= h) | (c >= w)).any(axis=1)
-            if off.any():
-                np.clip(r, 0, h - 1, out=r)
-                np.clip(c, 0, w - 1, out=c)
-            vals = costs[r, c]
-            vals[vals == NO_INFORMATION] = 0
-            best = vals.max(axis=1).astype(np.int64)
-            best[off] = LETHAL
+        if costs.dtype == np.uint8:  # all poses at once, compiled (kernels.py)
+            best = np.empty(k.size, dtype=np.int64)
+            footprint_max(costs, rows.ravel(), cols.ravel(), k.ravel(), self._dr, self._dc,
+                          LETHAL, NO_INFORMATION, best)
             return best.reshape(x.shape)
         out = np.empty(x.shape, dtype=np.int64)
         for b in np.unique(k):

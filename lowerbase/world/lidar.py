@@ -218,6 +218,7 @@ class ScanMerger:
         names = [lc.name for lc in self.lidars]
         if len(set(names)) != len(names):
             raise ConfigError(f"lidar names must be unique, got {names}")
+        self._cached: _MergeConstants | None = None
 
     @property
     def rate_hz(self) -> float:
@@ -232,47 +233,91 @@ class ScanMerger:
     def range_max(self) -> float:
         return max(lc.range_max + math.hypot(lc.x, lc.y) for lc in self.lidars)
 
+    def _constants(self, scans: Sequence[LaserScan]) -> _MergeConstants:
+        """What :meth:`merge` computes the same way for every scan of these beams."""
+        key = tuple((s.ranges.size, s.angle_min, s.angle_increment) for s in scans)
+        if self._cached is None or self._cached.key != key:
+            self._cached = _MergeConstants.build(self.lidars, key)
+        return self._cached
+
     def merge(self, scans: Sequence[LaserScan], stamp: float) -> LaserScan:
         """Nearest valid return per merged beam. A beam with none is ``-inf`` if a lidar saw
         something too close in it, else ``+inf`` if a lidar looked through it without a return,
-        else ``NaN`` (only dropouts, or no lidar covers it)."""
+        else ``NaN`` (only dropouts, or no lidar covers it).
+
+        Each beam's arithmetic is its own and the same for every scan but for its range: the
+        per-beam constants (mount, direction cosines, the reach of a non-finite return) are
+        computed once (:class:`_MergeConstants`), with the same numpy expressions, so the
+        result is bit for bit what computing them per scan gave (tests/world/test_lidar_merge.py
+        pins it against that)."""
         m = self.merged
         n = m.beams
         inc = m.increment
-        best = np.full(n, np.inf)
-        too_close = np.zeros(n, dtype=bool)
-        clear = np.zeros(n, dtype=bool)
-        # all lidars' beams at once (each beam's arithmetic is its own: the same as per lidar)
-        r = np.concatenate([scan.ranges.astype(float) for scan in scans])
-        beam = np.concatenate([scan.angles + lc.yaw
-                               for lc, scan in zip(self.lidars, scans, strict=True)])
-        sizes = [scan.ranges.size for scan in scans]
-
-        def per_beam(values: list[float]) -> np.ndarray:
-            return np.repeat(np.asarray(values, dtype=float), sizes)
-
-        lx, ly = per_beam([lc.x for lc in self.lidars]), per_beam([lc.y for lc in self.lidars])
+        k = self._constants(scans)
+        r = np.concatenate([scan.ranges for scan in scans]).astype(float)
         finite = np.isfinite(r)
-        # Non-finite beams are binned along their direction (at range_max / range_min).
-        reach = np.where(finite, r, np.where(r == np.inf, per_beam(
-            [lc.range_max for lc in self.lidars]), per_beam([lc.range_min for lc in self.lidars])))
-        px = lx + reach * np.cos(beam)
-        py = ly + reach * np.sin(beam)
+        all_finite = bool(finite.all())
+        reach = r if all_finite else np.where(finite, r, np.where(r == np.inf, k.far, k.near))
+        px = k.lx + reach * k.cos
+        py = k.ly + reach * k.sin
         rel = np.arctan2(py, px) - m.angle_min
-        idx = np.round(np.mod(rel, TWO_PI) / inc).astype(np.int64)
+        # np.mod(rel, 2 pi) is rel itself on [0, 2 pi): only the others need the (slow) mod
+        wrapped = (rel < 0.0) | (rel >= TWO_PI)
+        if wrapped.any():
+            rel[wrapped] = np.mod(rel[wrapped], TWO_PI)
+        idx = np.round(rel / inc).astype(np.int64)
         if m.full_circle:
             idx %= n
         inside = (idx >= 0) & (idx < n)
+        best = np.full(n, np.inf)
         valid = inside & finite
-        np.minimum.at(best, idx[valid], np.hypot(px[valid], py[valid]))
-        too_close[idx[inside & (r == -np.inf)]] = True
-        clear[idx[inside & (r == np.inf)]] = True
-        out = np.where(np.isfinite(best), best,
-                       np.where(too_close, -np.inf, np.where(clear, np.inf, np.nan)))
+        if valid.all():
+            np.minimum.at(best, idx, np.hypot(px, py))
+        else:
+            np.minimum.at(best, idx[valid], np.hypot(px[valid], py[valid]))
+        if all_finite:
+            out = np.where(np.isfinite(best), best, np.nan)
+        else:
+            too_close = np.zeros(n, dtype=bool)
+            clear = np.zeros(n, dtype=bool)
+            too_close[idx[inside & (r == -np.inf)]] = True
+            clear[idx[inside & (r == np.inf)]] = True
+            out = np.where(np.isfinite(best), best,
+                           np.where(too_close, -np.inf, np.where(clear, np.inf, np.nan)))
         period = 1.0 / self.rate_hz
         return LaserScan(m.frame_id, stamp, m.angle_min, m.angle_min + (n - 1) * inc, inc,
                          period / n, period, self.range_min, self.range_max,
                          out.astype(np.float32))
+
+
+@dataclass(frozen=True)
+class _MergeConstants:
+    """Per-beam constants of :meth:`ScanMerger.merge` for one set of scan beams (``key``: each
+    scan's size, angle_min, angle_increment): the mounts, the beams' cosines and sines in
+    base_link, the reach of a +inf / -inf return."""
+
+    key: tuple[tuple[int, float, float], ...]
+    lx: np.ndarray
+    ly: np.ndarray
+    cos: np.ndarray
+    sin: np.ndarray
+    far: np.ndarray
+    near: np.ndarray
+
+    @classmethod
+    def build(cls, lidars: Sequence[LidarConfig], key: tuple[tuple[int, float, float], ...]
+              ) -> _MergeConstants:
+        sizes = [size for size, _, _ in key]
+
+        def per_beam(values: list[float]) -> np.ndarray:
+            return np.repeat(np.asarray(values, dtype=float), sizes)
+
+        # as LaserScan.angles: angle_min + i * angle_increment, then the mount's yaw
+        beam = np.concatenate([amin + np.arange(size) * inc + lc.yaw
+                               for lc, (size, amin, inc) in zip(lidars, key, strict=True)])
+        return cls(key, per_beam([lc.x for lc in lidars]), per_beam([lc.y for lc in lidars]),
+                   np.cos(beam), np.sin(beam), per_beam([lc.range_max for lc in lidars]),
+                   per_beam([lc.range_min for lc in lidars]))
 
 
 class LidarRig:

@@ -76,3 +76,63 @@ def clear_lines(data: np.ndarray, c0: int, r0: int, c1: np.ndarray, r1: np.ndarr
             r = r0 + np.int64(np.floor(frac * dr + 0.5))
             if 0 <= c < w and 0 <= r < h:
                 data[r, c] = free
+
+
+@_jit
+def squared_distances(lethal: np.ndarray, cap: int, out: np.ndarray) -> None:
+    """``out``: each cell's squared distance [cells^2] to the nearest ``lethal`` cell, at most
+    ``cap`` (what the inflation layer's table reads; its EDT gave the same integers:
+    ``rint(edt^2)``). Exact in integers: a column pass (rows to the nearest lethal cell in the
+    column), then per row the lower envelope of the parabolas (Felzenszwalb-Huttenlocher) of the
+    columns nearer than ``cap``; their crossings are ratios of small integers, so no rounding
+    moves a crossing across a cell (tests/navigation/test_inflation_kernel.py)."""
+    h, w = lethal.shape
+    far = h + w + 1
+    g = np.empty((h, w), np.int64)
+    for c in range(w):
+        d = far
+        for r in range(h):
+            d = 0 if lethal[r, c] else min(d + 1, far)
+            g[r, c] = d
+        d = far
+        for r in range(h - 1, -1, -1):
+            d = 0 if lethal[r, c] else min(d + 1, far)
+            if d < g[r, c]:
+                g[r, c] = d
+    v = np.empty(w, np.int64)
+    z = np.empty(w + 1, np.float64)
+    for r in range(h):
+        k = -1
+        for q in range(w):
+            gq = g[r, q]
+            if gq * gq >= cap:
+                continue  # any distance through this column is >= cap
+            fq = gq * gq + q * q
+            if k < 0:
+                k = 0
+                v[0] = q
+                z[0] = -np.inf
+                z[1] = np.inf
+                continue
+            while True:
+                p = v[k]
+                s = (fq - (g[r, p] * g[r, p] + p * p)) / (2 * q - 2 * p)
+                if s <= z[k] and k > 0:
+                    k -= 1
+                else:
+                    break
+            k += 1
+            v[k] = q
+            z[k] = s
+            z[k + 1] = np.inf
+        if k < 0:
+            for q in range(w):
+                out[r, q] = cap
+            continue
+        j = 0
+        for q in range(w):
+            while z[j + 1] < q:
+                j += 1
+            p = v[j]
+            d2 = (q - p) * (q - p) + g[r, p] * g[r, p]
+            out[r, q] = d2 if d2 < cap else cap

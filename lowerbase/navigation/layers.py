@@ -11,11 +11,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 from skimage import draw
 
 from lowerbase.errors import ConfigError, WorldError
-from lowerbase.navigation.kernels import clear_lines
+from lowerbase.navigation.kernels import clear_lines, squared_distances
 from lowerbase.world.footprint import Footprint
 from lowerbase.world.grid import OccupancyGrid
 
@@ -326,7 +325,8 @@ def inflation_cost(distance_m: np.ndarray | float, inscribed_radius: float,
 
 class InflationLayer:
     """Costs decaying away from every LETHAL cell of the master grid, out to
-    ``inflation_radius``: a Euclidean distance transform and a lookup by squared cell distance."""
+    ``inflation_radius``: exact squared cell distances to the nearest LETHAL cell (compiled,
+:func:`~lowerbase.navigation.kernels.squared_distances`) and a lookup by them."""
 
     def __init__(self, params: InflationParams) -> None:
         self.params = params
@@ -351,8 +351,10 @@ class InflationLayer:
         if not lethal.any():
             return
         table = self.table(resolution, inscribed_radius)
-        dist = distance_transform_edt(~lethal)
-        d2 = np.minimum(np.rint(dist * dist), table.size - 1).astype(np.intp)
+        # the squared distance to the nearest LETHAL cell, capped where the table ends: the
+        # integers rint(edt^2) gave, compiled (kernels.py)
+        d2 = np.empty(master.shape, np.int64)
+        squared_distances(lethal, table.size - 1, d2)
         infl = table[d2]
         unknown = master == NO_INFORMATION
         floor = 1 if self.params.inflate_unknown else INSCRIBED_INFLATED_OBSTACLE

@@ -85,6 +85,8 @@ CHECKS: dict[str, Check] = {
     "lowerbase robot --map warehouse --sim-time": Check("skip", why=ROS),
     "lowerbase robot --map warehouse --mcap robot.mcap": Check("skip", why=ROS),
     "lowerbase robot --map warehouse --foxglove": Check("skip", why=ROS),
+    # tests/robot/test_robot_charging_ros.py runs it (with --sim-time --speed 2) on its master
+    "lowerbase robot --map empty_room --soc 30 --ground-truth": Check("skip", why=ROS),
     "lowerbase robot --map warehouse --sim-time --speed 4 --without navigation --without "
     "tasks": Check("skip", why=ROS),
     "lowerbase emulate --fleet 100": Check("start", "Ctrl-C stops"),

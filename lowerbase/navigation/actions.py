@@ -57,6 +57,19 @@ class ActionServers:
     def start(self) -> None:
         for server in (self.move_base, self.steps, self.mode):
             server.start()
+        self.node.rospy.on_shutdown(self.quiet)
+
+    def quiet(self) -> None:
+        """Stop the servers' timed status publishing, as rospy begins to shut down.
+
+        rospy runs ``on_shutdown`` hooks before it raises its shutdown flag and closes the
+        topics; actionlib's status timer checks only that flag, so a tick in between published
+        to a closed topic and left a traceback in the log. Taking each server's lock waits for
+        a tick in flight; ``started`` False makes the next ones return."""
+        for server in (self.move_base, self.steps, self.mode):
+            inner = server.action_server
+            with inner.lock:
+                inner.started = False
 
     def shutdown(self) -> None:
         for server in (self.move_base, self.steps, self.mode):

@@ -222,7 +222,7 @@ def step_goal(mode: int, steps: list[tuple[int, float, float]]) -> dict[str, Any
 @pytest.mark.process
 def test_step_control_straight_half_a_metre_on_the_truth(chain: dict[str, Any]) -> None:
     client: NavClient = chain["client"]
-    x0, y0, yaw0 = truth(client)
+    x0, y0, yaw0 = standing(client)  # the test before may have left it still settling
     odom0 = odom_xy(client)
     client.ask(op="send", name="/cmd_vel_control", type=STEP,
                goal=step_goal(1, [(1, 0.5, 0.0)]))
@@ -230,7 +230,7 @@ def test_step_control_straight_half_a_metre_on_the_truth(chain: dict[str, Any]) 
     assert res["state"] == SUCCEEDED, res
     assert res["result"] == {"result": 1, "executeMode": 1, "percent": pytest.approx(100.0)}
     assert res["feedbacks"] > 10
-    x1, y1, yaw1 = truth(client)
+    x1, y1, yaw1 = standing(client)
     target = (x0 + 0.5 * math.cos(yaw0), y0 + 0.5 * math.sin(yaw0))
     assert math.hypot(x1 - target[0], y1 - target[1]) < 0.01, \
         ((x0, y0), (x1, y1), res["text"], odom0, odom_xy(client))

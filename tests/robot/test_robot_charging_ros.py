@@ -1,5 +1,5 @@
 """A charging task end to end, black-box, on a real rosmaster: ``lowerbase robot --map
-empty_room --sim-time --speed 2 --ground-truth --soc 30`` (world, emulate, driver, navigation,
+empty_room --sim-time --speed 1 --ground-truth --soc 30`` (world, emulate, driver, navigation,
 tasks) and a user's rospy script that knows only the seed's interface
 (tests/robot/charging_client.py: exec_task, robot_status, /battery). The robot drives to the
 charger, docks, the emulator's charger contact closes, robot_state turns charging, /battery
@@ -47,7 +47,7 @@ def test_a_users_charging_task_docks_charges_and_a_new_task_undocks(
     assert places.charger is not None
     truth_file = tmp_path / "truth.csv"
     robot = Robot(env, tmp_path / "logs", "--truth", str(truth_file), "--ground-truth",
-                  "--soc", "30", "--sim-time", "--speed", "2")
+                  "--soc", "30", "--sim-time", "--speed", "1")
     try:
         robot.wait_for("ready on ROS master", timeout=240.0)
         out = subprocess.run(

@@ -18,40 +18,12 @@ from lowerbase.world.lidar import (
     ScanMerger,
 )
 from lowerbase.world.sim import WorldConfig, WorldSim
+from tests.world.lidar_reference import reference_merge
 
 
 def merge_per_scan(merger: ScanMerger, scans: Sequence[LaserScan], stamp: float) -> np.ndarray:
-    """The merge as it was before its constants were cached (every array built per scan)."""
-    m, lidars = merger.merged, merger.lidars
-    n, inc = m.beams, m.increment
-    best = np.full(n, np.inf)
-    too_close = np.zeros(n, dtype=bool)
-    clear = np.zeros(n, dtype=bool)
-    r = np.concatenate([scan.ranges.astype(float) for scan in scans])
-    beam = np.concatenate([scan.angles + lc.yaw for lc, scan in zip(lidars, scans, strict=True)])
-    sizes = [scan.ranges.size for scan in scans]
-
-    def per_beam(values: list[float]) -> np.ndarray:
-        return np.repeat(np.asarray(values, dtype=float), sizes)
-
-    lx, ly = per_beam([lc.x for lc in lidars]), per_beam([lc.y for lc in lidars])
-    finite = np.isfinite(r)
-    reach = np.where(finite, r, np.where(r == np.inf, per_beam(
-        [lc.range_max for lc in lidars]), per_beam([lc.range_min for lc in lidars])))
-    px = lx + reach * np.cos(beam)
-    py = ly + reach * np.sin(beam)
-    rel = np.arctan2(py, px) - m.angle_min
-    idx = np.round(np.mod(rel, TWO_PI) / inc).astype(np.int64)
-    if m.full_circle:
-        idx %= n
-    inside = (idx >= 0) & (idx < n)
-    valid = inside & finite
-    np.minimum.at(best, idx[valid], np.hypot(px[valid], py[valid]))
-    too_close[idx[inside & (r == -np.inf)]] = True
-    clear[idx[inside & (r == np.inf)]] = True
-    out = np.where(np.isfinite(best), best,
-                   np.where(too_close, -np.inf, np.where(clear, np.inf, np.nan)))
-    return np.asarray(out.astype(np.float32))
+    """The merge as it was before its constants were cached: the reference merge's ranges."""
+    return reference_merge(merger, scans, stamp).ranges
 
 
 def same(a: np.ndarray, b: np.ndarray) -> bool:

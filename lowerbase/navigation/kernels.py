@@ -13,26 +13,16 @@ numpy gather). The controller checks its arc with it every control period.
 the lines from the sensor's cell to each ray's end cell set free, the cells
 :func:`lowerbase.navigation.layers.line_cells` lists (tests/navigation/test_clear_lines.py).
 
-Compiled on first use and cached (``__pycache__``, else numba's cache; in memory where no cache
-location is writable), as :mod:`lowerbase.world.raycast_kernel`.
+Compiled on first use and cached by :func:`lowerbase.jit.compiled`, as the ray caster is.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any, TypeVar, cast
-
-import numba
 import numpy as np
 
-F = TypeVar("F", bound=Callable[..., Any])
+from lowerbase.jit import compiled
 
-
-def _jit(fn: F) -> F:
-    try:
-        return cast(F, numba.njit(cache=True, nogil=True)(fn))
-    except RuntimeError:  # "cannot cache function ...: no locator available" (read-only)
-        return cast(F, numba.njit(nogil=True)(fn))
+_jit = compiled()
 
 
 @_jit

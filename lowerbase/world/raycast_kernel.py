@@ -16,20 +16,11 @@ cache or ``NUMBA_CACHE_DIR``; where no cache location is writable it is compiled
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any, TypeVar, cast
-
-import numba
 import numpy as np
 
-F = TypeVar("F", bound=Callable[..., Any])
+from lowerbase.jit import compiled
 
-
-def _jit(fn: F) -> F:
-    try:
-        return cast(F, numba.njit(cache=True, nogil=True, error_model="numpy")(fn))
-    except RuntimeError:  # "cannot cache function ...: no locator available" (read-only)
-        return cast(F, numba.njit(nogil=True, error_model="numpy")(fn))
+_jit = compiled(error_model="numpy")
 
 
 @_jit

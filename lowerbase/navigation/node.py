@@ -30,12 +30,12 @@ from lowerbase.navigation.controller import Limits
 from lowerbase.navigation.costmap import camera_cloud
 from lowerbase.navigation.loop import control_loop, pose2d
 from lowerbase.navigation.steps import StepController
-from lowerbase.navigation.sync import PoseHistory, StampedSensors
 from lowerbase.world.camera import CameraConfig
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lidar import LaserScan
 from lowerbase.world.localization.poses import compose
 from lowerbase.world.pacing import Pace
+from lowerbase.world.stamped import PoseHistory, StampedSensors
 
 log = logging.getLogger(__name__)
 

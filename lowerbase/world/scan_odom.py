@@ -7,7 +7,7 @@ Pairing a scan with the newest /odom received instead (what the world node did) 
 odometry of another instant into map -> odom: under ``--sim-time --speed 2`` /odom arrived up
 to ~0.8 s of /clock off the scan, so while turning at 0.4 rad/s the transform was up to 0.3
 rad wrong at the scan's stamp, and the navigation node, which marks each scan at map -> odom
-and /odom of its stamp (``lowerbase.navigation.sync``), smeared the racks across the aisle.
+and /odom of its stamp (``lowerbase.world.stamped``), smeared the racks across the aisle.
 
 A scan with a stamp not after the last one handed out (the sensor loop caught up twice within
 one coarse /clock step) is dropped, counted: tf2 would drop its transform as TF_REPEATED_DATA.
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from lowerbase.navigation.sync import PoseHistory, StampedSensors
+from lowerbase.world.stamped import PoseHistory, StampedSensors
 
 Pose = tuple[float, float, float]
 _ORIGIN: Pose = (0.0, 0.0, 0.0)

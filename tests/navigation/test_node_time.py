@@ -1,7 +1,7 @@
 """The navigation node's time, ROS-free: its control loop (lowerbase.navigation.loop) on a
 stand-in rospy whose time moves only when the test publishes a /clock (as under
 /use_sim_time), and each scan marked at the robot's pose of its own stamp
-(lowerbase.navigation.sync) rather than at the newest pose."""
+(lowerbase.world.stamped) rather than at the newest pose."""
 
 from __future__ import annotations
 
@@ -13,11 +13,11 @@ import pytest
 from lowerbase.navigation.loop import control_loop
 from lowerbase.navigation.navigator import Navigator
 from lowerbase.navigation.node import NavigationSetup
-from lowerbase.navigation.sync import PoseHistory, StampedSensors
 from lowerbase.world.localization.poses import compose
 from lowerbase.world.maps import load_map
 from lowerbase.world.pacing import RosPace
 from lowerbase.world.sim import WorldConfig, WorldSim
+from lowerbase.world.stamped import PoseHistory, StampedSensors
 from tests.driver.test_rostime import FakeRospy
 
 

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import math
 
-from lowerbase.navigation.sync import PoseHistory
 from lowerbase.world.localization.poses import compose, inverse
 from lowerbase.world.scan_odom import ScanOdom
+from lowerbase.world.stamped import PoseHistory
 
 Pose = tuple[float, float, float]
 LAG = 0.6  #: [s] /odom arrives this long after its stamp

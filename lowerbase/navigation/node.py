@@ -28,8 +28,9 @@ from typing import Any
 from lowerbase.errors import ConfigError, LowerbaseError, WorldError
 from lowerbase.navigation.controller import Limits
 from lowerbase.navigation.costmap import camera_cloud
-from lowerbase.navigation.loop import control_loop, pose2d
+from lowerbase.navigation.loop import control_loop
 from lowerbase.navigation.steps import StepController
+from lowerbase.navigation.tf_map import MapToOdom
 from lowerbase.world.camera import CameraConfig
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lidar import LaserScan
@@ -43,6 +44,9 @@ NODE_NAME = "move_base"
 Pose = tuple[float, float, float]
 #: commands are sent this many periods after both controllers went idle (zeros: a clean stop)
 STOP_TAIL = 5
+#: [s of /odom] how long a scan or cloud waits for TF map -> odom at its stamp (the world's
+#: localization of that instant) before it is dropped, counted (lowerbase.world.stamped)
+SENSOR_TF_WAIT = 1.0
 
 
 @dataclass
@@ -104,7 +108,9 @@ class NavigationNode:
         self.scan: LaserScan | None = None  #: the newest /scan
         #: /odom's poses by stamp, and the scans and clouds waiting for it to reach theirs
         self.odom_history = PoseHistory()
-        self.sensors = StampedSensors(self.odom_history, self._map_to_odom_at)
+        self.tf = MapToOdom(self.rospy, setup.map_frame, setup.odom_frame)
+        self.sensors = StampedSensors(self.odom_history, self.tf.at, tf_newest=self.tf.newest,
+                                      wait=SENSOR_TF_WAIT)
         self.last_command: Any = None  #: the Navigator's NavCommand of the last tick
         self.tick_count = 0
         self.stats: dict[str, int] = {"bad_scan": 0, "bad_cloud": 0, "bad_odom": 0,
@@ -115,7 +121,6 @@ class NavigationNode:
         self._subs: list[Any] = []
         self._services: list[Any] = []
         self._servers: Any = None
-        self._tf_buffer: Any = None
         self._published_global: Any = None
         self._ready_printed = False
         self._plans_published = 0
@@ -133,7 +138,6 @@ class NavigationNode:
         from lowerbase.world.pacing import pace_for
 
         self.pace = pace_for(rospy, self.stop)
-        import tf2_ros
         from geometry_msgs.msg import Polygon
         from nav_msgs.msg import Odometry
         from nav_msgs.srv import GetPlan
@@ -145,8 +149,7 @@ class NavigationNode:
         from lowerbase.navigation.actions import ActionServers
         from lowerbase.navigation.services import Services
 
-        self._tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
-        self._tf_listener = tf2_ros.TransformListener(self._tf_buffer)
+        self.tf.listen()
         pub = rospy.Publisher
         self.pubs = {
             "cmd_vel": pub("base_cmd_vel", io.Twist, queue_size=5),
@@ -251,36 +254,10 @@ class NavigationNode:
 
     # -- the robot's pose ----------------------------------------------------------------------
     def _lookup_map_to_odom(self) -> None:
-        import tf2_ros
-
-        s = self.setup
-        try:
-            t = self._tf_buffer.lookup_transform(s.map_frame, s.odom_frame, self.rospy.Time(0))
-        except (tf2_ros.LookupException, tf2_ros.ConnectivityException,
-                tf2_ros.ExtrapolationException):  # no localization (yet)
-            return
-        m2o = pose2d(t.transform)
+        m2o = self.tf.latest()
         if m2o is not None:
             with self.lock:
                 self.map_to_odom = m2o
-
-    def _map_to_odom_at(self, stamp: float) -> Pose | None:
-        """TF map -> odom at ``stamp`` (the localization of that scan); the newest one when TF
-        has none there (not yet, or from before the buffer)."""
-        import tf2_ros
-
-        s = self.setup
-        if self._tf_buffer is not None:
-            try:
-                t = self._tf_buffer.lookup_transform(s.map_frame, s.odom_frame,
-                                                     self.rospy.Time.from_sec(stamp))
-                m2o = pose2d(t.transform)
-                if m2o is not None:
-                    return m2o
-            except (tf2_ros.LookupException, tf2_ros.ConnectivityException,
-                    tf2_ros.ExtrapolationException):
-                pass
-        return self.map_to_odom
 
     def map_pose(self) -> Pose | None:
         """The robot in the map frame: TF map -> odom (localization) composed with /odom."""

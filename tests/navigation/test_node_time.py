@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections import deque
 
 import pytest
 
@@ -19,6 +20,8 @@ from lowerbase.world.pacing import RosPace
 from lowerbase.world.sim import WorldConfig, WorldSim
 from lowerbase.world.stamped import PoseHistory, StampedSensors
 from tests.driver.test_rostime import FakeRospy
+
+Pose = tuple[float, float, float]
 
 
 def test_control_loop_ticks_at_its_rate_per_second_of_ros_time_and_hands_it_that_time() -> None:
@@ -90,7 +93,8 @@ def test_observations_wait_for_odom_to_reach_their_stamp_and_old_ones_are_counte
     for k in range(3):
         sensors.add("scan", 11.0 + k, k)
     assert sensors.ready() == []
-    assert sensors.stats == {"waited_out": 2, "too_old": 1, "no_localization": 0}
+    assert sensors.stats == {"waited_out": 2, "too_old": 1, "no_localization": 0,
+                             "tf_waited_out": 0}
     assert [d for _, d in sensors.pending["scan"]] == [1, 2]
 
 
@@ -124,3 +128,58 @@ def test_each_scan_is_marked_at_the_pose_of_its_stamp_so_walls_do_not_smear_into
     # the same scans at the newest pose (0.25 s later: 0.15 rad while turning) mark cells off
     # the racks: new obstacles the planner keeps 0.7 m away from (what made move_base give up)
     assert _phantoms(0.25, stamped=False) > 50
+
+
+class _PastTf:
+    """A stand-in TF buffer for map -> odom that knows only the stamps it has been sent (as
+    tf2: interpolated between two, no extrapolation past the newest)."""
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[float, Pose]] = []
+
+    def send(self, t: float, m2o: Pose) -> None:
+        self.sent.append((t, m2o))
+
+    def at(self, t: float) -> Pose | None:
+        for (t0, p0), (t1, p1) in zip(self.sent, self.sent[1:], strict=False):
+            if t0 <= t <= t1:  # poses here are (x, 0, 0): interpolated componentwise
+                f = (t - t0) / (t1 - t0)
+                return (p0[0] + f * (p1[0] - p0[0]), 0.0, 0.0)
+        return self.sent[-1][1] if self.sent and abs(t - self.sent[-1][0]) < 1e-9 else None
+
+    def newest(self) -> float | None:
+        return self.sent[-1][0] if self.sent else None
+
+
+def test_an_observation_waits_for_map_to_odom_at_its_stamp_and_is_never_marked_at_the_newest(
+        ) -> None:
+    """costmap_2d's tf message filter: a scan is held until TF has map -> odom at its stamp;
+    marked with that one (not the newest, which amcl may have corrected since), and dropped,
+    counted, when TF never reaches it within ``wait`` s of /odom."""
+    h = PoseHistory()
+    tf = _PastTf()
+    sensors = StampedSensors(h, tf.at, tf_newest=tf.newest, wait=0.5)
+    for k in range(6):
+        h.add(10.0 + 0.1 * k, (0.1 * k, 0.0, 0.0))  # /odom 10.0 .. 10.5
+    tf.send(10.0, (0.0, 0.0, 0.0))
+    sensors.add("scan", 10.2, "a")
+    assert sensors.ready() == []  # /odom has reached 10.2, TF has not: held
+    tf.send(10.2, (0.0, 0.0, 0.0))  # localization at 10.2 arrives, then a correction
+    tf.send(10.3, (5.0, 0.0, 0.0))
+    [(_, pose, data)] = sensors.ready()
+    assert data == "a" and pose == pytest.approx((0.0 + 0.2, 0.0, 0.0))  # TF at 10.2, not 10.3
+    sensors.add("scan", 10.4, "b")
+    sensors.add("scan", 10.5, "c")
+    assert sensors.ready() == [] and len(sensors.pending["scan"]) == 2
+    h.add(10.85, (0.85, 0.0, 0.0))  # still no TF after 10.3; /odom 0.45 s past "b"
+    assert sensors.ready() == [] and sensors.stats["tf_waited_out"] == 0
+    h.add(10.95, (0.95, 0.0, 0.0))
+    assert sensors.ready() == [] and sensors.stats["tf_waited_out"] == 1  # "b": 0.55 s > 0.5
+    h.add(11.0, (1.0, 0.0, 0.0))
+    tf.send(10.6, (5.0, 0.0, 0.0))
+    [(_, pose, data)] = sensors.ready()
+    assert data == "c" and pose == pytest.approx((5.5, 0.0, 0.0))
+    sensors.add("cloud", 10.1, "older than TF's cache")
+    tf.sent = [s for s in tf.sent if s[0] >= 10.6]  # TF keeps nothing at 10.1 any more
+    assert sensors.ready() == [] and sensors.stats["no_localization"] == 1  # never: dropped
+    assert sensors.pending["cloud"] == deque()

@@ -1,0 +1,59 @@
+"""TF map -> odom for the navigation node (rospy side): the newest one (the robot's pose now,
+as move_base's getRobotPose), the one at a stamp and the newest stamp TF has it at (for
+:class:`lowerbase.world.stamped.StampedSensors`, which pairs each scan and cloud with
+map -> odom at its own stamp, never the newest)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from lowerbase.navigation.loop import pose2d
+
+Pose = tuple[float, float, float]
+
+
+class MapToOdom:
+    """Lookups in a ``tf2_ros.Buffer`` (None until :meth:`listen`)."""
+
+    def __init__(self, rospy: Any, map_frame: str, odom_frame: str) -> None:
+        self.rospy = rospy
+        self.frames = (map_frame, odom_frame)
+        self.buffer: Any = None
+
+    def listen(self) -> None:
+        import tf2_ros
+
+        self.buffer = tf2_ros.Buffer(cache_time=self.rospy.Duration(10.0))
+        self._listener = tf2_ros.TransformListener(self.buffer)
+
+    def _lookup(self, stamp: Any) -> Pose | None:
+        import tf2_ros
+
+        if self.buffer is None:
+            return None
+        try:
+            t = self.buffer.lookup_transform(*self.frames, stamp)
+        except tf2_ros.TransformException:  # none (yet), or not at that stamp
+            return None
+        return pose2d(t.transform)
+
+    def latest(self) -> Pose | None:
+        """The newest map -> odom; None: no localization (yet)."""
+        return self._lookup(self.rospy.Time(0))
+
+    def at(self, stamp: float) -> Pose | None:
+        """Map -> odom at ``stamp`` [s] (interpolated by tf2); None when TF has none there:
+        not yet (after its newest) or no longer (before its cache)."""
+        return self._lookup(self.rospy.Time.from_sec(stamp))
+
+    def newest(self) -> float | None:
+        """[s] the newest stamp TF has map -> odom at; None: none yet."""
+        import tf2_ros
+
+        if self.buffer is None:
+            return None
+        try:
+            t = self.buffer.get_latest_common_time(*self.frames)
+        except tf2_ros.TransformException:
+            return None
+        return float(t.to_sec())

@@ -63,6 +63,7 @@ from lowerbase.driver.ekf_model import (
     W,
     X,
     Y,
+    interval_weight_list,
     interval_weights,
     motion_jacobian,
     motion_model,
@@ -135,18 +136,14 @@ class PlanarEkf(EkfState):
         else:
             self._still_since = None
         if self.is_standstill:
-            r = np.diag([n.standstill_linear**2, n.standstill_angular**2])
-            z = np.zeros((2, 1))
-            self._apply(z, H_TWIST, r, self._innovation(z, H_TWIST, r))
+            self._measure(np.zeros((2, 1)), H_TWIST, self._r_still)
             return self._count("wheel", Gate.STANDSTILL)
 
         r = self._twist_r(covariance)
         z = np.array([[linear], [angular]])
-        inn = self._innovation(z, H_TWIST, r)
-        y, s, d2 = inn.y, inn.s, inn.d2
-        if d2 <= n.gate_2dof:
+        _, applied, y, s = self._measure(z, H_TWIST, r, WHEEL_CONSIDER, gate=n.gate_2dof)
+        if applied:
             self._consecutive["wheel_linear"] = self._consecutive["wheel_angular"] = 0
-            self._apply(z, H_TWIST, r, inn, consider=WHEEL_CONSIDER)
             return self._count("wheel", Gate.ACCEPTED)
         v_pass = y.item(0, 0) ** 2 / s.item(0, 0) <= n.gate_1dof
         w_pass = y.item(1, 0) ** 2 / s.item(1, 1) <= n.gate_1dof
@@ -157,17 +154,15 @@ class PlanarEkf(EkfState):
         if w_pass:
             self._consecutive["wheel_angular"] = 0
         if v_ok and w_ok:  # each plausible alone (jointly marginal), or forced back in
-            self._apply(z, H_TWIST, r, inn, consider=WHEEL_CONSIDER)
+            self._measure(z, H_TWIST, r, WHEEL_CONSIDER)
             return self._count("wheel", Gate.ACCEPTED if v_pass and w_pass else Gate.FORCED)
         if v_ok:  # slipping wheel: yaw rate out, speed down-weighted
             z1, r1 = z[:1], r[:1, :1] * n.slip_inflation
-            self._apply(z1, H_V, r1, self._innovation(z1, H_V, r1, keep=False),
-                        consider=WHEEL_CONSIDER)
+            self._measure(z1, H_V, r1, WHEEL_CONSIDER, keep=False)
             return self._count("wheel", Gate.ANGULAR_REJECTED)
         if w_ok:
             z1, r1 = z[1:], r[1:, 1:]
-            self._apply(z1, H_W, r1, self._innovation(z1, H_W, r1, keep=False),
-                        consider=WHEEL_CONSIDER)
+            self._measure(z1, H_W, r1, WHEEL_CONSIDER, keep=False)
             return self._count("wheel", Gate.LINEAR_REJECTED)
         return self._count("wheel", Gate.REJECTED)
 
@@ -245,28 +240,36 @@ class PlanarEkf(EkfState):
                 and self._gyro_prev[0] < times[0]:
             times, rates = [self._gyro_prev[0], *times], [self._gyro_prev[1], *rates]
         if span is not None and span.start is not None:
-            weights = interval_weights(times, span.start, span.start + span.dt)
+            weights = interval_weight_list(times, span.start, span.start + span.dt)
         else:
-            weights = np.full(len(times), 1.0 / len(times))
+            weights = [1.0 / len(times)] * len(times)
         self.discard_gyro()
         self._gyro_prev = last
-        mean = float(weights @ np.asarray(rates))
-        return self._gyro(mean, self._gyro_sigma * math.sqrt(float(weights @ weights)))
+        mean = squares = 0.0
+        for w_i, r_i in zip(weights, rates, strict=True):
+            mean += w_i * r_i
+            squares += w_i * w_i
+        return self._gyro(mean, self._gyro_sigma * math.sqrt(squares))
 
     def _gyro(self, rate: float, sigma: float) -> Gate:
         r = np.array([[sigma**2]])
         z = np.array([[rate]])
-        inn = self._innovation(z, H_GYRO, r)
-        gated = self.noise.gate_gyro and inn.d2 > self.noise.gate_1dof
-        if gated and not self._force("gyro"):
-            return self._count("gyro", Gate.REJECTED)
-        forced = gated
-        self._consecutive["gyro"] = 0
         # The bias is only observable at standstill, where the wheels' zero is exact. While
         # moving, a wheel/gyro disagreement is as likely a wheel radius or slip error as a
         # bias, and letting the bias absorb it turns a wheel error into a heading drift; so
         # the bias is a "consider" state then (its uncertainty counts, its value stays).
-        self._apply(z, H_GYRO, r, inn, consider=() if self.is_standstill else (B,))
+        consider = () if self.is_standstill else (B,)
+        if not self.noise.gate_gyro:
+            self._measure(z, H_GYRO, r, consider)
+            self._consecutive["gyro"] = 0
+            return self._count("gyro", Gate.ACCEPTED)
+        d2, applied, _, _ = self._measure(z, H_GYRO, r, consider, gate=self.noise.gate_1dof)
+        forced = not applied and d2 > self.noise.gate_1dof  # (a NaN distance is not gated)
+        if forced and not self._force("gyro"):
+            return self._count("gyro", Gate.REJECTED)
+        self._consecutive["gyro"] = 0
+        if not applied:
+            self._measure(z, H_GYRO, r, consider)
         return self._count("gyro", Gate.FORCED if forced else Gate.ACCEPTED)
 
     def _twist_r(self, covariance: np.ndarray | tuple[float, ...] | None) -> np.ndarray:

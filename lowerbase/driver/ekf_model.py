@@ -206,14 +206,19 @@ def interval_weights(times: Sequence[float], t0: float, t1: float) -> np.ndarray
     Exact for a rate that is linear in time between the samples and constant outside them;
     so a constant rate, and a ramp sampled at both ends of the interval, come out exact.
     """
+    return np.array(interval_weight_list(times, t0, t1))
+
+
+def interval_weight_list(times: Sequence[float], t0: float, t1: float) -> list[float]:
+    """:func:`interval_weights` as a list of floats (the EKF's per-cycle path: a handful of
+    samples, where numpy's per-call cost exceeds the arithmetic)."""
     n = len(times)
     if n == 0:
         raise ValueError("no samples")
-    weights = np.zeros(n)
     span = t1 - t0
     if not span > 0:  # no interval: the samples' plain mean
-        weights[:] = 1.0 / n
-        return weights
+        return [1.0 / n] * n
+    weights = [0.0] * n
     weights[0] += max(0.0, min(t1, times[0]) - t0)  # before the first sample: held
     weights[-1] += max(0.0, t1 - max(t0, times[-1]))  # after the last one: held
     for i in range(n - 1):
@@ -224,7 +229,7 @@ def interval_weights(times: Sequence[float], t0: float, t1: float) -> np.ndarray
         # integral over [lo, hi] of the hat functions (b - t)/(b - a) and (t - a)/(b - a)
         weights[i] += (hi - lo) * (b - 0.5 * (lo + hi)) / (b - a)
         weights[i + 1] += (hi - lo) * (0.5 * (lo + hi) - a) / (b - a)
-    return weights / span
+    return [w / span for w in weights]
 
 
 class Innovation(NamedTuple):

@@ -14,6 +14,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
+from lowerbase.driver.ekf_kernels import drive, measure
 from lowerbase.driver.ekf_model import (
     DIM_X,
     YAW,
@@ -30,9 +31,12 @@ from lowerbase.driver.ekf_model import (
     motion_jacobian,
     motion_model,
     process_noise,
-    rate_noise,
-    slip_noise,
 )
+
+#: per set of consider states: 1 for the states a measurement may correct, 0 for the others
+_KEEP: dict[tuple[int, ...], np.ndarray] = {
+    c: np.array([0 if i in c else 1 for i in range(DIM_X)], dtype=np.uint8)
+    for c in ((), (X, Y, YAW, B), (B,))}
 
 
 class Span(NamedTuple):
@@ -92,6 +96,8 @@ class EkfState:
         #: counts of gate outcomes, by sensor and outcome
         self.statistics: dict[str, int] = {}
         self._r_default = np.diag([n.wheel_linear**2, n.wheel_angular**2])
+        #: the covariance of the zero-velocity pseudo-measurement at standstill
+        self._r_still = np.diag([n.standstill_linear**2, n.standstill_angular**2])
         # gyro samples queued by add_gyro: stamps [s], rates [rad/s], their sigma [rad/s]; and
         # the last sample fused (stamp, rate): the start of the next interval's trapezoid
         self._gyro_times: list[float] = []
@@ -245,9 +251,12 @@ class EkfState:
                 self.stamp = float(stamp)
             return Span(None, 0.0, False)
         span = Span(self.stamp, stamp - self.stamp, self.is_standstill)
-        kf = self.kf
-        kf.P = kf.P + rate_noise(span.dt, self.noise)
-        kf.x_prior, kf.P_prior = kf.x.copy(), kf.P.copy()
+        kf, n = self.kf, self.noise
+        p = kf.P  # + rate_noise(dt), in place: its only nonzero entries
+        p[V, V] += n.linear_accel**2 * span.dt
+        p[W, W] += n.angular_accel**2 * span.dt
+        p[B, B] += n.gyro_bias_walk**2 * span.dt
+        kf.x_prior, kf.P_prior = kf.x.copy(), p.copy()
         self._time += span.dt
         self.stamp = float(stamp)
         return span
@@ -257,15 +266,8 @@ class EkfState:
         in steps of at most ``max_step``; at standstill the pose covariance stays."""
         if span.dt <= 0:
             return
-        steps = max(1, math.ceil(span.dt / self.noise.max_step))
-        h = span.dt / steps
-        kf = self.kf
-        for _ in range(steps):
-            if not span.frozen:
-                f = motion_jacobian(kf.x, h)
-                kf.P = f @ kf.P @ f.T + slip_noise(kf.x, h, self.noise)
-            kf.x = motion_model(kf.x, h)
-        kf.P = 0.5 * (kf.P + kf.P.T)
+        drive(self.kf.x, self.kf.P, span.dt, self.noise.max_step, span.frozen,
+              self.noise.lateral_slip**2)
 
     def _innovation(
         self, z: np.ndarray, h: np.ndarray, r: np.ndarray, keep: bool = True
@@ -283,6 +285,29 @@ class EkfState:
     ) -> None:
         """:func:`~lowerbase.driver.ekf_model.apply_update` (``h``, ``r`` are in ``inn``)."""
         apply_update(self.kf, z, inn, consider)
+
+    def _measure(
+        self, z: np.ndarray, h: np.ndarray, r: np.ndarray, consider: tuple[int, ...] = (),
+        gate: float | None = None, keep: bool = True,
+    ) -> tuple[float, bool, np.ndarray, np.ndarray]:
+        """The innovation of ``z`` and, unless a ``gate`` is given and the Mahalanobis^2 is
+        not within it, the update (with ``consider`` states), both by the compiled
+        :func:`~lowerbase.driver.ekf_kernels.measure` on ``kf.x`` and ``kf.P`` in place;
+        filterpy's attributes set as :func:`~lowerbase.driver.ekf_model.apply_update` sets
+        them. ``keep``: store y, S and the distance as the last gated measurement's.
+        Returns ``(d2, applied, y, S)``."""
+        kf, m = self.kf, len(h)
+        y, s, si, gain = np.empty((m, 1)), np.empty((m, m)), np.empty((m, m)), np.empty((DIM_X, m))
+        d2, applied = measure(kf.x, kf.P, h, z, r, _KEEP[consider], gate is not None,
+                              0.0 if gate is None else gate, y, s, si, gain)
+        if keep:
+            self.innovation, self.innovation_covariance, self.mahalanobis_sq = y, s, d2
+        if applied:
+            kf.S, kf.SI, kf.K, kf.y = s, si, gain, y
+            kf.z = z  # made for this measurement (not a shared constant)
+            kf.x_post = kf.x.copy()
+            kf.P_post = kf.P.copy()
+        return d2, applied, y, s
 
     def _force(self, sensor: str) -> bool:
         self._consecutive[sensor] += 1

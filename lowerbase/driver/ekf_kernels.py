@@ -1,0 +1,164 @@
+"""Compiled (numba) arithmetic of the planar EKF's wheel cycle (:mod:`lowerbase.driver.ekf`).
+
+Per 20 ms wheel cycle the filter makes two small measurement updates and drives the pose over
+the cycle. In numpy that was some 40 calls on 6x6 and smaller arrays (about 1 us each, more
+than the arithmetic); here it is two kernel calls, on the filter's own arrays (``kf.x``
+(6, 1) and ``kf.P`` (6, 6), float64), in place.
+
+The arithmetic is what :func:`lowerbase.driver.ekf_model.innovation`,
+:func:`~lowerbase.driver.ekf_model.apply_update`, :func:`~lowerbase.driver.ekf_model.motion_model`,
+:func:`~lowerbase.driver.ekf_model.motion_jacobian` and
+:func:`~lowerbase.driver.ekf_model.slip_noise` do (tests/driver/test_ekf_kernels.py pins it to
+them), with every product summed in index order: numba without fastmath neither reorders nor
+fuses the operations, so the results do not depend on the CPU. numpy's ``@`` goes through
+OpenBLAS, whose kernels (chosen per CPU at run time) fuse multiply-adds; the last bits of the
+two differ (relative 1e-16 per operation), not the filter.
+
+Compiled on first use and cached by :func:`lowerbase.jit.compiled`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from lowerbase.jit import compiled
+
+_jit = compiled()
+
+# state indices (as lowerbase.driver.ekf_model's; repeated: numba reads module globals as
+# compile-time constants, and this module must not import the model's numpy objects)
+_X, _Y, _YAW, _V, _W = 0, 1, 2, 3, 4
+
+
+@_jit
+def measure(
+    x: np.ndarray, p: np.ndarray, h: np.ndarray, z: np.ndarray, r: np.ndarray,
+    keep: np.ndarray, gated: bool, gate: float,
+    y: np.ndarray, s: np.ndarray, si: np.ndarray, gain: np.ndarray,
+) -> tuple[float, bool]:
+    """Innovation of ``z = H x + noise(R)`` (1-D or 2-D) and, unless ``gated`` and its
+    Mahalanobis^2 is not ``<= gate``, the Kalman update of ``x`` and ``p`` in place with the
+    gain's rows zeroed where ``keep`` is 0 (consider states; their block of ``p`` stays).
+
+    Writes ``y`` (m, 1), ``S`` and ``S^-1`` (m, m) and the gain ``K`` (n, m; zero when not
+    applied); returns ``(d2, applied)`` (arrays made here would cost more to hand back to
+    Python than the whole update)."""
+    n = x.shape[0]
+    m = h.shape[0]
+    pht = np.empty((n, m))
+    for i in range(n):
+        for j in range(m):
+            acc = 0.0
+            for k in range(n):
+                acc += p[i, k] * h[j, k]
+            pht[i, j] = acc
+    for i in range(m):
+        for j in range(m):
+            acc = 0.0
+            for k in range(n):
+                acc += h[i, k] * pht[k, j]
+            s[i, j] = acc + r[i, j]
+    for i in range(m):
+        acc = 0.0
+        for k in range(n):
+            acc += h[i, k] * x[k, 0]
+        y[i, 0] = z[i, 0] - acc
+    if m == 1:
+        si[0, 0] = 1.0 / s[0, 0]
+        d2 = y[0, 0] ** 2 * si[0, 0]
+    else:
+        a, b, c, d = s[0, 0], s[0, 1], s[1, 0], s[1, 1]
+        det = a * d - b * c
+        si[0, 0], si[0, 1], si[1, 0], si[1, 1] = d / det, -b / det, -c / det, a / det
+        y0, y1 = y[0, 0], y[1, 0]
+        d2 = (y0 * (d * y0 - b * y1) + y1 * (a * y1 - c * y0)) / det
+    if gated and not d2 <= gate:
+        gain[:, :] = 0.0
+        return d2, False
+    for i in range(n):  # the optimal gain P H^T S^-1
+        for j in range(m):
+            acc = 0.0
+            for k in range(m):
+                acc += pht[i, k] * si[k, j]
+            gain[i, j] = acc
+    cov = np.empty((n, n))  # C = K_opt (P H^T)^T, before the consider rows are zeroed
+    for i in range(n):
+        for j in range(n):
+            acc = 0.0
+            for k in range(m):
+                acc += gain[i, k] * pht[j, k]
+            cov[i, j] = acc
+    for i in range(n):
+        if keep[i] == 0:
+            for j in range(m):
+                gain[i, j] = 0.0
+            for j in range(n):
+                if keep[j] == 0:
+                    cov[i, j] = 0.0  # the consider x consider block keeps its P
+    for i in range(n):
+        acc = 0.0
+        for k in range(m):
+            acc += gain[i, k] * y[k, 0]
+        x[i, 0] = x[i, 0] + acc
+    _subtract_symmetric(p, cov)
+    return d2, True
+
+
+@_jit
+def _subtract_symmetric(p: np.ndarray, c: np.ndarray) -> None:
+    """``p <- (q + q^T) / 2`` with ``q = p - c``."""
+    n = p.shape[0]
+    for i in range(n):
+        for j in range(i, n):
+            v = 0.5 * ((p[i, j] - c[i, j]) + (p[j, i] - c[j, i]))
+            p[i, j] = v
+            p[j, i] = v
+
+
+@_jit
+def drive(x: np.ndarray, p: np.ndarray, dt: float, max_step: float, frozen: bool,
+          lateral_slip_sq: float) -> None:
+    """Drive the pose of ``x`` over ``dt`` [s] with its rates, in steps of at most ``max_step``
+    (midpoint position step); unless ``frozen``, ``p <- F p F^T + Q_slip`` per step (the
+    sideways-slip noise ``lateral_slip_sq * h * n n^T`` across the heading); then ``p``
+    symmetrised. In place."""
+    steps = max(1, math.ceil(dt / max_step))
+    h = dt / steps
+    n = x.shape[0]
+    f = np.eye(n)
+    fp = np.empty((n, n))
+    q = np.zeros((n, n))
+    for _ in range(steps):
+        v, w, yaw = x[_V, 0], x[_W, 0], x[_YAW, 0]
+        mid = yaw + 0.5 * w * h
+        c, s = math.cos(mid), math.sin(mid)
+        if not frozen:
+            f[_X, _YAW] = -v * h * s
+            f[_X, _V] = h * c
+            f[_X, _W] = -v * h * s * 0.5 * h
+            f[_Y, _YAW] = v * h * c
+            f[_Y, _V] = h * s
+            f[_Y, _W] = v * h * c * 0.5 * h
+            f[_YAW, _W] = h
+            for i in range(n):
+                for j in range(n):
+                    acc = 0.0
+                    for k in range(n):
+                        acc += f[i, k] * p[k, j]
+                    fp[i, j] = acc
+            scale = lateral_slip_sq * h
+            nx, ny = -math.sin(yaw), math.cos(yaw)
+            q[_X, _X], q[_X, _Y] = scale * (nx * nx), scale * (nx * ny)
+            q[_Y, _X], q[_Y, _Y] = scale * (ny * nx), scale * (ny * ny)
+            for i in range(n):
+                for j in range(n):
+                    acc = 0.0
+                    for k in range(n):
+                        acc += fp[i, k] * f[j, k]
+                    p[i, j] = acc + q[i, j]
+        x[_X, 0] = x[_X, 0] + v * h * c
+        x[_Y, 0] = x[_Y, 0] + v * h * s
+        x[_YAW, 0] = yaw + w * h
+    _subtract_symmetric(p, np.zeros((n, n)))

@@ -1,0 +1,114 @@
+"""The EKF's compiled cycle arithmetic (lowerbase/driver/ekf_kernels.py) against the numpy
+forms it replaced (lowerbase/driver/ekf_model.py: innovation, apply_update, motion_model,
+motion_jacobian, slip_noise), on filters in the states the driver meets. The two sum the
+products in different orders (OpenBLAS fuses multiply-adds), so they agree to rounding."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lowerbase.driver.ekf import B, PlanarEkf
+from lowerbase.driver.ekf_kernels import drive, measure
+from lowerbase.driver.ekf_model import (
+    DIM_X,
+    H_GYRO,
+    H_TWIST,
+    H_V,
+    WHEEL_CONSIDER,
+    EkfNoise,
+    apply_update,
+    innovation,
+    motion_jacobian,
+    motion_model,
+    slip_noise,
+)
+
+
+def _filter(seed: int) -> PlanarEkf:
+    rng = np.random.default_rng(seed)
+    ekf = PlanarEkf(stamp=0.0)
+    for k in range(1, 80):
+        ekf.update_gyro(0.3 + rng.normal(0, 0.01), stamp=0.01 * k)
+        if k % 2 == 0:
+            ekf.update_wheels(0.6 + rng.normal(0, 0.01), 0.3, stamp=0.01 * k)
+    return ekf
+
+
+def _keep(consider: tuple[int, ...]) -> np.ndarray:
+    return np.array([0 if i in consider else 1 for i in range(DIM_X)], dtype=np.uint8)
+
+
+def _run(ekf: PlanarEkf, z: np.ndarray, h: np.ndarray, r: np.ndarray,
+         consider: tuple[int, ...], gate: float | None
+         ) -> tuple[float, bool, np.ndarray, np.ndarray, np.ndarray]:
+    m = len(h)
+    y, s, si, k = np.empty((m, 1)), np.empty((m, m)), np.empty((m, m)), np.empty((DIM_X, m))
+    d2, applied = measure(ekf.kf.x, ekf.kf.P, h, z, r, _keep(consider), gate is not None,
+                          0.0 if gate is None else gate, y, s, si, k)
+    return d2, applied, y, s, k
+
+
+CASES = [
+    (H_TWIST, np.array([[0.58], [0.33]]), np.diag([1e-4, 6.4e-3]), WHEEL_CONSIDER),
+    (H_GYRO, np.array([[0.31]]), np.array([[4e-6]]), (B,)),
+    (H_GYRO, np.array([[0.29]]), np.array([[4e-6]]), ()),
+    (H_V, np.array([[0.61]]), np.array([[1e-2]]), WHEEL_CONSIDER),
+]
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize(("h", "z", "r", "consider"), CASES)
+def test_measure_is_innovation_then_apply_update(
+        seed: int, h: np.ndarray, z: np.ndarray, r: np.ndarray,
+        consider: tuple[int, ...]) -> None:
+    ekf, ref = _filter(seed), _filter(seed)
+    inn = innovation(ref.kf, z, h, r)
+    apply_update(ref.kf, z, inn, consider)
+    x0, p0 = ekf.kf.x.copy(), ekf.kf.P.copy()
+    d2, applied, y, s, k = _run(ekf, z, h, r, consider, gate=None)
+    assert applied
+    assert d2 == pytest.approx(inn.d2, rel=1e-12)
+    np.testing.assert_allclose(y, inn.y, rtol=1e-12, atol=1e-18)
+    np.testing.assert_allclose(s, inn.s, rtol=1e-12)
+    np.testing.assert_allclose(k, ref.kf.K, rtol=1e-10, atol=1e-18)
+    np.testing.assert_allclose(ekf.kf.x, ref.kf.x, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(ekf.kf.P, ref.kf.P, rtol=1e-9, atol=1e-16)
+    assert np.array_equal(ekf.kf.P, ekf.kf.P.T)
+    for i in consider:  # a consider state keeps its value and its block of P, bit for bit
+        assert ekf.kf.x[i, 0] == x0[i, 0]
+        for j in consider:
+            assert ekf.kf.P[i, j] == p0[i, j]
+
+
+def test_a_measurement_outside_its_gate_changes_nothing() -> None:
+    ekf = _filter(3)
+    x0, p0 = ekf.kf.x.copy(), ekf.kf.P.copy()
+    z = np.array([[5.0], [-3.0]])  # far off: well outside the 2-dof gate
+    d2, applied, _, _, k = _run(ekf, z, H_TWIST, np.diag([1e-4, 6.4e-3]), WHEEL_CONSIDER,
+                                gate=EkfNoise().gate_2dof)
+    assert not applied and d2 > EkfNoise().gate_2dof
+    assert np.array_equal(ekf.kf.x, x0) and np.array_equal(ekf.kf.P, p0)
+    assert not k.any()
+
+
+@pytest.mark.parametrize(("dt", "frozen"), [(0.02, False), (0.12, False), (0.02, True)])
+def test_drive_is_the_stepped_motion_model(dt: float, frozen: bool) -> None:
+    ekf, noise = _filter(4), EkfNoise()
+    x, p = ekf.kf.x.copy(), ekf.kf.P.copy()
+    steps = max(1, math.ceil(dt / noise.max_step))  # 0.12 s: three steps of 0.04 s
+    h = dt / steps
+    for _ in range(steps):
+        if not frozen:
+            f = motion_jacobian(x, h)
+            p = f @ p @ f.T + slip_noise(x, h, noise)
+        x = motion_model(x, h)
+    p = 0.5 * (p + p.T)
+    p0 = ekf.kf.P.copy()
+    drive(ekf.kf.x, ekf.kf.P, dt, noise.max_step, frozen, noise.lateral_slip**2)
+    np.testing.assert_allclose(ekf.kf.x, x, rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(ekf.kf.P, p, rtol=1e-10, atol=1e-18)
+    if frozen:  # at standstill the covariance stays as it was
+        assert np.array_equal(ekf.kf.P, p0)

@@ -12,7 +12,8 @@ Threads (one lock, held around every DriverCore call):
 * rospy's subscriber threads hand /base_cmd_vel, /smooth_cmd_vel, rgbled and rgbled_shelf to
   ``set_twist`` / ``set_led``.
 
-Stamps are ``rospy.Time.now()`` when the frame was handled; DriverCore's own timeouts and the
+/odom, /odom_raw and odom -> base_link are stamped with the wheel sample's time (the EKF's), the
+rest with ``rospy.Time.now()`` when the frame was handled; DriverCore's own timeouts and the
 main loop run on a :class:`~lowerbase.clock.RealClock`, or on ROS time when ``/use_sim_time``
 is true (:mod:`lowerbase.driver.rostime`: 20 Hz of /clock's time). A bus that fails (a USB
 adapter unplugged) is closed and reopened every second, while the core reports the lost link;
@@ -44,6 +45,8 @@ from lowerbase.rosnode import ToRosout as _ToRosout  # noqa: F401 (navigation.no
 log = logging.getLogger(__name__)
 
 NODE_NAME = "driver_base"
+#: [s] the oldest sample /odom is stamped with its own time; older: the publish time
+MAX_STAMP_AGE = 5.0
 ROS_HINT = ("run lowerbase from a venv made from the ROS Python (Debian: /usr/bin/python3 -m venv "
             "--system-site-packages VENV) or source /opt/ros/noetic/setup.bash; docs/driver.md")
 
@@ -225,9 +228,21 @@ class DriverNode:
         elif what in ("parameters", "information", "ready"):
             self._info_dirty = True
 
+    def _sample_stamp(self) -> Any:
+        """The ROS time of the sample the odometry describes (the EKF's stamp: the wheel frame's
+        receive time or its Counter's), not of publishing: a frame handled late (a backlog at
+        K=2) was stamped up to 0.8 s of /clock after its motion, and the world and navigation
+        pair each scan with /odom by stamp. ROS now minus the sample's age on the core's
+        clock (one clock under /use_sim_time)."""
+        now, at = self.rospy.Time.now(), self.core.ekf.stamp
+        age = self.core.clock.now() - at if at is not None else math.nan
+        if not 0.0 < age <= MAX_STAMP_AGE:  # not behind, or not believable: publish time
+            return now
+        return now - self.rospy.Duration.from_sec(age)
+
     def _publish_odometry(self) -> None:
         core, io, s = self.core, self.io, self.settings
-        stamp = self.rospy.Time.now()
+        stamp = self._sample_stamp()
         odo = core.odometry
         if odo is not None and "odom_raw" in self._pubs:
             self._publish("odom_raw", io.odometry_msg(

@@ -46,6 +46,7 @@ import math
 
 import numpy as np
 
+from lowerbase.driver.ekf_kernels import wheel_cycle
 from lowerbase.driver.ekf_model import (
     CHI2_999_1DOF,
     CHI2_999_2DOF,
@@ -116,16 +117,48 @@ class PlanarEkf(EkfState):
         if not (math.isfinite(linear) and math.isfinite(angular)):
             return self._count("wheel", Gate.INVALID)
         span = self._begin(stamp)
+        driven = False
         try:
-            if self._gyro_times:
-                self._flush_gyro(span)
-            return self._wheels(linear, angular, covariance)
+            gyro = self._gyro_mean(span) if self._gyro_times else None
+            bias_considered = not self.is_standstill  # as the gyro finds it, before the wheels
+            self._standstill_update(linear, angular)
+            if self.noise.gate_gyro or self.is_standstill:
+                if gyro is not None:
+                    self._gyro(*gyro, bias_considered=bias_considered)
+                return self._wheels(linear, angular, covariance)
+            try:
+                r = self._twist_r(covariance)
+            except ValueError:
+                if gyro is not None:
+                    self._gyro(*gyro, bias_considered=bias_considered)
+                raise
+            # the usual cycle, moving with an ungated gyro: one compiled call
+            kf, n, ws = self.kf, self.noise, self._workspace
+            g_rate, g_sigma = gyro if gyro is not None else (0.0, 0.0)
+            _, d2, applied = wheel_cycle(
+                kf.x, kf.P, ws.data, r, gyro is not None, g_rate, g_sigma**2, bias_considered,
+                linear, angular, n.gate_2dof, span.dt, n.max_step, span.frozen,
+                n.lateral_slip**2)
+            driven = applied
+            if gyro is not None:
+                self._consecutive["gyro"] = 0
+                self._count("gyro", Gate.ACCEPTED)
+                kf.y, kf.S, kf.SI, kf.K, kf.z = ws.gyro
+                kf.x_post, kf.P_post = ws.post
+            self.innovation, self.innovation_covariance, self.mahalanobis_sq = (
+                ws.wheel[0], ws.wheel[1], d2)
+            if applied:
+                kf.y, kf.S, kf.SI, kf.K, kf.z = ws.wheel
+                kf.x_post, kf.P_post = ws.post
+                self._consecutive["wheel_linear"] = self._consecutive["wheel_angular"] = 0
+                return self._count("wheel", Gate.ACCEPTED)
+            return self._wheels_gated(ws.wheel[4], r, ws.wheel[0], ws.wheel[1])
         finally:
-            self._finish(span)
+            if not driven:
+                self._finish(span)
 
-    def _wheels(
-        self, linear: float, angular: float, covariance: np.ndarray | tuple[float, ...] | None
-    ) -> Gate:
+    def _standstill_update(self, linear: float, angular: float) -> None:
+        """Standstill starts when the wheels report no motion, ends when they report any."""
         n = self.noise
         if (
             abs(linear) <= n.standstill_threshold_linear
@@ -135,16 +168,27 @@ class PlanarEkf(EkfState):
                 self._still_since = self._time
         else:
             self._still_since = None
+
+    def _wheels(
+        self, linear: float, angular: float, covariance: np.ndarray | tuple[float, ...] | None
+    ) -> Gate:
+        """The wheels' measurement (the standstill timer already updated)."""
+        n = self.noise
         if self.is_standstill:
             self._measure(np.zeros((2, 1)), H_TWIST, self._r_still)
             return self._count("wheel", Gate.STANDSTILL)
-
         r = self._twist_r(covariance)
         z = np.array([[linear], [angular]])
         _, applied, y, s = self._measure(z, H_TWIST, r, WHEEL_CONSIDER, gate=n.gate_2dof)
         if applied:
             self._consecutive["wheel_linear"] = self._consecutive["wheel_angular"] = 0
             return self._count("wheel", Gate.ACCEPTED)
+        return self._wheels_gated(z, r, y, s)
+
+    def _wheels_gated(self, z: np.ndarray, r: np.ndarray, y: np.ndarray, s: np.ndarray) -> Gate:
+        """The wheels' twist ``z`` failed the 2-dof gate (innovation ``y``, covariance ``s``):
+        use what passes alone."""
+        n = self.noise
         v_pass = y.item(0, 0) ** 2 / s.item(0, 0) <= n.gate_1dof
         w_pass = y.item(1, 0) ** 2 / s.item(1, 1) <= n.gate_1dof
         v_ok = v_pass or self._force("wheel_linear")
@@ -154,14 +198,14 @@ class PlanarEkf(EkfState):
         if w_pass:
             self._consecutive["wheel_angular"] = 0
         if v_ok and w_ok:  # each plausible alone (jointly marginal), or forced back in
-            self._measure(z, H_TWIST, r, WHEEL_CONSIDER)
+            self._measure(z.copy(), H_TWIST, r, WHEEL_CONSIDER)
             return self._count("wheel", Gate.ACCEPTED if v_pass and w_pass else Gate.FORCED)
         if v_ok:  # slipping wheel: yaw rate out, speed down-weighted
-            z1, r1 = z[:1], r[:1, :1] * n.slip_inflation
+            z1, r1 = z[:1].copy(), r[:1, :1] * n.slip_inflation
             self._measure(z1, H_V, r1, WHEEL_CONSIDER, keep=False)
             return self._count("wheel", Gate.ANGULAR_REJECTED)
         if w_ok:
-            z1, r1 = z[1:], r[1:, 1:]
+            z1, r1 = z[1:].copy(), r[1:, 1:]
             self._measure(z1, H_W, r1, WHEEL_CONSIDER, keep=False)
             return self._count("wheel", Gate.LINEAR_REJECTED)
         return self._count("wheel", Gate.REJECTED)
@@ -232,8 +276,12 @@ class PlanarEkf(EkfState):
             self._finish(span)
 
     def _flush_gyro(self, span: Span | None) -> Gate:
-        """Fuse the queued samples: over ``span`` their trapezoid mean, the last sample fused
-        before included; without an interval their plain mean."""
+        """Fuse the queued samples (:meth:`_gyro_mean`)."""
+        return self._gyro(*self._gyro_mean(span))
+
+    def _gyro_mean(self, span: Span | None) -> tuple[float, float]:
+        """Take the queued samples: over ``span`` their trapezoid mean, the last sample fused
+        before included; without an interval their plain mean. Returns (mean, its sigma)."""
         times, rates = self._gyro_times, self._gyro_rates
         last = (times[-1], rates[-1])
         if span is not None and span.start is not None and self._gyro_prev is not None \
@@ -249,16 +297,20 @@ class PlanarEkf(EkfState):
         for w_i, r_i in zip(weights, rates, strict=True):
             mean += w_i * r_i
             squares += w_i * w_i
-        return self._gyro(mean, self._gyro_sigma * math.sqrt(squares))
+        return mean, self._gyro_sigma * math.sqrt(squares)
 
-    def _gyro(self, rate: float, sigma: float) -> Gate:
+    def _gyro(self, rate: float, sigma: float, bias_considered: bool | None = None) -> Gate:
+        """The gyro's measurement; the bias a consider state if ``bias_considered`` (default:
+        while not at standstill)."""
         r = np.array([[sigma**2]])
         z = np.array([[rate]])
         # The bias is only observable at standstill, where the wheels' zero is exact. While
         # moving, a wheel/gyro disagreement is as likely a wheel radius or slip error as a
         # bias, and letting the bias absorb it turns a wheel error into a heading drift; so
         # the bias is a "consider" state then (its uncertainty counts, its value stays).
-        consider = () if self.is_standstill else (B,)
+        if bias_considered is None:
+            bias_considered = not self.is_standstill
+        consider = (B,) if bias_considered else ()
         if not self.noise.gate_gyro:
             self._measure(z, H_GYRO, r, consider)
             self._consecutive["gyro"] = 0

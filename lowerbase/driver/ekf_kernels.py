@@ -162,3 +162,90 @@ def drive(x: np.ndarray, p: np.ndarray, dt: float, max_step: float, frozen: bool
         x[_Y, 0] = x[_Y, 0] + v * h * s
         x[_YAW, 0] = yaw + w * h
     _subtract_symmetric(p, np.zeros((n, n)))
+
+
+# -- the whole wheel cycle in one call -------------------------------------------------------
+
+#: the offsets of :func:`wheel_cycle`'s outputs in its workspace (a flat float64 array) and
+#: their shapes: the wheel measurement's y, S, S^-1, K and z, the gyro measurement's, and
+#: x and P after the last applied update (filterpy's x_post, P_post)
+LAYOUT: dict[str, tuple[int, tuple[int, ...]]] = {}
+_offset = 0
+for _name, _shape in (("wy", (2, 1)), ("ws", (2, 2)), ("wsi", (2, 2)), ("wk", (6, 2)),
+                      ("wz", (2, 1)), ("gy", (1, 1)), ("gs", (1, 1)), ("gsi", (1, 1)),
+                      ("gk", (6, 1)), ("gz", (1, 1)), ("gr", (1, 1)), ("x_post", (6, 1)),
+                      ("P_post", (6, 6))):
+    LAYOUT[_name] = (_offset, _shape)
+    _offset += math.prod(_shape)
+WORKSPACE_SIZE = _offset
+(_WY, _WS, _WSI, _WK, _WZ, _GY, _GS, _GSI, _GK, _GZ, _GR, _XPOST, _PPOST) = (
+    LAYOUT[k][0] for k in LAYOUT)
+_H_GYRO = np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0]])
+_H_TWIST = np.array([[0.0, 0.0, 0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
+_KEEP_WHEEL = np.array([0, 0, 0, 1, 1, 0], dtype=np.uint8)  # x, y, yaw, b: consider states
+_KEEP_GYRO_MOVING = np.array([1, 1, 1, 1, 1, 0], dtype=np.uint8)  # b: a consider state
+_KEEP_ALL = np.ones(6, dtype=np.uint8)
+
+
+@_jit
+def _view(ws: np.ndarray, offset: int, rows: int, cols: int) -> np.ndarray:
+    return ws[offset:offset + rows * cols].reshape((rows, cols))
+
+
+@_jit
+def _post(x: np.ndarray, p: np.ndarray, ws: np.ndarray, xo: int, po: int) -> None:
+    for i in range(6):
+        ws[xo + i] = x[i, 0]
+        for j in range(6):
+            ws[po + 6 * i + j] = p[i, j]
+
+
+@_jit
+def wheel_cycle(
+    x: np.ndarray, p: np.ndarray, ws: np.ndarray, r: np.ndarray, has_gyro: bool,
+    gyro_rate: float, gyro_var: float, bias_considered: bool, linear: float, angular: float,
+    gate: float, dt: float, max_step: float, frozen: bool, lateral_slip_sq: float,
+) -> tuple[float, float, bool]:
+    """One wheel cycle, moving and with an ungated gyro (the driver's usual case): the gyro's
+    interval mean (``gyro_rate``, variance ``gyro_var``; the bias a consider state if
+    ``bias_considered``) if ``has_gyro``, then the wheels' twist with covariance ``r``,
+    gated at ``gate`` with the pose and bias as consider states, then, if it was applied, the
+    pose driven over ``dt`` (:func:`drive`). The outputs go to ``ws`` (:data:`LAYOUT`).
+    Returns the gyro's and the wheels' Mahalanobis^2 and whether the wheels were applied (if
+    not, the caller goes on with the gate's other outcomes and drives the pose)."""
+    wy, wsv, wsi, wk, wz = (_view(ws, _WY, 2, 1), _view(ws, _WS, 2, 2), _view(ws, _WSI, 2, 2),
+                            _view(ws, _WK, 6, 2), _view(ws, _WZ, 2, 1))
+    d2g = 0.0
+    if has_gyro:
+        gz, gr = _view(ws, _GZ, 1, 1), _view(ws, _GR, 1, 1)
+        gz[0, 0] = gyro_rate
+        gr[0, 0] = gyro_var
+        keep = _KEEP_GYRO_MOVING if bias_considered else _KEEP_ALL
+        d2g, _ = measure(x, p, _H_GYRO, gz, gr, keep, False, 0.0, _view(ws, _GY, 1, 1),
+                         _view(ws, _GS, 1, 1), _view(ws, _GSI, 1, 1), _view(ws, _GK, 6, 1))
+        _post(x, p, ws, _XPOST, _PPOST)
+    wz[0, 0] = linear
+    wz[1, 0] = angular
+    d2, applied = measure(x, p, _H_TWIST, wz, r, _KEEP_WHEEL, True, gate, wy, wsv, wsi, wk)
+    if applied:
+        _post(x, p, ws, _XPOST, _PPOST)
+        if dt > 0:
+            drive(x, p, dt, max_step, frozen, lateral_slip_sq)
+    return d2g, d2, applied
+
+
+class CycleWorkspace:
+    """:func:`wheel_cycle`'s output array and fixed views of it: ``wheel`` and ``gyro`` (each
+    y, S, S^-1, K, z of that measurement) and ``post`` (x, P after the last update). The
+    filter hands these views to filterpy's attributes: the next cycle overwrites them."""
+
+    def __init__(self) -> None:
+        self.data = np.zeros(WORKSPACE_SIZE)
+        views: dict[str, np.ndarray] = {
+            name: self.data[off:off + math.prod(shape)].reshape(shape)
+            for name, (off, shape) in LAYOUT.items()}
+        self.wheel: tuple[np.ndarray, ...] = tuple(
+            views[k] for k in ("wy", "ws", "wsi", "wk", "wz"))
+        self.gyro: tuple[np.ndarray, ...] = tuple(
+            views[k] for k in ("gy", "gs", "gsi", "gk", "gz"))
+        self.post: tuple[np.ndarray, np.ndarray] = (views["x_post"], views["P_post"])

@@ -14,7 +14,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from lowerbase.driver.ekf_kernels import drive, measure
+from lowerbase.driver.ekf_kernels import CycleWorkspace, drive, measure
 from lowerbase.driver.ekf_model import (
     DIM_X,
     YAW,
@@ -96,6 +96,8 @@ class EkfState:
         #: counts of gate outcomes, by sensor and outcome
         self.statistics: dict[str, int] = {}
         self._r_default = np.diag([n.wheel_linear**2, n.wheel_angular**2])
+        #: the compiled wheel cycle's outputs (kf.y, S, SI, K, z, x_post, P_post are views)
+        self._workspace = CycleWorkspace()
         #: the covariance of the zero-velocity pseudo-measurement at standstill
         self._r_still = np.diag([n.standstill_linear**2, n.standstill_angular**2])
         # gyro samples queued by add_gyro: stamps [s], rates [rad/s], their sigma [rad/s]; and

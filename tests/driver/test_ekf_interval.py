@@ -117,13 +117,13 @@ def test_queued_gyro_samples_are_one_measurement_of_the_interval_mean() -> None:
     measurement, z = 0.25 g(t) + 0.5 g(t+10 ms) + 0.25 g(t+20 ms), sigma^2 sum(w^2)."""
     ekf = PlanarEkf()
     seen: list[tuple[float, float]] = []
-    original = ekf._gyro
+    original = ekf._gyro_mean
 
-    def spy(rate: float, sigma: float):  # type: ignore[no-untyped-def]
-        seen.append((rate, sigma))
-        return original(rate, sigma)
+    def spy(span):  # type: ignore[no-untyped-def]
+        seen.append(original(span))
+        return seen[-1]
 
-    ekf._gyro = spy  # type: ignore[method-assign]
+    ekf._gyro_mean = spy  # type: ignore[method-assign]
     ekf.update_gyro(0.20, stamp=1.00)  # the first stamp: no interval, fused as it is
     assert seen == [(0.20, EkfNoise().gyro_noise)]
     assert ekf.add_gyro(0.21, 1.01) is None and ekf.add_gyro(0.23, 1.02) is None

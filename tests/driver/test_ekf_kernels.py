@@ -112,3 +112,44 @@ def test_drive_is_the_stepped_motion_model(dt: float, frozen: bool) -> None:
     np.testing.assert_allclose(ekf.kf.P, p, rtol=1e-10, atol=1e-18)
     if frozen:  # at standstill the covariance stays as it was
         assert np.array_equal(ekf.kf.P, p0)
+
+
+@pytest.mark.parametrize("bias_considered", [True, False])
+def test_wheel_cycle_is_gyro_then_wheels_then_drive(bias_considered: bool) -> None:
+    """The fused cycle does exactly (bit for bit) what its three steps do one by one."""
+    from lowerbase.driver.ekf_kernels import CycleWorkspace, wheel_cycle
+
+    ekf, ref, noise = _filter(5), _filter(5), EkfNoise()
+    r = np.diag([1e-4, 6.4e-3])
+    ws = CycleWorkspace()
+    _, d2, applied = wheel_cycle(ekf.kf.x, ekf.kf.P, ws.data, r, True, 0.31, 4e-6,
+                                 bias_considered, 0.58, 0.3, noise.gate_2dof, 0.02,
+                                 noise.max_step, False, noise.lateral_slip**2)
+    _run(ref, np.array([[0.31]]), H_GYRO, np.array([[4e-6]]),
+         (B,) if bias_considered else (), None)
+    d2_ref, applied_ref, y, s, k = _run(ref, np.array([[0.58], [0.3]]), H_TWIST, r,
+                                        WHEEL_CONSIDER, noise.gate_2dof)
+    x_post = ref.kf.x.copy()
+    drive(ref.kf.x, ref.kf.P, 0.02, noise.max_step, False, noise.lateral_slip**2)
+    assert applied and applied_ref and d2 == d2_ref
+    assert np.array_equal(ekf.kf.x, ref.kf.x) and np.array_equal(ekf.kf.P, ref.kf.P)
+    wy, wsv, _, wk, wz = ws.wheel
+    assert np.array_equal(wy, y) and np.array_equal(wsv, s) and np.array_equal(wk, k)
+    assert wz.ravel().tolist() == [0.58, 0.3]
+    assert np.array_equal(ws.post[0], x_post)  # after the update, before the drive
+
+
+def test_the_filter_fails_over_to_the_gate_outcomes_when_the_wheels_fail_the_gate() -> None:
+    ekf = _filter(6)
+    t = ekf.stamp
+    assert t is not None
+    x0 = ekf.kf.x.copy()
+    ekf.add_gyro(0.3, t + 0.01)
+    ekf.add_gyro(0.3, t + 0.02)
+    # the wheels claim a yaw rate the gyro contradicts: a slipping wheel
+    from lowerbase.driver.ekf import Gate
+
+    assert ekf.update_wheels(0.6, 1.5, stamp=t + 0.02) is Gate.ANGULAR_REJECTED
+    assert ekf.statistics["gyro.accepted"] >= 1 and ekf.mahalanobis_sq > EkfNoise().gate_2dof
+    assert ekf.kf.K.shape == (DIM_X, 1)  # the speed-only update's gain
+    assert ekf.kf.x[0, 0] > x0[0, 0]  # the pose was driven over the cycle all the same

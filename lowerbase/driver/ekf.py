@@ -116,19 +116,23 @@ class PlanarEkf(EkfState):
         """
         if not (math.isfinite(linear) and math.isfinite(angular)):
             return self._count("wheel", Gate.INVALID)
-        span = self._begin(stamp)
+        span = self._begin(stamp, noise=False)
         driven = False
         try:
             gyro = self._gyro_mean(span) if self._gyro_times else None
             bias_considered = not self.is_standstill  # as the gyro finds it, before the wheels
             self._standstill_update(linear, angular)
             if self.noise.gate_gyro or self.is_standstill:
+                if span.dt > 0:
+                    self._rate_noise(span)
                 if gyro is not None:
                     self._gyro(*gyro, bias_considered=bias_considered)
                 return self._wheels(linear, angular, covariance)
             try:
                 r = self._twist_r(covariance)
             except ValueError:
+                if span.dt > 0:
+                    self._rate_noise(span)
                 if gyro is not None:
                     self._gyro(*gyro, bias_considered=bias_considered)
                 raise
@@ -138,20 +142,27 @@ class PlanarEkf(EkfState):
             _, d2, applied = wheel_cycle(
                 kf.x, kf.P, ws.data, r, gyro is not None, g_rate, g_sigma**2, bias_considered,
                 linear, angular, n.gate_2dof, span.dt, n.max_step, span.frozen,
-                n.lateral_slip**2)
+                n.lateral_slip**2, self._rate_q)
             driven = applied
+            if span.dt > 0 and kf.x_prior is not ws.prior[0]:
+                kf.x_prior, kf.P_prior = ws.prior
             if gyro is not None:
                 self._consecutive["gyro"] = 0
                 self._count("gyro", Gate.ACCEPTED)
-                kf.y, kf.S, kf.SI, kf.K, kf.z = ws.gyro
-                kf.x_post, kf.P_post = ws.post
-            self.innovation, self.innovation_covariance, self.mahalanobis_sq = (
-                ws.wheel[0], ws.wheel[1], d2)
+            self.mahalanobis_sq = d2
+            if self.innovation is not ws.wheel[0]:
+                self.innovation, self.innovation_covariance = ws.wheel[0], ws.wheel[1]
+            # filterpy's y, S, SI, K, z, x_post, P_post: the last applied update's (the views
+            # stay in place from one cycle to the next)
             if applied:
-                kf.y, kf.S, kf.SI, kf.K, kf.z = ws.wheel
-                kf.x_post, kf.P_post = ws.post
+                if kf.K is not ws.wheel[3]:
+                    kf.y, kf.S, kf.SI, kf.K, kf.z = ws.wheel
+                    kf.x_post, kf.P_post = ws.post
                 self._consecutive["wheel_linear"] = self._consecutive["wheel_angular"] = 0
                 return self._count("wheel", Gate.ACCEPTED)
+            if gyro is not None:
+                kf.y, kf.S, kf.SI, kf.K, kf.z = ws.gyro
+                kf.x_post, kf.P_post = ws.post
             return self._wheels_gated(ws.wheel[4], r, ws.wheel[0], ws.wheel[1])
         finally:
             if not driven:

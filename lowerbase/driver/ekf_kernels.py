@@ -29,7 +29,7 @@ _jit = compiled()
 
 # state indices (as lowerbase.driver.ekf_model's; repeated: numba reads module globals as
 # compile-time constants, and this module must not import the model's numpy objects)
-_X, _Y, _YAW, _V, _W = 0, 1, 2, 3, 4
+_X, _Y, _YAW, _V, _W, _B = 0, 1, 2, 3, 4, 5
 
 
 @_jit
@@ -174,12 +174,12 @@ _offset = 0
 for _name, _shape in (("wy", (2, 1)), ("ws", (2, 2)), ("wsi", (2, 2)), ("wk", (6, 2)),
                       ("wz", (2, 1)), ("gy", (1, 1)), ("gs", (1, 1)), ("gsi", (1, 1)),
                       ("gk", (6, 1)), ("gz", (1, 1)), ("gr", (1, 1)), ("x_post", (6, 1)),
-                      ("P_post", (6, 6))):
+                      ("P_post", (6, 6)), ("x_prior", (6, 1)), ("P_prior", (6, 6))):
     LAYOUT[_name] = (_offset, _shape)
     _offset += math.prod(_shape)
 WORKSPACE_SIZE = _offset
-(_WY, _WS, _WSI, _WK, _WZ, _GY, _GS, _GSI, _GK, _GZ, _GR, _XPOST, _PPOST) = (
-    LAYOUT[k][0] for k in LAYOUT)
+(_WY, _WS, _WSI, _WK, _WZ, _GY, _GS, _GSI, _GK, _GZ, _GR, _XPOST, _PPOST, _XPRIOR,
+ _PPRIOR) = (LAYOUT[k][0] for k in LAYOUT)
 _H_GYRO = np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0]])
 _H_TWIST = np.array([[0.0, 0.0, 0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
 _KEEP_WHEEL = np.array([0, 0, 0, 1, 1, 0], dtype=np.uint8)  # x, y, yaw, b: consider states
@@ -194,6 +194,7 @@ def _view(ws: np.ndarray, offset: int, rows: int, cols: int) -> np.ndarray:
 
 @_jit
 def _post(x: np.ndarray, p: np.ndarray, ws: np.ndarray, xo: int, po: int) -> None:
+    """Copy ``x`` and ``p`` into the workspace at offsets ``xo`` and ``po``."""
     for i in range(6):
         ws[xo + i] = x[i, 0]
         for j in range(6):
@@ -205,8 +206,11 @@ def wheel_cycle(
     x: np.ndarray, p: np.ndarray, ws: np.ndarray, r: np.ndarray, has_gyro: bool,
     gyro_rate: float, gyro_var: float, bias_considered: bool, linear: float, angular: float,
     gate: float, dt: float, max_step: float, frozen: bool, lateral_slip_sq: float,
+    rate_q: np.ndarray,
 ) -> tuple[float, float, bool]:
-    """One wheel cycle, moving and with an ungated gyro (the driver's usual case): the gyro's
+    """One wheel cycle, moving and with an ungated gyro (the driver's usual case): if ``dt`` >
+    0, the rates' process noise over it (``rate_q``: the white-noise densities of v, w and
+    the bias, :func:`~lowerbase.driver.ekf_model.rate_noise`) and the prior kept; the gyro's
     interval mean (``gyro_rate``, variance ``gyro_var``; the bias a consider state if
     ``bias_considered``) if ``has_gyro``, then the wheels' twist with covariance ``r``,
     gated at ``gate`` with the pose and bias as consider states, then, if it was applied, the
@@ -215,6 +219,11 @@ def wheel_cycle(
     not, the caller goes on with the gate's other outcomes and drives the pose)."""
     wy, wsv, wsi, wk, wz = (_view(ws, _WY, 2, 1), _view(ws, _WS, 2, 2), _view(ws, _WSI, 2, 2),
                             _view(ws, _WK, 6, 2), _view(ws, _WZ, 2, 1))
+    if dt > 0:
+        p[_V, _V] += rate_q[0] * dt
+        p[_W, _W] += rate_q[1] * dt
+        p[_B, _B] += rate_q[2] * dt
+        _post(x, p, ws, _XPRIOR, _PPRIOR)
     d2g = 0.0
     if has_gyro:
         gz, gr = _view(ws, _GZ, 1, 1), _view(ws, _GR, 1, 1)
@@ -249,3 +258,4 @@ class CycleWorkspace:
         self.gyro: tuple[np.ndarray, ...] = tuple(
             views[k] for k in ("gy", "gs", "gsi", "gk", "gz"))
         self.post: tuple[np.ndarray, np.ndarray] = (views["x_post"], views["P_post"])
+        self.prior: tuple[np.ndarray, np.ndarray] = (views["x_prior"], views["P_prior"])

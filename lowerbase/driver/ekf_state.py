@@ -39,6 +39,11 @@ _KEEP: dict[tuple[int, ...], np.ndarray] = {
     for c in ((), (X, Y, YAW, B), (B,))}
 
 
+#: the statistics' keys, "sensor.outcome"
+_KEYS = {(sensor, gate.value): f"{sensor}.{gate.value}" for sensor in ("wheel", "gyro")
+         for gate in Gate}
+
+
 class Span(NamedTuple):
     """An interval of the timeline: its start [s] (None: no interval), length [s], and
     whether the base stood still at its start."""
@@ -46,6 +51,9 @@ class Span(NamedTuple):
     start: float | None
     dt: float
     frozen: bool
+
+
+_NO_SPAN = Span(None, 0.0, False)
 
 
 class EkfState:
@@ -98,6 +106,8 @@ class EkfState:
         self._r_default = np.diag([n.wheel_linear**2, n.wheel_angular**2])
         #: the compiled wheel cycle's outputs (kf.y, S, SI, K, z, x_post, P_post are views)
         self._workspace = CycleWorkspace()
+        #: the rates' white-noise densities (v, w, bias), per second of interval
+        self._rate_q = np.array([n.linear_accel**2, n.angular_accel**2, n.gyro_bias_walk**2])
         #: the covariance of the zero-velocity pseudo-measurement at standstill
         self._r_still = np.diag([n.standstill_linear**2, n.standstill_angular**2])
         # gyro samples queued by add_gyro: stamps [s], rates [rad/s], their sigma [rad/s]; and
@@ -239,29 +249,35 @@ class EkfState:
         self._gyro_times, self._gyro_rates = [], []
         self._gyro_prev = None
 
-    def _begin(self, stamp: float | None) -> Span:
-        """Start the interval to ``stamp``: the rates (v, w, b) get their process noise and
-        the time moves on; the pose waits for :meth:`_finish`, once the measurements have
-        updated the rates to the interval's means. A stamp in the past or the first stamp:
-        no interval."""
+    def _begin(self, stamp: float | None, noise: bool = True) -> Span:
+        """Start the interval to ``stamp``: the rates (v, w, b) get their process noise (unless
+        not ``noise``: the caller's :func:`~lowerbase.driver.ekf_kernels.wheel_cycle` adds it,
+        or :meth:`_rate_noise`) and the time moves on; the pose waits for :meth:`_finish`, once
+        the measurements have updated the rates to the interval's means. A stamp in the past
+        or the first stamp: no interval."""
         if stamp is None:
-            return Span(None, 0.0, False)
+            return _NO_SPAN
         if not math.isfinite(stamp):
             raise ValueError(f"stamp must be finite, got {stamp}")
         if self.stamp is None or stamp <= self.stamp:
             if self.stamp is None:
                 self.stamp = float(stamp)
-            return Span(None, 0.0, False)
+            return _NO_SPAN
         span = Span(self.stamp, stamp - self.stamp, self.is_standstill)
+        if noise:
+            self._rate_noise(span)
+        self._time += span.dt
+        self.stamp = float(stamp)
+        return span
+
+    def _rate_noise(self, span: Span) -> None:
+        """P + rate_noise(dt), in place (its only nonzero entries); x_prior and P_prior."""
         kf, n = self.kf, self.noise
-        p = kf.P  # + rate_noise(dt), in place: its only nonzero entries
+        p = kf.P
         p[V, V] += n.linear_accel**2 * span.dt
         p[W, W] += n.angular_accel**2 * span.dt
         p[B, B] += n.gyro_bias_walk**2 * span.dt
         kf.x_prior, kf.P_prior = kf.x.copy(), p.copy()
-        self._time += span.dt
-        self.stamp = float(stamp)
-        return span
 
     def _finish(self, span: Span) -> None:
         """Drive the pose over ``span`` with the rates as they are now (the interval's means),
@@ -319,7 +335,7 @@ class EkfState:
         return False
 
     def _count(self, sensor: str, gate: Gate) -> Gate:
-        key = f"{sensor}.{gate.value}"
+        key = _KEYS[sensor, gate._value_]  # (Enum's own __hash__ runs Python code)
         self.statistics[key] = self.statistics.get(key, 0) + 1
         self.last_gate = gate
         return gate

@@ -23,6 +23,7 @@ from lowerbase.driver.ekf_model import (
     innovation,
     motion_jacobian,
     motion_model,
+    rate_noise,
     slip_noise,
 )
 
@@ -116,15 +117,19 @@ def test_drive_is_the_stepped_motion_model(dt: float, frozen: bool) -> None:
 
 @pytest.mark.parametrize("bias_considered", [True, False])
 def test_wheel_cycle_is_gyro_then_wheels_then_drive(bias_considered: bool) -> None:
-    """The fused cycle does exactly (bit for bit) what its three steps do one by one."""
+    """The fused cycle does exactly (bit for bit) what its steps do one by one: the rates'
+    process noise, the gyro, the wheels, the drive."""
     from lowerbase.driver.ekf_kernels import CycleWorkspace, wheel_cycle
 
     ekf, ref, noise = _filter(5), _filter(5), EkfNoise()
     r = np.diag([1e-4, 6.4e-3])
     ws = CycleWorkspace()
+    q = np.array([noise.linear_accel**2, noise.angular_accel**2, noise.gyro_bias_walk**2])
     _, d2, applied = wheel_cycle(ekf.kf.x, ekf.kf.P, ws.data, r, True, 0.31, 4e-6,
                                  bias_considered, 0.58, 0.3, noise.gate_2dof, 0.02,
-                                 noise.max_step, False, noise.lateral_slip**2)
+                                 noise.max_step, False, noise.lateral_slip**2, q)
+    ref.kf.P += rate_noise(0.02, noise)
+    x_prior, p_prior = ref.kf.x.copy(), ref.kf.P.copy()
     _run(ref, np.array([[0.31]]), H_GYRO, np.array([[4e-6]]),
          (B,) if bias_considered else (), None)
     d2_ref, applied_ref, y, s, k = _run(ref, np.array([[0.58], [0.3]]), H_TWIST, r,
@@ -137,6 +142,7 @@ def test_wheel_cycle_is_gyro_then_wheels_then_drive(bias_considered: bool) -> No
     assert np.array_equal(wy, y) and np.array_equal(wsv, s) and np.array_equal(wk, k)
     assert wz.ravel().tolist() == [0.58, 0.3]
     assert np.array_equal(ws.post[0], x_post)  # after the update, before the drive
+    assert np.array_equal(ws.prior[0], x_prior) and np.array_equal(ws.prior[1], p_prior)
 
 
 def test_the_filter_fails_over_to_the_gate_outcomes_when_the_wheels_fail_the_gate() -> None:

@@ -44,9 +44,10 @@ NODE_NAME = "move_base"
 Pose = tuple[float, float, float]
 #: commands are sent this many periods after both controllers went idle (zeros: a clean stop)
 STOP_TAIL = 5
-#: [s of /odom] how long a scan or cloud waits for TF map -> odom at its stamp (the world's
-#: localization of that instant) before it is dropped, counted (lowerbase.world.stamped)
-SENSOR_TF_WAIT = 1.0
+#: observations held per sensor for /odom and TF to reach their stamp (costmap_2d's tf filter
+#: queue: 50, 2 s of 25 Hz scans), and the longest wait for TF map -> odom there [s of /odom]
+#: (/odom reached the nodes up to 2.5 s late at K=2 on a loaded host: docs/robot.md)
+SENSOR_DEPTH, SENSOR_TF_WAIT = 50, 2.0
 
 
 @dataclass
@@ -109,8 +110,8 @@ class NavigationNode:
         #: /odom's poses by stamp, and the scans and clouds waiting for it to reach theirs
         self.odom_history = PoseHistory()
         self.tf = MapToOdom(self.rospy, setup.map_frame, setup.odom_frame)
-        self.sensors = StampedSensors(self.odom_history, self.tf.at, tf_newest=self.tf.newest,
-                                      wait=SENSOR_TF_WAIT)
+        self.sensors = StampedSensors(self.odom_history, self.tf.at, SENSOR_DEPTH,
+                                      tf_newest=self.tf.newest, wait=SENSOR_TF_WAIT)
         self.last_command: Any = None  #: the Navigator's NavCommand of the last tick
         self.tick_count = 0
         self.stats: dict[str, int] = {"bad_scan": 0, "bad_cloud": 0, "bad_odom": 0,

@@ -24,9 +24,11 @@ _ORIGIN: Pose = (0.0, 0.0, 0.0)
 
 
 class ScanOdom:
-    """Scans waiting for /odom (at most ``depth``: 1 s of 25 Hz scans; older ones dropped)."""
+    """Scans waiting for /odom (at most ``depth``, older ones dropped: amcl's message filter
+    queue of 100 scans, 4 s at 25 Hz; /odom came up to 2.5 s of /clock late at K=2 on a
+    loaded host, and a 25-scan queue lost those scans unlocalized)."""
 
-    def __init__(self, span: float = 5.0, depth: int = 25) -> None:
+    def __init__(self, span: float = 5.0, depth: int = 100) -> None:
         self.odom = PoseHistory(span)
         self._waiting = StampedSensors(self.odom, lambda stamp: _ORIGIN, depth)
         self.last_stamp: float | None = None  #: the stamp of the last scan handed out

@@ -157,7 +157,9 @@ class SimLoop(SteppedLoop):
         self._to_mcu.clear()
         self.mcu.step()
         frames, self._to_driver = self._to_driver, []
+        driver = self.driver
+        on_frame = driver.on_frame
         for stamp, frame_id, data in frames:
-            self.driver.on_frame(frame_id, data, stamp)
-        self.driver.tick()
+            on_frame(frame_id, data, stamp)
+        driver.tick()
         self.clock.advance(self.mcu.dt)

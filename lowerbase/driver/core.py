@@ -137,6 +137,8 @@ class DriverCore:
         self.stats: Counter[str] = Counter()
         self.listeners: list[Listener] = []
         self._counters: Counter[str] = Counter()
+        #: message name -> (its codec, its stats key): looked up once per name
+        self._tx: dict[str, tuple[Any, str, bool]] = {}
         self._param_names = self.codec.message("ParameterRequest").signal("Index").choices
         self.state = LinkState.WAITING
         self.boot_counter: int | None = None
@@ -608,12 +610,16 @@ class DriverCore:
             self._next_command = now + period
 
     def _emit(self, name: str, values: dict[str, Any]) -> None:
-        msg = self.codec.message(name)
-        if msg.has_counter:
+        tx = self._tx.get(name)
+        if tx is None:
+            msg = self.codec.message(name)
+            tx = self._tx[name] = (msg, f"tx_{name}", msg.has_counter)
+        msg, key, has_counter = tx
+        if has_counter:
             values["Counter"] = self._counters[name] & 0xF
             self._counters[name] += 1
         data = msg.encode(values)
-        self.stats[f"tx_{name}"] += 1
+        self.stats[key] += 1
         self._send(msg.frame_id, data)
 
     def _notify(self, what: str) -> None:

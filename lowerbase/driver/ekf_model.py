@@ -218,12 +218,16 @@ def interval_weight_list(times: Sequence[float], t0: float, t1: float) -> list[f
     span = t1 - t0
     if not span > 0:  # no interval: the samples' plain mean
         return [1.0 / n] * n
+    # (max/min written as conditionals, the same values: this runs every wheel cycle)
     weights = [0.0] * n
-    weights[0] += max(0.0, min(t1, times[0]) - t0)  # before the first sample: held
-    weights[-1] += max(0.0, t1 - max(t0, times[-1]))  # after the last one: held
+    first, last = times[0], times[-1]
+    held = (first if first < t1 else t1) - t0
+    weights[0] += held if held > 0.0 else 0.0  # before the first sample: held
+    held = t1 - (last if last > t0 else t0)
+    weights[-1] += held if held > 0.0 else 0.0  # after the last one: held
     for i in range(n - 1):
         a, b = times[i], times[i + 1]
-        lo, hi = max(a, t0), min(b, t1)
+        lo, hi = (a if a > t0 else t0), (b if b < t1 else t1)
         if hi <= lo or b <= a:
             continue
         # integral over [lo, hi] of the hat functions (b - t)/(b - a) and (t - a)/(b - a)

@@ -28,6 +28,7 @@ import math
 import operator
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import SupportsIndex
 
 from lowerbase.errors import ConfigError
@@ -117,12 +118,12 @@ class OdometryParameters:
                     f"odometry parameter {name} must be finite and > 0, got {value!r}"
                 )
 
-    @property
+    @cached_property  # read every wheel cycle (frozen: the instance's __dict__ holds it)
     def metres_per_pulse_left(self) -> float:
         """Rim travel of the left wheel per encoder pulse [m]."""
         return self.wheel_perimeter / (self.ratio_left * self.pulse_per_circle)
 
-    @property
+    @cached_property
     def metres_per_pulse_right(self) -> float:
         """Rim travel of the right wheel per encoder pulse [m]."""
         return self.wheel_perimeter / (self.ratio_right * self.pulse_per_circle)
@@ -406,15 +407,16 @@ class WheelOdometry:
         # turning the other way, but the real errors change with load and floor, so claiming
         # that cancellation would be overconfident.
         sx, sy, syaw = self._sens
-        dyaw_de = (0.0, abs(ds), abs(dyaw))
+        a_ds, a_dyaw = abs(ds), abs(dyaw)  # dyaw_de = (0, |ds|, |dyaw|); dds = (ds, 0, 0)
         mid = yaw0 + 0.5 * dyaw
         c, s = math.cos(mid), math.sin(mid)
-        dmid = [syaw[j] + 0.5 * dyaw_de[j] for j in range(3)]
-        dds = (ds, 0.0, 0.0)
+        m0, m1, m2 = syaw[0] + 0.5 * 0.0, syaw[1] + 0.5 * a_ds, syaw[2] + 0.5 * a_dyaw
+        dsc, dss = ds * c, ds * s
+        # written out (the same operations as the loop over j): this runs every wheel cycle
         self._sens = [
-            [sx[j] + dds[j] * c - ds * s * dmid[j] for j in range(3)],
-            [sy[j] + dds[j] * s + ds * c * dmid[j] for j in range(3)],
-            [syaw[j] + dyaw_de[j] for j in range(3)],
+            [sx[0] + ds * c - dss * m0, sx[1] + 0.0 * c - dss * m1, sx[2] + 0.0 * c - dss * m2],
+            [sy[0] + ds * s + dsc * m0, sy[1] + 0.0 * s + dsc * m1, sy[2] + 0.0 * s + dsc * m2],
+            [syaw[0] + 0.0, syaw[1] + a_ds, syaw[2] + a_dyaw],
         ]
 
     @property

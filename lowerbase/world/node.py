@@ -305,7 +305,7 @@ class WorldNode:
         if now is None or self.camera is None:
             return
         pose, t = now
-        stamp = self.rospy.Time.now()
+        stamp = self._stamp_of(t)  # the rendering pose's time, as the scans'
         f = self.camera.render(self.scene_at(t), pose, t)
         io, cfg = self.io, self.camera.config
         self._pubs["color"].publish(io.image(f.color, "rgb8", self.color_frame, stamp))

@@ -114,6 +114,7 @@ class DriverNode:
         self._bad_twist_log = -math.inf
         self._tf: Any = None
         self._last_tf_stamp: Any = None  #: of the last odom -> base_link sent
+        self._last_odom_stamp: float | None = None  #: [s] of the last /odom
         self._reader: threading.Thread | None = None
 
     # -- set-up ------------------------------------------------------------------------------
@@ -229,16 +230,16 @@ class DriverNode:
             self._info_dirty = True
 
     def _sample_stamp(self) -> Any:
-        """The ROS time of the sample the odometry describes (the EKF's stamp: the wheel frame's
-        receive time or its Counter's), not of publishing: a frame handled late (a backlog at
-        K=2) was stamped up to 0.8 s of /clock after its motion, and the world and navigation
-        pair each scan with /odom by stamp. ROS now minus the sample's age on the core's
-        clock (one clock under /use_sim_time)."""
-        now, at = self.rospy.Time.now(), self.core.ekf.stamp
+        """ROS time of the odometry's sample (the EKF's stamp, aged on the core's clock), not
+        of publishing: the world and navigation pair scans with /odom by stamp, and a frame
+        handled late (a backlog at K=2) was stamped up to 2 s of /clock after its motion."""
+        now, at, last = self.rospy.Time.now(), self.core.ekf.stamp, self._last_odom_stamp
         age = self.core.clock.now() - at if at is not None else math.nan
-        if not 0.0 < age <= MAX_STAMP_AGE:  # not behind, or not believable: publish time
-            return now
-        return now - self.rospy.Duration.from_sec(age)
+        stamp = now - self.rospy.Duration.from_sec(age) if 0.0 < age <= MAX_STAMP_AGE else now
+        if last is not None and last - MAX_STAMP_AGE < stamp.to_sec() < last:
+            stamp = self.rospy.Time.from_sec(last)  # never back (after an EKF reset, "now")
+        self._last_odom_stamp = stamp.to_sec()
+        return stamp
 
     def _publish_odometry(self) -> None:
         core, io, s = self.core, self.io, self.settings

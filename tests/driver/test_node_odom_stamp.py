@@ -10,6 +10,8 @@ import math
 from types import SimpleNamespace
 from typing import Any
 
+import pytest
+
 from lowerbase.bench.simloop import SimLoop
 from lowerbase.driver.core import LinkState
 from lowerbase.driver.settings import load_settings
@@ -70,3 +72,31 @@ def test_odom_after_a_backlog_carries_the_stamp_of_its_wheel_sample(woosh_msgs: 
         k = min(range(len(times)), key=lambda i: abs(times[i] - stamp))
         # the pose is the truth's at its stamp (within a wheel cycle's travel)
         assert math.isclose(msg.pose.pose.position.x - x0, xs[k], abs_tol=0.02), (stamp, k)
+
+
+def test_odom_stamps_never_go_back_after_the_ekf_lost_its_stamp(woosh_msgs: Any) -> None:
+    """The world and navigation keep /odom's history by stamp and restart it when a stamp goes
+    back (a restarted /clock): an EKF reset (stamp unknown: published at "now") followed by a
+    sample from before that must not look like one."""
+    import rospy
+
+    from lowerbase.clock import SimClock
+    from lowerbase.driver.node import DriverNode
+
+    clock = SimClock()
+    settings, config = load_settings({})
+    node = DriverNode(settings, config, StubLink(), clock=clock)
+    node.rospy = SimpleNamespace(Time=SimpleNamespace(
+        now=lambda: rospy.Time.from_sec(clock.now()), from_sec=rospy.Time.from_sec),
+        Duration=rospy.Duration)
+    sent: list[Any] = []
+    node._pubs = {"odom": SimpleNamespace(publish=sent.append)}
+    clock.advance(10.0)
+    node.core.ekf.stamp = None  # reset: the pose's time unknown
+    node._publish_odometry()
+    node.core.ekf.stamp = 9.9  # the next sample, received 0.1 s ago
+    node._publish_odometry()
+    node.core.ekf.stamp = 10.02
+    clock.advance(0.05)
+    node._publish_odometry()
+    assert [m.header.stamp.to_sec() for m in sent] == pytest.approx([10.0, 10.0, 10.02])

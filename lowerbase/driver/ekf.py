@@ -216,7 +216,7 @@ class PlanarEkf(EkfState):
             self._measure(z1, H_V, r1, WHEEL_CONSIDER, keep=False)
             return self._count("wheel", Gate.ANGULAR_REJECTED)
         if w_ok:
-            z1, r1 = z[1:].copy(), r[1:, 1:]
+            z1, r1 = z[1:].copy(), r[1:, 1:].copy()  # contiguous: the kernel's one signature
             self._measure(z1, H_W, r1, WHEEL_CONSIDER, keep=False)
             return self._count("wheel", Gate.LINEAR_REJECTED)
         return self._count("wheel", Gate.REJECTED)

@@ -259,3 +259,23 @@ class CycleWorkspace:
             views[k] for k in ("gy", "gs", "gsi", "gk", "gz"))
         self.post: tuple[np.ndarray, np.ndarray] = (views["x_post"], views["P_post"])
         self.prior: tuple[np.ndarray, np.ndarray] = (views["x_prior"], views["P_prior"])
+
+
+_compiled = False
+
+
+def compile_kernels() -> None:
+    """Run each kernel once on scratch arrays of the filter's types, so that they are compiled
+    (or loaded from numba's cache: about 0.3 s; compiling takes seconds, once per install)
+    when a filter is made, not at its first measurement in a running receive loop."""
+    global _compiled
+    if _compiled:
+        return
+    x, p, r = np.zeros((6, 1)), np.eye(6), np.eye(2)
+    ws = CycleWorkspace()
+    wheel_cycle(x, p, ws.data, r, True, 0.0, 1.0, True, 0.0, 0.0, 1.0, 0.02, 0.05, False, 0.0,
+                np.zeros(3))
+    y, s, si, k = np.empty((1, 1)), np.empty((1, 1)), np.empty((1, 1)), np.empty((6, 1))
+    measure(x, p, _H_GYRO, np.zeros((1, 1)), np.eye(1), _KEEP_ALL, False, 0.0, y, s, si, k)
+    drive(x, p, 0.02, 0.05, False, 0.0)
+    _compiled = True

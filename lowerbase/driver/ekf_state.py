@@ -14,7 +14,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from lowerbase.driver.ekf_kernels import CycleWorkspace, drive, measure
+from lowerbase.driver.ekf_kernels import CycleWorkspace, compile_kernels, drive, measure
 from lowerbase.driver.ekf_model import (
     DIM_X,
     YAW,
@@ -61,6 +61,7 @@ class EkfState:
     (which adds the measurements): ``[x, y, yaw, v, w, gyro_bias]``, see that module."""
 
     def __init__(self, noise: EkfNoise | None = None, stamp: float | None = None) -> None:
+        compile_kernels()
         self.noise = noise if noise is not None else EkfNoise()
         self.kf: Any = ExtendedKalmanFilter(dim_x=DIM_X, dim_z=2)
         #: time [s] the state refers to (None until the first stamped call)

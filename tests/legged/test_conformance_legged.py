@@ -82,6 +82,48 @@ def test_each_defect_fails_exactly_its_checks(defect: str, expected: set[str]) -
     assert {c for c, s in results.items() if s is Status.SKIP} == {"actuator.zero_position"}
 
 
+class StalledLink(SimLink):
+    """The emulator's process descheduled for ``stall`` s (no step, no frame, the clock goes
+    on), 0.3 s after the last BodyVelocityCommand: a loaded host."""
+
+    def __init__(self, stall: float, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.stall, self.stalled = stall, False
+        self.last_velocity: float | None = None
+
+    def send(self, bus: int, frame_id: int, data: bytes) -> None:
+        if frame_id == CODEC.message("BodyVelocityCommand").frame_id:
+            self.last_velocity = self.clock.now()
+        super().send(bus, frame_id, data)
+
+    def wait(self, seconds: float) -> None:
+        end = self.clock.now() + seconds - 1e-9
+        while self.clock.now() < end:
+            if (not self.stalled and self.last_velocity is not None
+                    and self.clock.now() - self.last_velocity >= 0.3):
+                self.stalled = True
+                self.clock.advance(self.stall)
+                continue
+            self.lower.step()
+            self.clock.advance(self.lower.dt)
+
+
+@pytest.mark.parametrize("defects", [(), ("no-velocity-timeout",)])
+def test_velocity_timeout_allows_a_measured_stall_only(defects: tuple[str, ...]) -> None:
+    """A host stall between the last command and the stop is measured from the silent frames
+    and allowed; a chassis that never stops still fails."""
+    link = StalledLink(0.7, defects=defects)
+    checks = select(legged_registry(), ["locomotion.*,body.stand,body.velocity*"])
+    report = run_legged_suite(link, checks, LeggedSettings())
+    outcome = {r.check.id: r.outcome for r in report.results}["body.velocity_timeout"]
+    assert link.stalled
+    if defects:
+        assert outcome.status is Status.FAIL, outcome.detail
+    else:
+        assert outcome.status is Status.PASS, outcome.detail
+        assert "0.7" in outcome.detail and "stall" in outcome.detail
+
+
 def test_every_defect_is_tested_and_unknown_ones_are_refused() -> None:
     assert set(DEFECTS) == {"no-velocity-timeout", "slow-status", "obey-outside-test-mode",
                             "no-exit-frames"}

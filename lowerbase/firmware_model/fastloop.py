@@ -13,11 +13,14 @@ increment per frame. Constants of the hardware and of the believed chassis are d
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from lowerbase.clock import SimClock
 from lowerbase.firmware_model.encoder import wrap_int32 as wrap
+from lowerbase.firmware_model.fastkernel import KernelLoop, kernel
 from lowerbase.protocol.status_codes import StatusBit
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -40,10 +43,15 @@ SIDE_BITS = tuple(
     for side in ("LEFT", "RIGHT"))
 
 Rows = list[dict[str, Any]]
+log = logging.getLogger(__name__)
 
 
 class LeanLoop:
     """One Mcu's lean control period (built by ``Mcu.power_on``; see the module docstring)."""
+
+    #: run the period in compiled code (fastkernel.py) when numba is there; False keeps this
+    #: Python loop (the reference the kernel is tested against)
+    compiled = True
 
     def __init__(self, mcu: Mcu) -> None:
         from lowerbase.firmware_model import mcu as m  # the constants; no import cycle at load
@@ -64,6 +72,20 @@ class LeanLoop:
         # the compiled encoder itself (what MessageCodec.encode calls when strict)
         self.tx = [(msg._encode, msg.name, msg.frame_id, msg.has_counter, msg.cycle_time or 0.0,
                     msg.name in m.SHARED_COUNTER) for msg in mcu._periodic]
+        self.kernel: KernelLoop | None = None
+        # on a SimClock only: there the period's cost is the run's speed; in real time a period
+        # costs 20 us of its 5 ms, and loading numba and the kernel (1-2 s) would delay the boot
+        lk = kernel() if self.compiled and isinstance(mcu.clock, SimClock) else None
+        if lk is not None:
+            try:
+                self.kernel = KernelLoop(self, lk)
+            except ValueError as exc:  # a frame layout the kernel does not encode
+                log.warning("the compiled control loop is not used: %s", exc)
+
+    def release(self) -> None:
+        """Before a Python path steps: the compiled loop hands its state back to the Mcu."""
+        if self.kernel is not None:
+            self.kernel.release(general=True)
 
     # -- the believed chassis ------------------------------------------------------------------
 
@@ -76,6 +98,10 @@ class LeanLoop:
     # -- one control period ----------------------------------------------------------------------
 
     def step(self) -> None:
+        if self.kernel is not None:
+            if self.compiled and self.kernel.step():
+                return
+            self.kernel.release()
         mcu, m = self.mcu, self.m
         now = mcu.clock.now()
         dt = mcu.dt

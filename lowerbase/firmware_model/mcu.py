@@ -137,6 +137,9 @@ class Mcu:
 
     def power_on(self) -> None:
         """Boot (also what Reboot does): load parameters, count the boot, start in BOOT."""
+        old: LeanLoop | None = getattr(self, "_lean", None)
+        if old is not None:
+            old.release()  # the frame counters run on across a reboot
         params, state, problems = self.store.load()
         self.status = 0
         if problems:
@@ -442,6 +445,7 @@ class Mcu:
                               or self.imu.frozen):
             self._lean.step()  # the same, bit for bit, without the fault hooks (fastloop.py)
             return
+        self._lean.release()  # the compiled lean loop's due times and counters, back here
         now = self.clock.now()
         dt = self.dt
         if self.state == RobotState.BOOT and now - self.boot_time >= BOOT_TIME:

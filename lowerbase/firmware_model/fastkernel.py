@@ -1,0 +1,324 @@
+"""The lean control period in compiled code: :class:`KernelLoop` drives
+:func:`.lean_kernel.period` for :class:`~.fastloop.LeanLoop` (docs/emulator.md, "Where the time
+goes").
+
+One kernel call per period does the arithmetic; Python keeps what is rare or belongs to Python
+objects: ``Mcu._target`` (smoother, watchdog), the IMU noise blocks, the BMS step and poll, the
+odometer save, and the frames other than the hot ones. The state goes in and out as scalars
+every period, so the Python objects (motors, encoders, ground truth, Mcu) are always current
+for whoever reads or writes them between periods. The periodic frames' due times and the hot
+frames' counters live in arrays while the kernel runs (``acquire``), and go back to the Mcu
+before any Python path steps (``release``).
+
+A period goes to the Python LeanLoop instead (``step`` returns False, nothing changed) when
+surroundings are installed (the world's collision check must see each move), slip events or
+random slip are in play, or the BMS is polled this period (every 100th period: its answer
+sets status bits; the pack's step, every 20th period, is called after the kernel). The
+signal layouts of the hot frames come from the codec (start bit, length, scale, offset,
+signedness, raw range); a layout the kernel cannot encode (floats, Motorola order, integer
+scaling) keeps the Python loop. Without numba, or when compilation fails, it is never used.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from lowerbase.protocol.codec import MessageCodec
+
+if TYPE_CHECKING:  # pragma: no cover
+    from lowerbase.firmware_model.fastloop import LeanLoop
+
+log = logging.getLogger(__name__)
+
+#: the hot frames: message, multiplexer value (None: plain), value slots after the Counter
+HOT: dict[str, list[tuple[int | None, tuple[str, ...]]]] = {
+    "WheelFeedback": [
+        (0, ("Wheel", "LeftCount", "LeftVelocity", "LeftCurrent", "LeftDriverStatus")),
+        (1, ("Wheel", "RightCount", "RightVelocity", "RightCurrent", "RightDriverStatus"))],
+    "MotionState": [(None, ("Linear", "Angular"))],
+    "ImuGyro": [(None, ("X", "Y", "Z"))],
+    "ImuAccel": [(None, ("X", "Y", "Z"))],
+}
+_kernel: Any = None  # lean_kernel once it imported and compiled; False when it cannot
+
+
+def kernel() -> Any:
+    """The compiled kernel module, or None (numba missing or compilation failed)."""
+    global _kernel
+    if _kernel is None:
+        try:
+            lk = importlib.import_module("lowerbase.firmware_model.lean_kernel")
+            _warm_up(lk)
+            _kernel = lk
+        except Exception as exc:  # numba missing, or it cannot compile: the Python loop
+            log.warning("the compiled control loop is not available (%s); using Python", exc)
+            _kernel = False
+    return _kernel or None
+
+
+def tables(periodic: list[MessageCodec], lk: Any) -> tuple[np.ndarray, ...]:
+    """(hot, frames, sig, scale) of :func:`.lean_kernel.emit` for the periodic messages, from
+    their codecs; ValueError for a layout the kernel does not encode."""
+    hot = np.zeros((len(periodic), 2), np.int64)
+    frames: list[tuple[int, ...]] = []
+    sig: list[tuple[int, ...]] = []
+    scale: list[tuple[float, float]] = []
+    bases = {"WheelFeedback": [lk.V_WF_L, lk.V_WF_R], "MotionState": [lk.V_MS],
+             "ImuGyro": [lk.V_IG], "ImuAccel": [lk.V_IA]}
+    for i, msg in enumerate(periodic):
+        if msg.name not in HOT:
+            continue
+        if msg.big_endian or msg.length > 8 or not msg.has_counter:
+            raise ValueError(f"{msg.name}: a layout the kernel does not encode")
+        hot[i] = len(frames), len(HOT[msg.name])
+        for (mux, names), base in zip(HOT[msg.name], bases[msg.name], strict=True):
+            signals = msg.variants[mux] if mux is not None else msg.signals
+            slots = ("Counter", *names)
+            if {s.name for s in signals} != set(slots):
+                raise ValueError(f"{msg.name}: signals {sorted(s.name for s in signals)}")
+            frames.append((msg.frame_id, msg.length, len(sig), len(signals), base,
+                           int(msg.name == "WheelFeedback")))
+            for s in signals:
+                if s.is_float or s.kind not in ("identity", "linear"):
+                    raise ValueError(f"{msg.name}.{s.name}: a conversion the kernel lacks")
+                sig.append((slots.index(s.name), s.start, s.length, int(s.kind == "linear"),
+                            s.raw_min, s.raw_max))
+                scale.append((s.scale, s.offset))
+    return (hot, np.array(frames, np.int64).reshape(-1, 6), np.array(sig, np.int64).reshape(
+        -1, 6), np.array(scale, np.float64).reshape(-1, 2))
+
+
+def _warm_up(lk: Any) -> None:
+    """Compile (or load from the cache) with the argument types of a real period."""
+    k = np.ones(lk.C_SIZE + lk.R_SIZE)
+    z, imu = np.zeros(12), np.zeros(12)
+    due, per = np.zeros(2), np.ones(1)
+    hot = np.zeros((1, 2), np.int64)
+    counters, vals = np.zeros(1, np.int64), np.zeros(lk.V_SIZE)
+    sig, scale = np.zeros((1, 6), np.int64), np.ones((1, 2))
+    frames = np.zeros((1, 6), np.int64)
+    out, ids, lens = np.zeros((8, 8), np.uint8), np.zeros(8, np.int64), np.zeros(8, np.int64)
+    f, b, i = 0.0, False, 0
+    lk.period(k, f, f, f, f, b, f, f, f, b, b, f, f, f, f, f, b, b, f, f, i, f, i, f,
+              f, f, f, f, f, f, f, f, f, True, True, z, b, imu, i, True, f, f, f, i, i, i, i,
+              b, b, f, b, True, due, per, hot, counters, vals, sig, scale, frames, out, ids,
+              lens)
+
+
+class KernelLoop:
+    """The compiled lean period of one Mcu (see the module docstring)."""
+
+    def __init__(self, lean: LeanLoop, lk: Any) -> None:
+        from lowerbase.firmware_model import mcu as m  # the constants; no import cycle at load
+
+        self.lean, self.mcu, self.lk, self.m = lean, lean.mcu, lk, m
+        mcu = self.mcu
+        self.hot, self.frames, self.sig, self.scale = tables(mcu._periodic, lk)
+        n = len(mcu._periodic)
+        self.hot_names = [(i, msg.name) for i, msg in enumerate(mcu._periodic)
+                          if self.hot[i, 1]]
+        self.due = np.zeros(n + 1)
+        self.per = np.array([msg.cycle_time or 0.0 for msg in mcu._periodic])
+        self.counters = np.zeros(n, np.int64)
+        self.vals = np.zeros(lk.V_SIZE)
+        self.imu = np.zeros(12)
+        self.zero_row = np.zeros(12)
+        self.out = np.zeros((2 * n + 8, 8), np.uint8)
+        self.ids = np.zeros(2 * n + 8, np.int64)
+        self.lens = np.zeros(2 * n + 8, np.int64)
+        self.k = np.zeros(lk.C_SIZE + lk.R_SIZE)
+        self.owned = False
+        self._key: tuple[Any, ...] = ()
+        self._rows: list[list[float]] | None = None
+        self._rows_arr = np.zeros((0, 12))
+
+    # -- ownership of the due times, hot counters and IMU sample -----------------------------------
+
+    def acquire(self) -> None:
+        mcu = self.mcu
+        self.due[:-1] = mcu._due
+        self.due[-1] = mcu._next_any_due
+        self._next = mcu._next_any_due
+        for i, name in self.hot_names:
+            self.counters[i] = mcu._counters[name]
+        gyro, accel = mcu.imu_sample
+        self.imu[6:] = (*gyro, *accel)
+        self.lean.ml.blocked = self.lean.mr.blocked = False  # what _apply_faults does
+        self.lean.el.dropout = self.lean.er.dropout = False
+        self.owned = True
+
+    def release(self, general: bool = False) -> None:
+        """Hand the due times and counters back to the Mcu (before any Python path steps);
+        ``general``: the general loop steps next (it may change the IMU fault offsets)."""
+        if general:
+            self._key = ()
+        if not self.owned:
+            return
+        mcu = self.mcu
+        mcu._due = self.due[:-1].tolist()
+        mcu._next_any_due = min(mcu._due)
+        for i, name in self.hot_names:
+            mcu._counters[name] = int(self.counters[i])
+        self.owned = False
+
+    def _constants(self) -> None:
+        """The constants array for the current chassis, motor parameters and geometry."""
+        mcu, lean, lk, m = self.mcu, self.lean, self.lk, self.m
+        k, dt = self.k, mcu.dt
+        for o, motor in ((0, lean.ml), (lk.M, lean.mr)):
+            p, g = motor.params, motor.geometry
+            if (p, g, dt) != motor._key:
+                motor._constants(dt)
+            k[o:o + lk.M] = (motor._limit, motor._alpha, p.time_constant, motor._ome_zero,
+                             motor._ome_dt, motor._half_mass, motor._rolling, g.radius,
+                             g.min_speed, p.viscous_friction, p.gear_efficiency, g.ratio,
+                             p.torque_constant, p.idle_current, p.over_current_limit,
+                             p.over_current_time, p.stall_speed, p.stall_time)
+        c = mcu.chassis
+        lean._derive(c)
+        tg, sp, imu = mcu.truth.geometry, mcu.slip.params, mcu.imu
+        ip = imu.params
+        k[lk.C_DIST:lk.C_GF] = (
+            c.wheel_distant, c.min_speed, c.wheel_perimeter, c.ratio_left, c.ratio_right,
+            lean.bpp_l, lean.bpp_r, lean.ppr_l, lean.ppr_r,
+            lean.stall_speed, sp.accel_slip_threshold, sp.accel_slip_fraction,
+            tg.radius_left, tg.radius_right, tg.track, max(c.max_rpm, 1.0), lean.idle2,
+            1.0 + ip.gyro_scale_error, 1.0 + ip.accel_scale_error, *imu._limits, ip.gravity,
+            dt, 0.0, m.CARRIED, m.ENCODER_FAULT_TIME, m.IMU_FROZEN_SAMPLES,
+            m.STANDBY_HINT_TIME, m.BMS_LINK_TIMEOUT)
+        k[lk.C_GF:lk.C_SIZE] = (*imu.gyro_fault, *imu.accel_fault, *imu.gyro_turn_on,
+                                *imu.accel_turn_on)
+        rng = m._RANGES
+        ranges = []
+        for name, signals in (("WheelFeedback", ("LeftVelocity", "LeftCurrent")),
+                              ("WheelFeedback", ("RightVelocity", "RightCurrent")),
+                              ("MotionState", ("Linear", "Angular")),
+                              ("ImuGyro", tuple("XYZ")), ("ImuAccel", tuple("XYZ"))):
+            for s in signals:
+                ranges += rng[name, s]
+        k[lk.C_SIZE:] = ranges
+        self._key = self._current_key()
+
+    def _current_key(self) -> tuple[Any, ...]:
+        lean, mcu = self.lean, self.mcu
+        return (mcu.chassis, lean.ml.params, lean.ml.geometry, lean.mr.params, lean.mr.geometry,
+                mcu.truth.geometry, mcu.slip.params)
+
+    # -- one period ------------------------------------------------------------------------------
+
+    def step(self) -> bool:
+        """One lean period in the kernel; False (nothing done) when it is the Python loop's."""
+        mcu, m, lean = self.mcu, self.m, self.lean
+        truth, slip, bms = mcu.truth, mcu.slip, mcu.bms
+        now = mcu.clock.now()
+        if (truth.surroundings is not None or slip.events or slip.params.slip_rate_per_km
+                or (bms is not None and now >= mcu._bms_next_poll)):
+            self.release()
+            return False
+        if not self.owned:
+            self.acquire()
+        if self._key != self._current_key():
+            self._constants()
+        if mcu.state == m.RobotState.BOOT and now - mcu.boot_time >= m.BOOT_TIME:
+            mcu.state = m.RobotState.STANDBY
+        target_v, target_w, brake = mcu._target(now)
+        imu = mcu.imu
+        imu_due = now >= mcu._imu_due
+        z = self.zero_row
+        if imu_due and imu.params.noise:
+            rows = imu._rows
+            if not rows:
+                imu._block(lean.imu_cycle if lean.imu_cycle > 0.0 else 1.0 / imu.params.rate_hz)
+                rows = imu._rows
+            if rows is not self._rows:
+                self._rows, self._rows_arr = rows, np.array(rows)
+            z = self._rows_arr[len(rows) - 1]
+            rows.pop()
+        ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
+        stuck = mcu._enc_stuck
+        emit_now = now + 1e-9 >= self._next
+        (ml.omega, ml.setpoint, ml.current, ml.over_current, ml.stalled, ml._over_time,
+         ml._stall_time,
+         mr.omega, mr.setpoint, mr.current, mr.over_current, mr.stalled, mr._over_time,
+         mr._stall_time,
+         el.total, el._frac, er.total, er._frac,
+         truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x, truth.distance,
+         mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge, mcu._bms_elapsed,
+         mcu._imu_same, mcu.status, mcu.motion_fault, state, count) = self.lk.period(
+            self.k, now, mcu.boot_time, target_v, target_w, brake,
+            ml.omega, ml.setpoint, ml.current, ml.over_current, ml.stalled, ml._over_time,
+            ml._stall_time,
+            mr.omega, mr.setpoint, mr.current, mr.over_current, mr.stalled, mr._over_time,
+            mr._stall_time,
+            el.total, el._frac, er.total, er._frac,
+            truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.distance,
+            mcu.odometer, stuck["left"], stuck["right"],
+            imu_due, imu.params.noise, z, mcu._imu_last is not None, self.imu, mcu._imu_same,
+            bms is not None, mcu._bms_charge, mcu._bms_elapsed, mcu._bms_last_answer,
+            mcu._bms_bits, mcu.status, mcu.motion_fault, int(mcu.state), mcu.estop_command,
+            mcu._watchdog, mcu._standby_cmd_time,
+            mcu._speed_limited and mcu._last_cmd is not None,
+            emit_now, self.due, self.per, self.hot, self.counters, self.vals, self.sig,
+            self.scale, self.frames, self.out, self.ids, self.lens)
+        ml._steady = mr._steady = None
+        if bms is not None and mcu._bms_elapsed >= m.BMS_STEP - 1e-9:  # nothing above reads it
+            bms.step(mcu._bms_elapsed, mcu._bms_charge / mcu._bms_elapsed)
+            mcu._bms_charge = mcu._bms_elapsed = 0.0
+        if state != mcu.state:
+            mcu.state = m.RobotState(state)
+        if imu_due:
+            mcu._imu_due += lean.imu_cycle
+            s = self.imu[6:].tolist()
+            sample = ((s[0], s[1], s[2]), (s[3], s[4], s[5]))
+            if imu.params.noise:
+                zl = self._rows_arr[len(imu._rows)].tolist()
+                gt, at, gb, ab = imu.gyro_turn_on, imu.accel_turn_on, imu.gyro_bias, imu.accel_bias
+                gb[0], gb[1], gb[2] = gt[0] + zl[0], gt[1] + zl[1], gt[2] + zl[2]
+                ab[0], ab[1], ab[2] = at[0] + zl[3], at[1] + zl[4], at[2] + zl[5]
+            imu._last = mcu._imu_last = mcu.imu_sample = sample
+        if mcu.odometer != mcu._saved_odometer and now - mcu._last_save >= m.ODOMETER_SAVE_PERIOD:
+            mcu._save_state()
+        if count:
+            self._send(now, count)
+        return True
+
+    def _send(self, now: float, count: int) -> None:
+        """The frames the kernel emitted, in order; the non-hot ones built here."""
+        mcu = self.mcu
+        if count < 0:  # a hot frame the codec refuses: the Python emitter raises as it did
+            self.release()
+            self.lean._emit_due(now)
+            return
+        self._next = float(self.due[-1])
+        data = self.out[:count].tobytes()
+        ids, lens = self.ids[:count].tolist(), self.lens[:count].tolist()
+        send = mcu._send
+        counters = mcu._counters
+        tx, builders = self.lean.tx, self.lean.builders
+        sent = 0
+        for j in range(count):
+            fid = ids[j]
+            if fid >= 0:
+                send(fid, data[8 * j:8 * j + lens[j]])
+                sent += 1
+                continue
+            i = -1 - fid
+            encode, name, frame_id, has_counter, _, shared = tx[i]
+            rows = builders[i]()
+            if shared and rows and has_counter:
+                counter = counters[name]
+                counters[name] = (counter + 1) & 0xF
+                for values in rows:
+                    values["Counter"] = counter
+            for values in rows:
+                if has_counter and "Counter" not in values:
+                    values["Counter"] = counters[name]
+                    counters[name] = (counters[name] + 1) & 0xF
+                send(frame_id, encode(values))
+                sent += 1
+        if sent:
+            mcu.stats["tx_frames"] += sent

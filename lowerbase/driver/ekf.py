@@ -295,17 +295,16 @@ class PlanarEkf(EkfState):
     def _gyro_mean(self, span: Span | None) -> tuple[float, float]:
         """Take the queued samples: over ``span`` their trapezoid mean, the last sample fused
         before included; without an interval their plain mean. Returns (mean, its sigma)."""
-        times, rates = self._gyro_times, self._gyro_rates
-        last = (times[-1], rates[-1])
-        if span is not None and span.start is not None and self._gyro_prev is not None \
-                and self._gyro_prev[0] < times[0]:
-            times, rates = [self._gyro_prev[0], *times], [self._gyro_prev[1], *rates]
+        times, rates = self._gyro_times, self._gyro_rates  # taken: the queue starts anew
+        self._gyro_times, self._gyro_rates = [], []
+        prev, self._gyro_prev = self._gyro_prev, (times[-1], rates[-1])
         if span is not None and span.start is not None:
+            if prev is not None and prev[0] < times[0]:
+                times.insert(0, prev[0])
+                rates.insert(0, prev[1])
             weights = interval_weight_list(times, span.start, span.start + span.dt)
         else:
             weights = [1.0 / len(times)] * len(times)
-        self.discard_gyro()
-        self._gyro_prev = last
         mean = squares = 0.0
         for w_i, r_i in zip(weights, rates, strict=True):
             mean += w_i * r_i

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from lowerbase.firmware_model import fastbatch
 from lowerbase.protocol.codec import MessageCodec
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -46,14 +47,16 @@ HOT: dict[str, list[tuple[int | None, tuple[str, ...]]]] = {
 _kernel: Any = None  # lean_kernel once it imported and compiled; False when it cannot
 
 
-def kernel() -> Any:
-    """The compiled kernel module, or None (numba missing or compilation failed)."""
+def kernel() -> tuple[Any, Any] | None:
+    """The compiled kernel modules (lean_kernel, lean_batch), or None (numba missing or
+    compilation failed)."""
     global _kernel
     if _kernel is None:
         try:
             lk = importlib.import_module("lowerbase.firmware_model.lean_kernel")
-            _warm_up(lk)
-            _kernel = lk
+            lb = importlib.import_module("lowerbase.firmware_model.lean_batch")
+            _warm_up(lk, lb)
+            _kernel = lk, lb
         except Exception as exc:  # numba missing, or it cannot compile: the Python loop
             log.warning("the compiled control loop is not available (%s); using Python", exc)
             _kernel = False
@@ -92,7 +95,7 @@ def tables(periodic: list[MessageCodec], lk: Any) -> tuple[np.ndarray, ...]:
         -1, 6), np.array(scale, np.float64).reshape(-1, 2))
 
 
-def _warm_up(lk: Any) -> None:
+def _warm_up(lk: Any, lb: Any) -> None:
     """Compile (or load from the cache) with the argument types of a real period."""
     k = np.ones(lk.C_SIZE + lk.R_SIZE)
     z, imu = np.zeros(12), np.zeros(12)
@@ -106,13 +109,18 @@ def _warm_up(lk: Any) -> None:
     lk.period(k, f, f, f, f, b, f, f, f, b, b, f, f, f, f, f, b, b, f, f, i, f, i, f,
               f, f, f, f, f, f, f, f, f, True, True, z, b, imu, i, True, f, f, f, i, i, i, i,
               b, b, f, b, True, due, per, hot, counters, vals, sig, scale, frames, out, ids,
-              lens)
+              lens, i)
+    lb.batch(1, k, f, f, b, np.ones((1, 2)), f, f, f, f, f, b, b, f, f, f, f, f, b, b, f, f, i,
+             f, i, f,
+             f, f, f, f, f, f, f, f, f, f, f, f, True, np.zeros((1, 12)), i, b, imu, i, True, f,
+             f, f, i, f, f, f, f, f, f, f, i, i, i, b, b, f, b, due, per, hot, counters, vals,
+             sig, scale, frames, out, ids, lens, np.zeros(8, np.int64))
 
 
 class KernelLoop:
     """The compiled lean period of one Mcu (see the module docstring)."""
 
-    def __init__(self, lean: LeanLoop, lk: Any) -> None:
+    def __init__(self, lean: LeanLoop, lk: Any, lb: Any) -> None:
         from lowerbase.firmware_model import mcu as m  # the constants; no import cycle at load
 
         self.lean, self.mcu, self.lk, self.m = lean, lean.mcu, lk, m
@@ -127,9 +135,12 @@ class KernelLoop:
         self.vals = np.zeros(lk.V_SIZE)
         self.imu = np.zeros(12)
         self.zero_row = np.zeros(12)
-        self.out = np.zeros((2 * n + 8, 8), np.uint8)
-        self.ids = np.zeros(2 * n + 8, np.int64)
-        self.lens = np.zeros(2 * n + 8, np.int64)
+        self.lb = lb  # lean_batch: runs of periods (fastbatch.py)
+        size = 5 * fastbatch.MAX_RUN + 2 * n + 8
+        self.out, self.ids = np.zeros((size, 8), np.uint8), np.zeros(size, np.int64)
+        self.lens, self.pidx = np.zeros(size, np.int64), np.zeros(size, np.int64)
+        self.targets = np.zeros((fastbatch.MAX_RUN, 2))
+        self.zero_rows = np.zeros((1, 12))
         self.k = np.zeros(lk.C_SIZE + lk.R_SIZE)
         self.owned = False
         self._key: tuple[Any, ...] = ()
@@ -263,7 +274,7 @@ class KernelLoop:
             mcu._watchdog, mcu._standby_cmd_time,
             mcu._speed_limited and mcu._last_cmd is not None,
             emit_now, self.due, self.per, self.hot, self.counters, self.vals, self.sig,
-            self.scale, self.frames, self.out, self.ids, self.lens)
+            self.scale, self.frames, self.out, self.ids, self.lens, 0)
         ml._steady = mr._steady = None
         if bms is not None and mcu._bms_elapsed >= m.BMS_STEP - 1e-9:  # nothing above reads it
             bms.step(mcu._bms_elapsed, mcu._bms_charge / mcu._bms_elapsed)
@@ -287,20 +298,27 @@ class KernelLoop:
         return True
 
     def _send(self, now: float, count: int) -> None:
-        """The frames the kernel emitted, in order; the non-hot ones built here."""
-        mcu = self.mcu
+        """The frames the kernel emitted (``count`` -1: the Python emitter's turn)."""
         if count < 0:  # a hot frame the codec refuses: the Python emitter raises as it did
             self.release()
             self.lean._emit_due(now)
             return
         self._next = float(self.due[-1])
-        data = self.out[:count].tobytes()
-        ids, lens = self.ids[:count].tolist(), self.lens[:count].tolist()
+        sent = self.send_frames(self.out[:count].tobytes(), self.ids[:count].tolist(),
+                                self.lens[:count].tolist(), 0, count)
+        if sent:
+            self.mcu.stats["tx_frames"] += sent
+
+    def send_frames(self, data: bytes, ids: list[int], lens: list[int], start: int,
+                    end: int) -> int:
+        """Frames ``start`` .. ``end`` of an emission, in order, the non-hot ones built here
+        (``data``: the payload slots, 8 bytes each); returns how many were sent."""
+        mcu = self.mcu
         send = mcu._send
         counters = mcu._counters
         tx, builders = self.lean.tx, self.lean.builders
         sent = 0
-        for j in range(count):
+        for j in range(start, end):
             fid = ids[j]
             if fid >= 0:
                 send(fid, data[8 * j:8 * j + lens[j]])
@@ -320,5 +338,4 @@ class KernelLoop:
                     counters[name] = (counters[name] + 1) & 0xF
                 send(frame_id, encode(values))
                 sent += 1
-        if sent:
-            mcu.stats["tx_frames"] += sent
+        return sent

@@ -78,7 +78,7 @@ class LeanLoop:
         lk = kernel() if self.compiled and isinstance(mcu.clock, SimClock) else None
         if lk is not None:
             try:
-                self.kernel = KernelLoop(self, lk)
+                self.kernel = KernelLoop(self, *lk)
             except ValueError as exc:  # a frame layout the kernel does not encode
                 log.warning("the compiled control loop is not used: %s", exc)
 

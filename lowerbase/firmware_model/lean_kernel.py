@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from lowerbase.jit import compiled
+from lowerbase.firmware_model.lean_frames import _jit, clip, emit, pymax, pymin, wrap32
 from lowerbase.protocol.status_codes import StatusBit
 
 _B = {b.name: int(b) for b in StatusBit}
@@ -52,21 +52,6 @@ C_GF, C_AF, C_GT, C_AT = 2 * M + 29, 2 * M + 32, 2 * M + 35, 2 * M + 38  # 3 eac
 C_SIZE = 2 * M + 41
 #: state numbers of RobotState
 ACTIVE, EMERGENCY_STOP, FAULT, STANDBY = 2, 3, 4, 1
-
-_jit = compiled()
-
-
-@_jit
-def pymax(a: float, b: float) -> float:
-    """Python's ``max(a, b)``: the first unless the second is greater."""
-    return b if b > a else a
-
-
-@_jit
-def pymin(a: float, b: float) -> float:
-    """Python's ``min(a, b)``: the first unless the second is smaller."""
-    return b if b < a else a
-
 
 @_jit
 def motor_step(k: np.ndarray, o: int, target: float, dt: float, brake: bool, omega: float,
@@ -139,101 +124,6 @@ def encoder_add(frac: float, angle: float, ppr: float) -> tuple[int, float]:
 
 
 @_jit
-def clip(value: float, lo: float, hi: float) -> float:
-    return lo if value < lo else hi if value > hi else value
-
-
-@_jit
-def wrap32(x: int) -> int:
-    return (x + 2147483648) % 4294967296 - 2147483648
-
-
-@_jit
-def encode(vals: np.ndarray, sig: np.ndarray, scale: np.ndarray, row: int, n: int,
-           out: np.ndarray, slot: int) -> None:
-    """Pack ``vals`` into ``out[slot]`` by the signal table rows ``row .. row+n`` of ``sig``
-    (value index, start bit, length, linear?, raw min, raw max) and ``scale`` (scale,
-    offset): the codec's rounding (half to even) and Intel bit layout."""
-    payload = 0
-    for j in range(row, row + n):
-        v = vals[sig[j, 0]]
-        if sig[j, 3]:
-            off = scale[j, 1]
-            raw = int(np.rint(v / scale[j, 0] if off == 0.0 else (v - off) / scale[j, 0]))
-        else:
-            raw = int(v)
-        payload |= (raw & ((1 << sig[j, 2]) - 1)) << sig[j, 1]
-    for b in range(8):
-        out[slot, b] = (payload >> (8 * b)) & 0xFF
-
-
-@_jit
-def valid(vals: np.ndarray, sig: np.ndarray, scale: np.ndarray, row: int, n: int) -> bool:
-    """Whether every signal of the frame encodes (finite, raw value in range); the Python
-    encoder raises SignalRangeError otherwise, and the caller leaves the frame to it."""
-    for j in range(row, row + n):
-        v = vals[sig[j, 0]]
-        if not math.isfinite(v):
-            return False
-        if sig[j, 3]:
-            off = scale[j, 1]
-            r = np.rint(v / scale[j, 0] if off == 0.0 else (v - off) / scale[j, 0])
-        else:
-            r = v
-        if r < sig[j, 4] or r > sig[j, 5]:
-            return False
-    return True
-
-
-@_jit
-def emit(now: float, due: np.ndarray, period: np.ndarray, hot: np.ndarray,
-         counters: np.ndarray, vals: np.ndarray, sig: np.ndarray, scale: np.ndarray,
-         frames: np.ndarray, out: np.ndarray, ids: np.ndarray, lens: np.ndarray) -> int:
-    """LeanLoop._emit_due: the frames due now, in catalog order, into ``out``/``ids``/``lens``
-    (``ids`` -1 - i: periodic message i, built in Python); ``due`` ends with their minimum.
-    ``hot[i]``: the first row of ``frames`` (frame id, length, first signal row, signal count,
-    value base, shared counter) of message i and how many (0: not hot). Returns the frame
-    count, or -1 (nothing changed) when a hot frame would not encode."""
-    edge = now + 1e-9
-    count = 0
-    n = due.size - 1  # due[n]: the earliest of them (Mcu._next_any_due)
-    for i in range(n):  # check first: a frame the codec refuses is Python's to raise
-        if edge >= due[i] and hot[i, 1]:
-            for f in range(hot[i, 0], hot[i, 0] + hot[i, 1]):
-                base = frames[f, 4]
-                vals[base] = float(counters[i])
-                if not valid(vals[base:], sig, scale, frames[f, 2], frames[f, 3]):
-                    return -1
-    for i in range(n):
-        d = due[i]
-        if edge < d:
-            continue
-        p = period[i]
-        missed = pymax(0.0, math.floor((now - d) / p)) if p != 0.0 else 0.0
-        due[i] = d + (missed + 1.0) * p
-        if hot[i, 1] == 0:
-            ids[count] = -1 - i
-            count += 1
-            continue
-        shared = frames[hot[i, 0], 5] != 0
-        counter = counters[i]
-        if shared:
-            counters[i] = (counter + 1) & 0xF
-        for f in range(hot[i, 0], hot[i, 0] + hot[i, 1]):
-            base = frames[f, 4]
-            if not shared:
-                counter = counters[i]
-                counters[i] = (counter + 1) & 0xF
-            vals[base] = float(counter)
-            encode(vals[base:], sig, scale, frames[f, 2], frames[f, 3], out, count)
-            ids[count] = frames[f, 0]
-            lens[count] = frames[f, 1]
-            count += 1
-    due[n] = due[:n].min()
-    return count
-
-
-@_jit
 def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_w: float,
            brake: bool,
            om_l: float, sp_l: float, cur_l: float, oc_l: bool, st_l: bool, ot_l: float,
@@ -250,7 +140,7 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
            standby_cmd_time: float, limited: bool,
            emit_now: bool, due: np.ndarray, per: np.ndarray, hot: np.ndarray,
            counters: np.ndarray, vals: np.ndarray, sig: np.ndarray, scale: np.ndarray,
-           frames: np.ndarray, out: np.ndarray, ids: np.ndarray, lens: np.ndarray,
+           frames: np.ndarray, out: np.ndarray, ids: np.ndarray, lens: np.ndarray, at: int,
            ) -> tuple[float, float, float, bool, bool, float, float,
                       float, float, float, bool, bool, float, float,
                       int, float, int, float,
@@ -260,7 +150,8 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
     """One lean control period after ``Mcu._target`` (see the module docstring). ``imu[6:]``
     holds the current IMU sample (gyro, accel), replaced by the new one when ``imu_due``
     (``z``: its 12 noise values). Returns the new state and, last, the frame count of
-    :func:`emit` (0 when ``emit_now`` is False, -1 when Python must emit)."""
+    :func:`emit` from slot ``at`` (``at`` when ``emit_now`` is False, -1 when Python must
+    emit)."""
     dt = k[C_DT]
     half = 0.5 * target_w * k[C_DIST]
     v_l, v_r = target_v - half, target_v + half
@@ -362,10 +253,10 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
             state = FAULT
         elif state != ACTIVE:
             state = STANDBY
-    count = 0
+    count = at
     if emit_now:
         hot_values(k, vals, om_l, cur_l, oc_l, st_l, tot_l, om_r, cur_r, oc_r, st_r, tot_r, imu)
-        count = emit(now, due, per, hot, counters, vals, sig, scale, frames, out, ids, lens)
+        count = emit(now, due, per, hot, counters, vals, sig, scale, frames, out, ids, lens, at)
     return (om_l, sp_l, cur_l, oc_l, st_l, ot_l, stt_l,
             om_r, sp_r, cur_r, oc_r, st_r, ot_r, stt_r,
             tot_l, fr_l, tot_r, fr_r,

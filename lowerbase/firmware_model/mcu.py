@@ -29,7 +29,7 @@ import numpy as np
 
 from lowerbase.clock import Clock
 from lowerbase.errors import ConfigError, ProtocolError
-from lowerbase.firmware_model import kinematics
+from lowerbase.firmware_model import fastbatch, kinematics
 from lowerbase.firmware_model.encoder import EncoderCounter
 from lowerbase.firmware_model.fastloop import LeanLoop
 from lowerbase.firmware_model.faults import Fault, parse_fault
@@ -481,6 +481,25 @@ class Mcu:
             self._save_state()
         self._emit_due(now)
         self._release_delayed(now)
+
+    def advance(self, periods: int) -> None:
+        """``periods`` control periods on a SimClock, each followed by ``clock.advance(dt)``:
+        what a loop of ``step()`` and ``clock.advance(dt)`` does, frame for frame, with runs of
+        lean periods in one compiled call (fastbatch.py; the send callback must then not read
+        this Mcu or its truth: a run's state comes back once, its frames after it)."""
+        clock = self.clock
+        while periods > 0:
+            kernel = self._lean.kernel
+            done = 0
+            if (kernel is not None and self.lean and self._lean.compiled
+                    and not (self.faults or self._delayed or self._imu_bias_applied
+                             or self.imu.frozen)):
+                done = fastbatch.run(kernel, periods)
+            if not done:
+                self.step()
+                clock.advance(self.dt)  # type: ignore[attr-defined]  # a SimClock
+                done = 1
+            periods -= done
 
     def _target(self, now: float) -> tuple[float, float, bool]:
         """Twist to drive (after limits and smoothing) and whether to brake."""

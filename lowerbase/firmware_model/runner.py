@@ -321,6 +321,9 @@ def _run_blocks(
                 if id(chassis) in ready:
                     drain(chassis)
                 polled = id(chassis) not in has_fd
+                if not polled and on_chassis_step is None:
+                    mcu.advance(n)  # the same periods, in compiled runs where it can
+                    continue
                 for _ in range(n):
                     if polled:
                         drain(chassis)

@@ -68,8 +68,7 @@ class SimRig:
         self.clock.advance(self.mcu.dt)
 
     def run(self, seconds: float) -> None:
-        for _ in range(round(seconds / self.mcu.dt)):
-            self.step()
+        self.mcu.advance(round(seconds / self.mcu.dt))
 
     def enable(self) -> None:
         """Wait out the boot, then enable CAN control."""
@@ -81,11 +80,11 @@ class SimRig:
               period: float = 0.02) -> None:
         """Send MotionCommand every ``period`` [s] for ``seconds`` while time runs."""
         every = max(1, round(period / self.mcu.dt))
-        for k in range(round(seconds / self.mcu.dt)):
-            if k % every == 0:
-                self.send("MotionCommand", Linear=linear, Angular=angular,
-                          Mode="Smoothed" if smoothed else "Raw")
-            self.step()
+        total = round(seconds / self.mcu.dt)
+        for k in range(0, total, every):
+            self.send("MotionCommand", Linear=linear, Angular=angular,
+                      Mode="Smoothed" if smoothed else "Raw")
+            self.mcu.advance(min(every, total - k))
 
     def frames(self, name: str, since: float = -1.0) -> list[Sent]:
         return [s for s in self.sent if s.name == name and s.t >= since]

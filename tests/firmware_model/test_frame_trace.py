@@ -215,6 +215,7 @@ def test_the_general_loop_gives_the_same_trace(monkeypatch: pytest.MonkeyPatch) 
 
 def test_the_lean_loop_runs_whenever_no_fault_is_in_play(monkeypatch: pytest.MonkeyPatch) -> None:
     calls: list[None] = []
+    monkeypatch.setattr(LeanLoop, "compiled", False)  # runs of compiled periods skip step()
     lean_step = LeanLoop.step
     monkeypatch.setattr(LeanLoop, "step", lambda self: calls.append(lean_step(self)))
     rig = TraceRig(profile=load_profile(), keep=False)

@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from lowerbase.bms.adapter import McuBmsAdapter
-from lowerbase.firmware_model import fastkernel
+from lowerbase.firmware_model import fastbatch, fastkernel
 from lowerbase.firmware_model.fastkernel import KernelLoop
 from lowerbase.firmware_model.fastloop import LeanLoop
 from lowerbase.firmware_model.mcu import Mcu
@@ -26,15 +26,23 @@ pytestmark = pytest.mark.skipif(fastkernel.kernel() is None, reason="numba not a
 
 
 def _count_kernel_periods(monkeypatch: pytest.MonkeyPatch) -> dict[str, int]:
-    seen = {"kernel": 0, "python": 0}
-    step = KernelLoop.step
+    """Periods done by KernelLoop.step ("kernel"), left by it to Python ("python"), and done
+    in runs (fastbatch.run, "run")."""
+    seen = {"kernel": 0, "python": 0, "run": 0}
+    step, run = KernelLoop.step, fastbatch.run
 
     def counted(self: KernelLoop) -> bool:
         done = step(self)
         seen["kernel" if done else "python"] += 1
         return done
 
+    def counted_run(kl: KernelLoop, n: int) -> int:
+        done = run(kl, n)
+        seen["run"] += done
+        return done
+
     monkeypatch.setattr(KernelLoop, "step", counted)
+    monkeypatch.setattr(fastbatch, "run", counted_run)
     return seen
 
 
@@ -42,32 +50,46 @@ def test_the_kernel_runs_most_lean_periods_and_keeps_the_trace(
         monkeypatch: pytest.MonkeyPatch) -> None:
     seen = _count_kernel_periods(monkeypatch)
     assert record() == EXPECTED
-    assert seen["kernel"] > 10 * seen["python"] > 0  # the BMS periods stay in Python
+    # the BMS polls stay in Python; SimRig.drive and run go through Mcu.advance
+    assert seen["run"] > seen["kernel"] > 10 * seen["python"] > 0
 
 
 def test_the_python_lean_loop_gives_the_same_trace(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(LeanLoop, "compiled", False)
     seen = _count_kernel_periods(monkeypatch)
     assert record() == EXPECTED
-    assert seen == {"kernel": 0, "python": 0}
+    assert seen == {"kernel": 0, "python": 0, "run": 0}
 
 
-def _drive_switching(general_every: int | None) -> tuple[list[Any], tuple[Any, ...]]:
+def _drive_switching(general_every: int | None, runs: bool = False
+                     ) -> tuple[list[Any], tuple[Any, ...]]:
     """A drive in which a fault is armed (not yet active: the general loop) and cleared again
-    at irregular periods; every frame and the end state."""
+    at irregular periods; every frame and the end state. ``runs``: the periods between two
+    changes go through ``Mcu.advance`` (runs of compiled periods), else ``step()`` each."""
     p = load_profile()
     rig = TraceRig(profile=p, bms=McuBmsAdapter.from_battery_table(p.battery), keep=False)
     rig.enable()
-    for k in range(900):
+    k = 0
+    while k < 1400:
         if k % 4 == 0:
             rig.send("MotionCommand", Linear=0.5 + 0.001 * (k % 50), Angular=0.3 - 0.002 * (
-                k % 30), Mode="Raw" if k < 500 else "Smoothed")
+                k % 30), Mode="Raw" if k < 500 or k > 1000 else "Smoothed")
         if general_every is not None and k % general_every in (0, 3, 4):
             if rig.mcu.faults:
                 rig.mcu.clear_fault()
             else:
                 rig.mcu.inject("drop:0.5@1000")  # in play, never active
-        rig.step()
+        if k == 1200:  # commands stop: the watchdog brakes
+            k += 200
+            rig.mcu.advance(200) if runs else rig.run(1.0)
+            continue
+        if runs:
+            n = 1 + k % 3
+            rig.mcu.advance(n)
+            k += n
+        else:
+            rig.step()
+            k += 1
     rig.mcu._lean.release()  # the due times and counters the kernel holds, back to the Mcu
     m, tr = rig.mcu, rig.mcu.truth
     end = (tr.x, tr.y, tr.yaw, tr.v, tr.w, tr.accel_x, tr.distance, m.odometer,
@@ -76,14 +98,14 @@ def _drive_switching(general_every: int | None) -> tuple[list[Any], tuple[Any, .
     return rig.trace, end
 
 
-@pytest.mark.parametrize("every", [7, 23])
+@pytest.mark.parametrize(("every", "runs"), [(7, False), (23, False), (11, True), (37, True)])
 def test_switching_kernel_and_general_loop_is_seamless(monkeypatch: pytest.MonkeyPatch,
-                                                       every: int) -> None:
+                                                       every: int, runs: bool) -> None:
     seen = _count_kernel_periods(monkeypatch)
-    switching = _drive_switching(every)
-    assert seen["kernel"] > 100
+    switching = _drive_switching(every, runs)
+    assert seen["kernel"] + seen["run"] > 300
     monkeypatch.setattr(Mcu, "lean", False)
-    assert switching == _drive_switching(None)
+    assert switching == _drive_switching(None, runs)  # Mcu.advance: step() each
 
 
 class Wall:

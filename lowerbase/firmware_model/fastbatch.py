@@ -1,0 +1,137 @@
+"""``Mcu.advance`` through the compiled loop: a run of lean periods in one kernel call
+(:func:`.lean_batch.batch`), then their frames sent period by period, each at its time.
+
+A run is taken while the robot drives on a command (ACTIVE, nothing stopping it, a command in
+force): ``Mcu._target`` is then a function of the command and the smoother alone, computed here
+for every period of the run (the smoother wound back if the run stops early). The state
+comes back once per run, so during a run the send callback must not read the Mcu or its ground
+truth (SimRig and the fleet's buses do not; the frames themselves are exact).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, cast
+
+import numpy as np
+
+from lowerbase.clock import SimClock
+
+if TYPE_CHECKING:  # pragma: no cover
+    from lowerbase.firmware_model.fastkernel import KernelLoop
+
+MAX_RUN = 32  #: periods per kernel call
+
+
+def run(kl: KernelLoop, n: int) -> int:
+    """Up to ``n`` periods (each followed by ``clock.advance(dt)``); returns how many were
+    done, 0 when the next one is not for a run (the caller steps it)."""
+    mcu, m, lean = kl.mcu, kl.m, kl.lean
+    truth, slip, bms = mcu.truth, mcu.slip, mcu.bms
+    cmd = mcu._last_cmd
+    if (cmd is None or mcu.state != m.RobotState.ACTIVE or mcu.status & m.STOPPING
+            or mcu.estop_command or mcu.motion_fault or truth.surroundings is not None
+            or slip.events or slip.params.slip_rate_per_km):
+        return 0
+    now = mcu.clock.now()
+    if bms is not None and now >= mcu._bms_next_poll:
+        return 0
+    imu = mcu.imu
+    noise = imu.params.noise
+    rows = imu._rows
+    if noise and not rows:
+        return 0  # the next sample refills the noise block: a single step does it
+    if not kl.owned:
+        kl.acquire()
+    if kl._key != kl._current_key():
+        kl._constants()
+    n = min(n, MAX_RUN)
+    v, w, mode = cmd
+    targets = kl.targets
+    smoother = mcu.smoother
+    dt = mcu.dt
+    wound: list[tuple[float, float]] = []
+    start = smoother.v, smoother.w
+    if mode == 1:
+        for j in range(n):
+            targets[j] = smoother.step(v, w, dt)
+            wound.append((smoother.v, smoother.w))
+    if noise and rows is not kl._rows:
+        kl._rows, kl._rows_arr = rows, np.array(rows)
+    ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
+    stuck = mcu._enc_stuck
+    imu_due0 = mcu._imu_due
+    r = kl.lb.batch(
+        n, kl.k, now, mcu.boot_time, mode == 1, targets, v, w,
+        ml.omega, ml.setpoint, ml.current, ml.over_current, ml.stalled, ml._over_time,
+        ml._stall_time,
+        mr.omega, mr.setpoint, mr.current, mr.over_current, mr.stalled, mr._over_time,
+        mr._stall_time,
+        el.total, el._frac, er.total, er._frac,
+        truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x, truth.distance,
+        mcu.odometer, stuck["left"], stuck["right"],
+        mcu._imu_due, lean.imu_cycle, noise, kl._rows_arr if noise else kl.zero_rows,
+        len(rows) - 1 if noise else 0, mcu._imu_last is not None, kl.imu, mcu._imu_same,
+        bms is not None, mcu._bms_charge, mcu._bms_elapsed, mcu._bms_last_answer,
+        mcu._bms_bits, mcu._bms_next_poll, m.BMS_STEP, mcu._saved_odometer, mcu._last_save,
+        m.ODOMETER_SAVE_PERIOD, mcu._last_cmd_time, float(mcu.chassis.command_timeout),
+        mcu.status, mcu.motion_fault, int(mcu.state), mcu.estop_command, mcu._watchdog,
+        mcu._standby_cmd_time, mcu._speed_limited,
+        kl.due, kl.per, kl.hot, kl.counters, kl.vals, kl.sig, kl.scale, kl.frames, kl.out,
+        kl.ids, kl.lens, kl.pidx)
+    done = r[35]
+    if mode == 1:  # the smoother as after the last period done
+        smoother.v, smoother.w = wound[done - 1] if done else start
+    if not done:
+        return 0
+    (ml.omega, ml.setpoint, ml.current, ml.over_current, ml.stalled, ml._over_time,
+     ml._stall_time,
+     mr.omega, mr.setpoint, mr.current, mr.over_current, mr.stalled, mr._over_time,
+     mr._stall_time,
+     el.total, el._frac, er.total, er._frac,
+     truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x, truth.distance,
+     mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge, mcu._bms_elapsed,
+     mcu._imu_same, mcu.status, mcu.motion_fault, state, count, _, row, mcu._imu_due,
+     _, python_emit) = r
+    ml._steady = mr._steady = None
+    mcu._watchdog = mcu._watchdog_ramp = False
+    if mode != 1:
+        smoother.reset(v, w)
+    if state != mcu.state:
+        mcu.state = m.RobotState(state)
+    if mcu._imu_due != imu_due0:  # sampled
+        s = kl.imu[6:].tolist()
+        sample = ((s[0], s[1], s[2]), (s[3], s[4], s[5]))
+        if noise and row + 1 < len(rows):
+            zl = kl._rows_arr[row + 1].tolist()
+            gt, at, gb, ab = imu.gyro_turn_on, imu.accel_turn_on, imu.gyro_bias, imu.accel_bias
+            gb[0], gb[1], gb[2] = gt[0] + zl[0], gt[1] + zl[1], gt[2] + zl[2]
+            ab[0], ab[1], ab[2] = at[0] + zl[3], at[1] + zl[4], at[2] + zl[5]
+            del rows[row + 1:]
+        imu._last = mcu._imu_last = mcu.imu_sample = sample
+    clock = cast(SimClock, mcu.clock)  # the compiled loop runs on a SimClock only
+    last = done - 1
+    data = kl.out[:count].tobytes()
+    ids, lens = kl.ids[:count].tolist(), kl.lens[:count].tolist()
+    pidx = kl.pidx[:count].tolist()
+    kl._next = float(kl.due[-1])
+    f = sent = 0
+    for j in range(done):
+        if j == last:
+            if bms is not None and mcu._bms_elapsed >= m.BMS_STEP - 1e-9:
+                bms.step(mcu._bms_elapsed, mcu._bms_charge / mcu._bms_elapsed)
+                mcu._bms_charge = mcu._bms_elapsed = 0.0
+            if (mcu.odometer != mcu._saved_odometer
+                    and clock.now() - mcu._last_save >= m.ODOMETER_SAVE_PERIOD):
+                mcu._save_state()
+        end = f
+        while end < count and pidx[end] == j:
+            end += 1
+        if end > f:
+            sent += kl.send_frames(data, ids, lens, f, end)
+            f = end
+        if j == last and python_emit:
+            kl._send(clock.now(), -1)
+        clock.advance(dt)
+    if sent:
+        mcu.stats["tx_frames"] += sent
+    return done

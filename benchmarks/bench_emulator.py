@@ -11,6 +11,7 @@ from collections import defaultdict
 from benchmarks.common import Row, percentile
 from lowerbase.bms.adapter import McuBmsAdapter
 from lowerbase.clock import SimClock
+from lowerbase.firmware_model.fastloop import LeanLoop
 from lowerbase.firmware_model.mcu import Command, Mcu
 from lowerbase.firmware_model.profile import load_profile
 from lowerbase.firmware_model.runner import bus_sender
@@ -21,12 +22,18 @@ from lowerbase.transport import free_loopback_port, open_bus
 GROUP = "239.74.163.98"
 
 
-def sim_speed(seconds: float, lean: bool = True) -> float:
+def sim_speed(seconds: float, lean: bool = True, compiled: bool = True) -> float:
     """Chassis seconds per wall second: one MCU with its BMS, driving, every frame encoded
     (SimRig plays the upper computer: a MotionCommand encoded and decoded every 20 ms).
-    ``lean=False`` sends every step through the general, fault-aware loop."""
+    ``lean=False`` sends every step through the general, fault-aware loop; ``compiled=False``
+    keeps the lean loop in Python (no numba kernel)."""
     p = load_profile()
-    rig = SimRig(p, bms=McuBmsAdapter.from_battery_table(p.battery), keep=False)
+    saved = LeanLoop.compiled
+    LeanLoop.compiled = compiled
+    try:
+        rig = SimRig(p, bms=McuBmsAdapter.from_battery_table(p.battery), keep=False)
+    finally:
+        LeanLoop.compiled = saved
     rig.mcu.lean = lean
     rig.enable()
     t0 = time.perf_counter()
@@ -130,11 +137,15 @@ def deviations(codec: Codec, stamps: dict[str, list[float]]
 
 def run(quick: bool = False) -> list[Row]:
     speed = sim_speed(20.0 if quick else 120.0)
+    python = sim_speed(20.0 if quick else 120.0, compiled=False)
     general = sim_speed(20.0 if quick else 120.0, lean=False)
     per_core, fps = chassis_per_core(10.0 if quick else 60.0)
     rows = [
         Row("emulator", "simulated clock, one chassis", speed, "x real time",
-            "target >= 1000x; MCU + BMS at 200 Hz, all frames encoded, no bus"),
+            "target >= 1000x; MCU + BMS at 200 Hz, all frames encoded, no bus; the lean "
+            "period compiled (numba; about 8 s CPU to compile once, then cached)"),
+        Row("emulator", "simulated clock, one chassis, Python lean loop", python, "x real time",
+            "the same without the compiled period (no numba; docs/emulator.md)"),
         Row("emulator", "simulated clock, one chassis, general loop", general, "x real time",
             "the same with every step through the fault-aware loop (what a run with a "
             "fault armed costs; docs/emulator.md)"),

@@ -4,7 +4,8 @@ A :class:`WorldSim` wraps a :class:`~lowerbase.bench.simloop.SimLoop` (emulator 
 a map, its named places, obstacles, the lidar rig (the merged /scan at its rate), the depth
 camera (at its rate; off unless asked, it is the costly part), the localizer (amcl, fed with
 the driver's /odom pose and the merged scan, or the ground truth) and contact (the footprint
-against walls and obstacles, installed in the emulator through the ``Surroundings`` seam).
+against walls and obstacles, installed in the emulator through the ``Surroundings`` seam, by
+a :class:`~lowerbase.world.contact_gate.ContactGate` only while a move may touch something).
 
 Scans are cast lazily, since ray casting is the costly part: at every scan tick (the rig's
 rate) the true pose is recorded; the scan itself is cast when the localizer will use it (after
@@ -32,6 +33,7 @@ from lowerbase.bench.simloop import SimLoop, SteppedLoop
 from lowerbase.errors import WorldError
 from lowerbase.firmware_model.profile import Profile
 from lowerbase.world.camera import CameraFrame, DepthCamera
+from lowerbase.world.contact_gate import ContactGate
 from lowerbase.world.footprint import (
     DEFAULT_FOOTPRINT,
     Contact,
@@ -144,7 +146,8 @@ class WorldSim(SteppedLoop):
         self.truth = LoopTruth(self.loop)
         self.surroundings = WorldSurroundings(grid, cfg.obstacles, cfg.footprint,
                                               self.map_from_truth)
-        self.loop.surroundings = self.surroundings
+        #: installs the surroundings in the emulator only while a move may touch something
+        self.gate = ContactGate(self.loop, self.surroundings)
         self.scene = Scene(grid)
         self._tick: tuple[float, Pose2D] | None = None  #: the last scan tick: (t, true pose)
         self._scan: LaserScan | None = None
@@ -215,6 +218,7 @@ class WorldSim(SteppedLoop):
     # -- running -------------------------------------------------------------------------------
     def step(self) -> None:
         """One control period of the emulator and driver, then the sensors that are due."""
+        self.gate.check()
         self.loop.step()
         now = self.loop.now
         self._record_odom()

@@ -118,6 +118,39 @@ class WorldSurroundings:
                 return True
         return False
 
+    def free_space(self, pose: Pose2D, t: float) -> tuple[float, float, float] | None:
+        """How far the robot at ``pose`` (the emulator's truth frame) may move before the cheap
+        test (``_may_touch``) could find anything: (static [m]: walls, the map's edge, boxes;
+        moving [m]: people, as measured at ``t`` [s]; the fastest person's speed [m/s]).
+        Negative: it may touch now. None: an obstacle it cannot bound.
+
+        The wall clearance is a distance transform between cell centres, so it is 1-Lipschitz
+        in them: a point ``d`` away lands in a cell whose clearance is at least this cell's
+        minus ``d`` minus one cell diagonal (both points' offsets from their centres)."""
+        x, y, _ = self.to_map(pose)
+        g = self.grid
+        ox, oy, _ = g.origin
+        w, h = g.size_m
+        r = self._radius
+        static = min(x - ox - r, ox + w - r - x, y - oy - r, oy + h - r - y)
+        if static > 0.0:
+            col = min(math.floor((x - ox) / g.resolution), g.width - 1)
+            row = min(math.floor((y - oy) / g.resolution), g.height - 1)
+            static = min(static, float(self._clearance[row, col]) - self._wall_margin
+                         - g.resolution * math.sqrt(2.0))
+        moving, speed = math.inf, 0.0
+        for o in self.obstacles.items:
+            if isinstance(o, Box):
+                (cx, cy), reach = o.center, 0.5 * math.hypot(*o.size)
+                static = min(static, math.hypot(x - cx, y - cy) - (r + reach + 1e-6))
+            elif isinstance(o, Person):
+                (cx, cy) = o.position_at(t)
+                moving = min(moving, math.hypot(x - cx, y - cy) - (r + o.radius + 1e-6))
+                speed = max(speed, o.speed)
+            else:  # pragma: no cover - Obstacles holds only these
+                return None
+        return static, moving, speed
+
     def touching(self, pose: Pose2D, t: float) -> Contact | None:
         """What the footprint at ``pose`` (MAP frame) touches at time ``t``."""
         if not self._may_touch(pose, t):

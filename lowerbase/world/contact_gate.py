@@ -1,0 +1,137 @@
+"""Ask the world about contact only where contact is possible: :class:`ContactGate`.
+
+The emulator's ground-truth integrator asks its installed
+:class:`~lowerbase.firmware_model.truth.Surroundings` before every move; with surroundings
+installed its lean control period runs in Python (the compiled period cannot call the world:
+docs/emulator.md). Most of a shift, though, the robot is far from every wall and obstacle, and
+:meth:`WorldSurroundings.allowed` answers yes and records no contact without a polygon test.
+
+:class:`ContactGate` installs the world's surroundings in the emulator only while a move could
+touch something, and takes them out while it provably cannot, so those periods run compiled.
+"Provably" is a bound, not a guess: from a pose where the cheap test finds nothing
+(:meth:`WorldSurroundings.free_space`: how far the footprint's circle is from the walls, the
+map's edge and each obstacle's bounding circle, and how fast the people walk) and the fastest
+the robot can truly move in one period (the larger of each wheel's speed, setpoint and motor
+limit, times the larger true radius: a first-order lag toward a ramp bounded by these never
+exceeds them, and slip only slows a wheel), every move until the robot has used up that slack
+would be allowed and record nothing, exactly as if the surroundings had been asked. The gate
+checks before each period (one distance and a few comparisons) and installs them again as
+soon as the next move might reach the slack, or when the obstacles are replaced, a slip
+event is scheduled or a wheel's limits change. The robot's path, contacts and frames are the
+same bits either way (tests/world/test_contact_gate.py); only who computes the period changes.
+
+The world must be stepped through :meth:`WorldSim.step` (which calls :meth:`ContactGate.check`
+first), as it is for its sensors.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from lowerbase.firmware_model.kinematics import motor_rpm_to_wheel_rad_s
+
+if TYPE_CHECKING:
+    from lowerbase.bench.simloop import SimLoop
+    from lowerbase.world.truth import WorldSurroundings
+
+#: [m] kept back from every slack (rounding of the distance transform and the poses)
+MARGIN = 1e-6
+#: periods the surroundings stay installed after a pose with no slack, before looking again
+BACKOFF = 8
+
+
+@dataclass(frozen=True)
+class FreeSpace:
+    """Measured at ``t`` [s] with the robot at (``x``, ``y``) (the emulator's truth frame):
+    the footprint's circle may move ``static`` [m] before the walls, the map's edge or a box
+    could touch it, and ``moving`` [m] minus what the people walk at up to ``speed`` [m/s]
+    before a person could; the robot moves at most ``reach`` [m] per period; it holds while
+    ``inputs`` (obstacles, geometries) are the same objects."""
+
+    x: float
+    y: float
+    t: float
+    static: float
+    moving: float
+    speed: float
+    reach: float
+    inputs: tuple[object, ...]
+
+    def holds(self, x: float, y: float, t_end: float) -> bool:
+        """Can the move from (x, y) ending at ``t_end`` touch nothing?"""
+        d = math.hypot(x - self.x, y - self.y) + self.reach
+        return d < self.static and d + self.speed * (t_end - self.t) < self.moving
+
+
+class ContactGate:
+    """Installs ``surroundings`` in ``loop``'s emulator only while a move may touch something
+    (see the module docstring); ``enabled=False``: always installed (the reference)."""
+
+    def __init__(self, loop: SimLoop, surroundings: WorldSurroundings,
+                 enabled: bool = True) -> None:
+        self.loop = loop
+        self.surroundings = surroundings
+        self.enabled = enabled
+        self.skipped = 0  #: periods run without asking the surroundings
+        self._free: FreeSpace | None = None
+        self._wait = 0  #: periods left before the free space is measured again
+        loop.surroundings = surroundings
+
+    def _inputs(self) -> tuple[object, ...]:
+        mcu = self.loop.mcu
+        ml, mr = mcu.motors["left"], mcu.motors["right"]
+        return (self.surroundings.obstacles.items, mcu.truth.geometry, ml.geometry,
+                mr.geometry)
+
+    def _reach(self) -> float:
+        """[m] the most the base centre can truly move in one control period, now and for as
+        long as the wheels' geometries stay (see the module docstring)."""
+        mcu = self.loop.mcu
+        w = 0.0
+        for m in mcu.motors.values():
+            g = m.geometry
+            w = max(w, abs(m.omega), abs(m.setpoint), motor_rpm_to_wheel_rad_s(g.max_rpm, g.ratio))
+        tg = mcu.truth.geometry
+        return w * max(tg.radius_left, tg.radius_right) * mcu.dt
+
+    def check(self) -> None:
+        """Before a control period: take the surroundings out if the coming move cannot touch
+        anything, else install them."""
+        loop = self.loop
+        mcu = loop.mcu
+        truth = mcu.truth
+        if self.enabled and not mcu.slip.events:
+            t_end = loop.now + mcu.dt
+            f = self._free
+            if f is not None and f.inputs == self._inputs() and f.holds(truth.x, truth.y, t_end):
+                truth.surroundings = None
+                self.skipped += 1
+                return
+            self._free = None
+            if self._wait > 0:
+                self._wait -= 1
+            else:
+                f = self._measure()
+                if f is not None and f.holds(truth.x, truth.y, t_end):
+                    self._free = f
+                    truth.surroundings = None
+                    self.skipped += 1
+                    return
+                self._wait = BACKOFF
+        else:
+            self._free = None
+        truth.surroundings = self.surroundings
+
+    def _measure(self) -> FreeSpace | None:
+        truth = self.loop.mcu.truth
+        if self.surroundings.contact is not None:
+            return None  # touching: the next move is the surroundings' to judge
+        t = self.loop.now
+        space = self.surroundings.free_space((truth.x, truth.y, truth.yaw), t)
+        if space is None:
+            return None
+        static, moving, speed = space
+        return FreeSpace(truth.x, truth.y, t, static - MARGIN, moving - MARGIN, speed,
+                         self._reach(), self._inputs())

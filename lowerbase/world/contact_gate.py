@@ -14,7 +14,12 @@ map's edge and each obstacle's bounding circle, and how fast the people walk) an
 the robot can truly move in one period (the larger of each wheel's speed, setpoint and motor
 limit, times the larger true radius: a first-order lag toward a ramp bounded by these never
 exceeds them, and slip only slows a wheel), every move until the robot has used up that slack
-would be allowed and record nothing, exactly as if the surroundings had been asked. The gate
+would be allowed and record nothing, exactly as if the surroundings had been asked. A robot
+standing nearer a wall than that (docked on the charger) gets the footprint's own distance to
+the cells, boxes and people around it instead (:meth:`WorldSurroundings.polygon_free_space`),
+against the most a footprint point moves per period (the base's move plus the turn times the
+circumscribed radius); there the surroundings would have run their polygon test and found
+nothing, so only their ``checks`` count differs. The gate
 checks before each period (one distance and a few comparisons) and installs them again as
 soon as the next move might reach the slack, or when the obstacles are replaced, a slip
 event is scheduled or a wheel's limits change. The robot's path, contacts and frames are the
@@ -44,14 +49,18 @@ BACKOFF = 8
 
 @dataclass(frozen=True)
 class FreeSpace:
-    """Measured at ``t`` [s] with the robot at (``x``, ``y``) (the emulator's truth frame):
-    the footprint's circle may move ``static`` [m] before the walls, the map's edge or a box
-    could touch it, and ``moving`` [m] minus what the people walk at up to ``speed`` [m/s]
-    before a person could; the robot moves at most ``reach`` [m] per period; it holds while
-    ``inputs`` (obstacles, geometries) are the same objects."""
+    """Measured at ``t`` [s] with the robot at (``x``, ``y``, ``yaw``) (the emulator's truth
+    frame): the footprint's circle (``arm`` 0) or the footprint itself (``arm``: its
+    circumscribed radius, what a turn moves its points by per radian) may move ``static`` [m]
+    before the walls, the map's edge or a box could touch it, and ``moving`` [m] minus what the
+    people walk at up to ``speed`` [m/s] before a person could; a point of it moves at most
+    ``reach`` [m] per period; it holds while ``inputs`` (obstacles, geometries) are the same
+    objects."""
 
     x: float
     y: float
+    yaw: float
+    arm: float
     t: float
     static: float
     moving: float
@@ -59,9 +68,9 @@ class FreeSpace:
     reach: float
     inputs: tuple[object, ...]
 
-    def holds(self, x: float, y: float, t_end: float) -> bool:
-        """Can the move from (x, y) ending at ``t_end`` touch nothing?"""
-        d = math.hypot(x - self.x, y - self.y) + self.reach
+    def holds(self, x: float, y: float, yaw: float, t_end: float) -> bool:
+        """Can the move from (x, y, yaw) ending at ``t_end`` touch nothing?"""
+        d = math.hypot(x - self.x, y - self.y) + self.arm * abs(yaw - self.yaw) + self.reach
         return d < self.static and d + self.speed * (t_end - self.t) < self.moving
 
 
@@ -85,16 +94,21 @@ class ContactGate:
         return (self.surroundings.obstacles.items, mcu.truth.geometry, ml.geometry,
                 mr.geometry)
 
-    def _reach(self) -> float:
-        """[m] the most the base centre can truly move in one control period, now and for as
-        long as the wheels' geometries stay (see the module docstring)."""
+    def _reach(self, arm: float = 0.0) -> float:
+        """[m] the most the base centre (``arm`` 0) or a point ``arm`` [m] from it can truly
+        move in one control period, now and for as long as the wheels' geometries stay (see
+        the module docstring; a turn is at most the wheels' speed difference over the track)."""
         mcu = self.loop.mcu
         w = 0.0
         for m in mcu.motors.values():
             g = m.geometry
             w = max(w, abs(m.omega), abs(m.setpoint), motor_rpm_to_wheel_rad_s(g.max_rpm, g.ratio))
         tg = mcu.truth.geometry
-        return w * max(tg.radius_left, tg.radius_right) * mcu.dt
+        v = w * max(tg.radius_left, tg.radius_right) * mcu.dt
+        return v + arm * 2.0 * v / tg.track
+
+    def _standing(self) -> bool:
+        return all(m.setpoint == 0.0 for m in self.loop.mcu.motors.values())
 
     def check(self) -> None:
         """Before a control period: take the surroundings out if the coming move cannot touch
@@ -105,7 +119,8 @@ class ContactGate:
         if self.enabled and not mcu.slip.events:
             t_end = loop.now + mcu.dt
             f = self._free
-            if f is not None and f.inputs == self._inputs() and f.holds(truth.x, truth.y, t_end):
+            if f is not None and f.inputs == self._inputs() \
+                    and f.holds(truth.x, truth.y, truth.yaw, t_end):
                 truth.surroundings = None
                 self.skipped += 1
                 return
@@ -114,7 +129,7 @@ class ContactGate:
                 self._wait -= 1
             else:
                 f = self._measure()
-                if f is not None and f.holds(truth.x, truth.y, t_end):
+                if f is not None and f.holds(truth.x, truth.y, truth.yaw, t_end):
                     self._free = f
                     truth.surroundings = None
                     self.skipped += 1
@@ -125,13 +140,24 @@ class ContactGate:
         truth.surroundings = self.surroundings
 
     def _measure(self) -> FreeSpace | None:
+        """The free space around the robot now: the circle's, else (standing, e.g. docked
+        near a wall) the footprint's."""
         truth = self.loop.mcu.truth
-        if self.surroundings.contact is not None:
+        sur = self.surroundings
+        if sur.contact is not None:
             return None  # touching: the next move is the surroundings' to judge
         t = self.loop.now
-        space = self.surroundings.free_space((truth.x, truth.y, truth.yaw), t)
+        pose = (truth.x, truth.y, truth.yaw)
+        space = sur.free_space(pose, t)
         if space is None:
             return None
+        arm, reach = 0.0, self._reach()
+        if min(space[0], space[1]) <= reach and self._standing():
+            arm = sur.footprint.radius
+            space = sur.polygon_free_space(pose, t)
+            if space is None:
+                return None
+            reach = self._reach(arm)
         static, moving, speed = space
-        return FreeSpace(truth.x, truth.y, t, static - MARGIN, moving - MARGIN, speed,
-                         self._reach(), self._inputs())
+        return FreeSpace(truth.x, truth.y, truth.yaw, arm, t, static - MARGIN, moving - MARGIN,
+                         speed, reach, self._inputs())

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
+import shapely
 from scipy.ndimage import distance_transform_edt
 
 from lowerbase.world.footprint import DEFAULT_FOOTPRINT, Contact, Footprint, contact
@@ -86,6 +87,7 @@ class WorldSurroundings:
         self.events: list[ContactEvent] = []
         self.checks = 0  #: full polygon tests made (the rest were cleared cheaply)
         occupied = grid.occupied()
+        self._occupied = occupied
         self._clearance = (distance_transform_edt(~occupied) * grid.resolution
                            if occupied.any() else np.full(occupied.shape, math.inf))
         # the footprint's circle plus a cell diagonal (the EDT is measured between cell centres)
@@ -149,6 +151,43 @@ class WorldSurroundings:
                 speed = max(speed, o.speed)
             else:  # pragma: no cover - Obstacles holds only these
                 return None
+        return static, moving, speed
+
+    def polygon_free_space(self, pose: Pose2D, t: float, horizon: float = 0.25
+                           ) -> tuple[float, float, float] | None:
+        """As :meth:`free_space`, for the footprint itself (exact distances, each capped at
+        ``horizon`` [m]): how far any point of the footprint at ``pose`` may move before the
+        polygon test could find an overlap. For a robot standing near a wall (docked), where
+        the circle's slack is gone. None: an obstacle it cannot bound, or it touches now."""
+        x, y, yaw = self.to_map(pose)
+        poly = self.footprint.at((x, y, yaw))
+        g = self.grid
+        ox, oy, _ = g.origin
+        res = g.resolution
+        minx, miny, maxx, maxy = poly.bounds
+        c0 = max(math.floor((minx - horizon - ox) / res), 0)
+        r0 = max(math.floor((miny - horizon - oy) / res), 0)
+        c1 = min(math.floor((maxx + horizon - ox) / res), g.width - 1)
+        r1 = min(math.floor((maxy + horizon - oy) / res), g.height - 1)
+        w, h = g.size_m
+        static = min(horizon, minx - ox, miny - oy, ox + w - maxx, oy + h - maxy)
+        if c1 >= c0 and r1 >= r0:
+            rows, cols = np.nonzero(self._occupied[r0:r1 + 1, c0:c1 + 1])
+            if rows.size:
+                x0, y0 = ox + (cols + c0) * res, oy + (rows + r0) * res
+                cells = shapely.box(x0, y0, x0 + res, y0 + res)
+                static = min(static, float(shapely.distance(poly, cells).min()))
+        moving, speed = math.inf, 0.0
+        for o in self.obstacles.items:
+            if isinstance(o, Box):
+                static = min(static, poly.distance(o.shape_at(t)))
+            elif isinstance(o, Person):
+                moving = min(moving, horizon, poly.distance(o.shape_at(t)))
+                speed = max(speed, o.speed)
+            else:  # pragma: no cover - Obstacles holds only these
+                return None
+        if min(static, moving) <= 0.0:
+            return None
         return static, moving, speed
 
     def touching(self, pose: Pose2D, t: float) -> Contact | None:

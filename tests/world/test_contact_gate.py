@@ -8,9 +8,10 @@ robot provably touches nothing, so the robot drives the same bits with or withou
 - ``polygon_free_space`` (a robot standing by a wall) is a sound bound on the polygon test,
   for moves and turns that use up its slack; one period moves no point of the footprint further
   than the gate's reach (the wheels at their limit: straight, spinning, turning).
-- End to end: a WorldSim driving into a wall, standing a few cm from it, a box dropped in its lane while the gate has the
-  surroundings out, and a person walking into it: gate on and gate off give the same true pose
-  at every period, the same contact events and the same frames on the bus.
+- End to end: a WorldSim driving into a wall, standing a few cm from it, a box dropped in its
+  lane while the gate has the surroundings out, and a person walking into it: gate on and gate
+  off give the same true pose at every period, the same contact events and the same frames on
+  the bus.
 """
 
 from __future__ import annotations

@@ -224,7 +224,9 @@ class PathController:
                            math.sqrt(2.0 * self.limits.linear_decel * 0.5 * dist))
             w = min(max(2.0 * alpha, -cfg.max_rotation), cfg.max_rotation) \
                 if abs(ex) > 0.5 * cfg.xy_tolerance else 0.0
-            return self._checked(x, y, yaw, v, w, Status.APPROACHING)
+            # the robot stops at the goal: check up to it, not the margin beyond (a goal at a
+            # rack face was BLOCKED creeping, free stopped: every other period)
+            return self._checked(x, y, yaw, v, w, Status.APPROACHING, up_to=dist)
         err = wrap(gyaw - yaw)
         if abs(err) <= 0.5 * cfg.yaw_tolerance:
             self._phase = Status.SUCCEEDED
@@ -240,13 +242,15 @@ class PathController:
 
     # -- safety and limits ----------------------------------------------------------------------
     def _checked(self, x: float, y: float, yaw: float, v: float, w: float,
-                 status: Status) -> Command:
+                 status: Status, up_to: float = math.inf) -> Command:
         """The command if the footprint stays off lethal cells along its arc over the braking
-        distance (+ margin); else braking and BLOCKED."""
+        distance (+ margin, at most ``up_to`` m: the goal, as nav2's regulated pure pursuit
+        checks up to the carrot); else braking and BLOCKED."""
         lim, cfg = self.limits, self.config
         v_next, w_next = self._ramp(v, w)
         reach = v_next * v_next / (2.0 * lim.linear_decel) + cfg.check_margin \
             + abs(v_next) * cfg.period
+        reach = min(reach, max(up_to, abs(v_next) * cfg.period))
         turn = w_next * w_next / (2.0 * lim.angular_decel) + abs(w_next) * cfg.period + 0.05
         n = max(3, math.ceil(reach / (0.5 * self.resolution)), math.ceil(turn / 0.02))
         s = np.linspace(0.0, 1.0, n + 1)[1:]

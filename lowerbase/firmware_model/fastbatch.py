@@ -83,15 +83,7 @@ def run(kl: KernelLoop, n: int) -> int:
         smoother.v, smoother.w = wound[done - 1] if done else start
     if not done:
         return 0
-    (ml.omega, ml.setpoint, ml.current, ml.over_current, ml.stalled, ml._over_time,
-     ml._stall_time,
-     mr.omega, mr.setpoint, mr.current, mr.over_current, mr.stalled, mr._over_time,
-     mr._stall_time,
-     el.total, el._frac, er.total, er._frac,
-     truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x, truth.distance,
-     mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge, mcu._bms_elapsed,
-     mcu._imu_same, mcu.status, mcu.motion_fault, state, count, _, row, mcu._imu_due,
-     _, python_emit) = r
+    state, count, _, row, mcu._imu_due, _, python_emit = kl.store_state(r)
     ml._steady = mr._steady = None
     mcu._watchdog = mcu._watchdog_ramp = False
     if mode != 1:

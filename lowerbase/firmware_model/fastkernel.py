@@ -252,14 +252,7 @@ class KernelLoop:
         ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
         stuck = mcu._enc_stuck
         emit_now = now + 1e-9 >= self._next
-        (ml.omega, ml.setpoint, ml.current, ml.over_current, ml.stalled, ml._over_time,
-         ml._stall_time,
-         mr.omega, mr.setpoint, mr.current, mr.over_current, mr.stalled, mr._over_time,
-         mr._stall_time,
-         el.total, el._frac, er.total, er._frac,
-         truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x, truth.distance,
-         mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge, mcu._bms_elapsed,
-         mcu._imu_same, mcu.status, mcu.motion_fault, state, count) = self.lk.period(
+        state, count = self.store_state(self.lk.period(
             self.k, now, mcu.boot_time, target_v, target_w, brake,
             ml.omega, ml.setpoint, ml.current, ml.over_current, ml.stalled, ml._over_time,
             ml._stall_time,
@@ -274,7 +267,7 @@ class KernelLoop:
             mcu._watchdog, mcu._standby_cmd_time,
             mcu._speed_limited and mcu._last_cmd is not None,
             emit_now, self.due, self.per, self.hot, self.counters, self.vals, self.sig,
-            self.scale, self.frames, self.out, self.ids, self.lens, 0)
+            self.scale, self.frames, self.out, self.ids, self.lens, 0))
         ml._steady = mr._steady = None
         if bms is not None and mcu._bms_elapsed >= m.BMS_STEP - 1e-9:  # nothing above reads it
             bms.step(mcu._bms_elapsed, mcu._bms_charge / mcu._bms_elapsed)
@@ -297,6 +290,22 @@ class KernelLoop:
             self._send(now, count)
         return True
 
+    def store_state(self, r: tuple[Any, ...]) -> tuple[Any, ...]:
+        """Put the state a kernel call returned (``period``'s or ``batch``'s, the same leading
+        33 scalars) back into the motors, encoders, ground truth and Mcu; returns the rest."""
+        mcu, lean = self.mcu, self.lean
+        ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
+        truth, stuck = mcu.truth, mcu._enc_stuck
+        (ml.omega, ml.setpoint, ml.current, ml.over_current, ml.stalled, ml._over_time,
+         ml._stall_time,
+         mr.omega, mr.setpoint, mr.current, mr.over_current, mr.stalled, mr._over_time,
+         mr._stall_time,
+         el.total, el._frac, er.total, er._frac,
+         truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x, truth.distance,
+         mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge, mcu._bms_elapsed,
+         mcu._imu_same, mcu.status, mcu.motion_fault) = r[:33]
+        return r[33:]
+
     def _send(self, now: float, count: int) -> None:
         """The frames the kernel emitted (``count`` -1: the Python emitter's turn)."""
         if count < 0:  # a hot frame the codec refuses: the Python emitter raises as it did
@@ -314,28 +323,14 @@ class KernelLoop:
         """Frames ``start`` .. ``end`` of an emission, in order, the non-hot ones built here
         (``data``: the payload slots, 8 bytes each); returns how many were sent."""
         mcu = self.mcu
-        send = mcu._send
-        counters = mcu._counters
-        tx, builders = self.lean.tx, self.lean.builders
+        send, counters = mcu._send, mcu._counters
+        send_rows = self.lean.send_rows
         sent = 0
         for j in range(start, end):
             fid = ids[j]
             if fid >= 0:
                 send(fid, data[8 * j:8 * j + lens[j]])
                 sent += 1
-                continue
-            i = -1 - fid
-            encode, name, frame_id, has_counter, _, shared = tx[i]
-            rows = builders[i]()
-            if shared and rows and has_counter:
-                counter = counters[name]
-                counters[name] = (counter + 1) & 0xF
-                for values in rows:
-                    values["Counter"] = counter
-            for values in rows:
-                if has_counter and "Counter" not in values:
-                    values["Counter"] = counters[name]
-                    counters[name] = (counters[name] + 1) & 0xF
-                send(frame_id, encode(values))
-                sent += 1
+            else:
+                sent += send_rows(-1 - fid, counters, send)
         return sent

@@ -19,28 +19,13 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from lowerbase.clock import SimClock
+from lowerbase.firmware_model import lean_bits as bits
 from lowerbase.firmware_model.encoder import wrap_int32 as wrap
 from lowerbase.firmware_model.fastkernel import KernelLoop, kernel
-from lowerbase.protocol.status_codes import StatusBit
 
 if TYPE_CHECKING:  # pragma: no cover
-    from lowerbase.firmware_model.mcu import Mcu
+    from lowerbase.firmware_model.mcu import Mcu, Send
     from lowerbase.firmware_model.profile import ChassisParams
-
-_B = {b.name: int(b) for b in StatusBit}
-ESTOP_COMMAND = _B["ESTOP_COMMAND"]
-WATCHDOG_STOP = _B["WATCHDOG_STOP"]
-COMMAND_IN_STANDBY = _B["COMMAND_IN_STANDBY"]
-SPEED_LIMITED = _B["SPEED_LIMITED"]
-IMU_FAULT = _B["IMU_FAULT"]
-BMS_LINK_LOST = _B["BMS_LINK_LOST"]
-ESTOP_BITS = _B["ESTOP_BUTTON"] | ESTOP_COMMAND
-BMS_PROTECTION = _B["BMS_PROTECTION"]
-#: per side: over-current, stalled, motor fault, encoder fault
-SIDE_BITS = tuple(
-    tuple(_B[f"{side}_{what}"] for what in ("OVER_CURRENT", "MOTOR_STALLED", "MOTOR_FAULT",
-                                             "ENCODER_FAULT"))
-    for side in ("LEFT", "RIGHT"))
 
 Rows = list[dict[str, Any]]
 log = logging.getLogger(__name__)
@@ -186,15 +171,15 @@ class LeanLoop:
         mcu, m = self.mcu, self.m
         s = mcu.status & m.CARRIED
         if mcu.estop_command:
-            s |= ESTOP_COMMAND
+            s |= bits.ESTOP_COMMAND
         if mcu._watchdog:
-            s |= WATCHDOG_STOP
+            s |= bits.WATCHDOG_STOP
         if now - mcu._standby_cmd_time < m.STANDBY_HINT_TIME:
-            s |= COMMAND_IN_STANDBY
+            s |= bits.COMMAND_IN_STANDBY
         if mcu._speed_limited and mcu._last_cmd is not None:
-            s |= SPEED_LIMITED
+            s |= bits.SPEED_LIMITED
         for motor, side, (over, stalled, fault, enc) in (
-            (self.ml, "left", SIDE_BITS[0]), (self.mr, "right", SIDE_BITS[1])
+            (self.ml, "left", bits.SIDE_BITS[0]), (self.mr, "right", bits.SIDE_BITS[1])
         ):
             if motor.over_current:
                 s |= over
@@ -207,17 +192,17 @@ class LeanLoop:
                 s |= enc
         s |= mcu.motion_fault
         if mcu._imu_same >= m.IMU_FROZEN_SAMPLES:
-            s |= IMU_FAULT
+            s |= bits.IMU_FAULT
         if mcu.bms is not None:
             lost = now - mcu._bms_last_answer > m.BMS_LINK_TIMEOUT
-            s |= (BMS_LINK_LOST if lost else 0) | mcu._bms_bits
+            s |= (bits.BMS_LINK_LOST if lost else 0) | mcu._bms_bits
         mcu.status = s
         state = mcu.state
         rs = m.RobotState
         if state == rs.ACTIVE or state == rs.EMERGENCY_STOP or state == rs.FAULT:
-            if s & ESTOP_BITS:
+            if s & bits.ESTOP_BITS:
                 mcu.state = rs.EMERGENCY_STOP
-            elif mcu.motion_fault or s & BMS_PROTECTION:
+            elif mcu.motion_fault or s & bits.BMS_PROTECTION:
                 mcu.state = rs.FAULT
             elif state != rs.ACTIVE:
                 mcu.state = rs.STANDBY
@@ -228,31 +213,40 @@ class LeanLoop:
         """Mcu._emit_due + Mcu._emit without faults: straight out, one stats update."""
         mcu = self.mcu
         due = mcu._due
+        send_rows = self.send_rows
         counters = mcu._counters
         send = mcu._send
         sent = 0
         edge = now + 1e-9
-        for i, (encode, name, frame_id, has_counter, period, shared) in enumerate(self.tx):
+        for i, (_, _, _, _, period, _) in enumerate(self.tx):
             d = due[i]
             if edge < d:
                 continue
             missed = max(0, math.floor((now - d) / period)) if period else 0
             due[i] = d + (missed + 1) * period
-            rows = self.builders[i]()
-            if shared and rows and has_counter:
-                counter = counters[name]
-                counters[name] = (counter + 1) & 0xF
-                for values in rows:
-                    values["Counter"] = counter
-            for values in rows:
-                if has_counter and "Counter" not in values:
-                    values["Counter"] = counters[name]
-                    counters[name] = (counters[name] + 1) & 0xF
-                send(frame_id, encode(values))
-                sent += 1
+            sent += send_rows(i, counters, send)
         mcu._next_any_due = min(due)
         if sent:
             mcu.stats["tx_frames"] += sent
+
+    def send_rows(self, i: int, counters: dict[str, int], send: Send) -> int:
+        """Build, count and send the rows of periodic message ``i`` (``self.tx[i]``): a shared
+        rolling Counter for all rows, or one per row that lacks its own (``counters``,
+        ``send``: the Mcu's); returns how many
+        frames went out (the Python emitter's and the kernel's non-hot frames both)."""
+        encode, name, frame_id, has_counter, _, shared = self.tx[i]
+        rows = self.builders[i]()
+        if shared and rows and has_counter:
+            counter = counters[name]
+            counters[name] = (counter + 1) & 0xF
+            for values in rows:
+                values["Counter"] = counter
+        for values in rows:
+            if has_counter and "Counter" not in values:
+                values["Counter"] = counters[name]
+                counters[name] = (counters[name] + 1) & 0xF
+            send(frame_id, encode(values))
+        return len(rows)
 
     def _builder(self, name: str) -> Callable[[], Rows]:
         """The rows of periodic message ``name``: specialised for the 10 and 20 ms frames,

@@ -20,22 +20,26 @@ import math
 
 import numpy as np
 
+from lowerbase.firmware_model.lean_bits import (
+    BMS_LINK_LOST,
+    BMS_PROTECTION,
+    COMMAND_IN_STANDBY,
+    ESTOP_BITS,
+    ESTOP_COMMAND,
+    IMU_FAULT,
+    L_ENC,
+    L_FAULT,
+    L_OVER,
+    L_STALL,
+    R_ENC,
+    R_FAULT,
+    R_OVER,
+    R_STALL,
+    SPEED_LIMITED,
+    WATCHDOG_STOP,
+)
 from lowerbase.firmware_model.lean_frames import _jit, clip, emit, pymax, pymin, wrap32
-from lowerbase.protocol.status_codes import StatusBit
 
-_B = {b.name: int(b) for b in StatusBit}
-ESTOP_COMMAND = _B["ESTOP_COMMAND"]
-WATCHDOG_STOP = _B["WATCHDOG_STOP"]
-COMMAND_IN_STANDBY = _B["COMMAND_IN_STANDBY"]
-SPEED_LIMITED = _B["SPEED_LIMITED"]
-IMU_FAULT = _B["IMU_FAULT"]
-BMS_LINK_LOST = _B["BMS_LINK_LOST"]
-ESTOP_BITS = _B["ESTOP_BUTTON"] | ESTOP_COMMAND
-BMS_PROTECTION = _B["BMS_PROTECTION"]
-L_OVER, L_STALL, L_FAULT, L_ENC = (_B[f"LEFT_{w}"] for w in (
-    "OVER_CURRENT", "MOTOR_STALLED", "MOTOR_FAULT", "ENCODER_FAULT"))
-R_OVER, R_STALL, R_FAULT, R_ENC = (_B[f"RIGHT_{w}"] for w in (
-    "OVER_CURRENT", "MOTOR_STALLED", "MOTOR_FAULT", "ENCODER_FAULT"))
 TWO_PI = 2.0 * math.pi
 
 # -- indices into the constants array (built by fastkernel.constants) --------------------------

@@ -16,6 +16,7 @@ from typing import Any, Protocol
 
 from lowerbase.errors import LowerbaseError
 from lowerbase.navigation.steps import CANCEL, PAUSE, RESUM, StepController
+from lowerbase.tasks.blocked import BlockedDebounce, blocked
 from lowerbase.tasks.docking import Docking, StepMoves
 from lowerbase.tasks.model import (
     AUTO_TASK_ID,
@@ -74,11 +75,6 @@ def _pct(soc: float | None) -> str:
     return "" if soc is None else f" ({soc:.0f} %)"
 
 
-def blocked(fb: NavFeedback) -> bool:
-    """Whether navigation reports its path blocked (it waits or replans: a warning)."""
-    return "block" in f"{fb.status} {fb.reason}".lower()
-
-
 @dataclass
 class Task:
     request: TaskRequest
@@ -117,6 +113,7 @@ class TaskMachine(Docking):
         self.chassis = Chassis(initialized=False)
         self.docked = False  #: on the charger (a dock-in finished, no dock-out since)
         self.tracker = StatusTracker(on_status)
+        self.blocked = BlockedDebounce(self.config.blocked_delay)  #: path-blocked warning
         self.now = 0.0
         self._last_tick: float | None = None
         self._auto_tried = False
@@ -258,6 +255,7 @@ class TaskMachine(Docking):
         return None
 
     def _send(self, t: Task, target: Pose, poses: Sequence[Pose]) -> None:
+        self.blocked.reset()
         try:
             self.nav.send_goal(target, poses, now=self.now)
         except LowerbaseError as exc:  # an off-map pose
@@ -383,7 +381,7 @@ class TaskMachine(Docking):
             if state in ("ABORTED", "PREEMPTED"):
                 self._fail(t, f"navigation {state.lower()}: {fb.reason or fb.status}")
                 return (0.0, 0.0)
-            if blocked(fb):
+            if self.blocked.update(blocked(fb.status, fb.reason), self.now):
                 t.action_state, t.msg = ActionState.WARNING, f"path blocked: {fb.reason}"
             elif t.action_state == ActionState.WARNING:
                 t.action_state, t.msg = ActionState.EXECUTING, ""

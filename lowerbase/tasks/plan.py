@@ -35,6 +35,8 @@ class TaskConfig:
     full_soc: float = 100.0  #: [%] a charging task undocks and completes at this charge
     auto_charge: bool = True  #: go and charge on a low battery once no task runs
     period: float = 0.05  #: [s] tick period (20 Hz, as a navigation stack)
+    #: [s] the path must be blocked this long in a row before the action warns (0: at once)
+    blocked_delay: float = 0.5
 
     def __post_init__(self) -> None:
         for name in ("load_time", "unload_time", "pose_tolerance", "yaw_tolerance",
@@ -43,6 +45,9 @@ class TaskConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise LowerbaseError(f"task config {name} must be a number > 0, got {value!r}")
+        if not (math.isfinite(self.blocked_delay) and self.blocked_delay >= 0):
+            raise LowerbaseError(f"task config blocked_delay must be a number >= 0, "
+                                 f"got {self.blocked_delay!r}")
         if not (isinstance(self.dock_corrections, int) and self.dock_corrections >= 0):
             raise LowerbaseError(f"task config dock_corrections must be an integer >= 0, "
                                  f"got {self.dock_corrections!r}")

@@ -148,6 +148,8 @@ def test_localization_loss_holds_navigation_until_it_returns() -> None:
 def test_blocked_path_warns_and_an_abort_fails() -> None:
     b = moving(ready())
     b.nav.force, b.nav.status, b.nav.reason = "ACTIVE", "blocked", "blocked by an obstacle"
+    b.tick(10)  # blocked_delay (0.5 s; tests/tasks/test_blocked.py)
+    assert b.status.action_state == AS.EXECUTING
     b.tick()
     s = b.status
     assert (s.action_state, s.robot_state) == (AS.WARNING, RS.WARNING)

@@ -7,6 +7,7 @@ back with rosbag's own decoder (the message definition in the bag, not ours)."""
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import shutil
@@ -85,6 +86,12 @@ def business(master: Any, *args: str, timeout: float = 150.0) -> list[str]:
             if line.startswith("business: msg_")]
 
 
+def _changes(pairs: list[tuple[str, str]]) -> dict[str, list[str]]:
+    """Each status topic's statuses with repeats collapsed (RUNNING, BLOCKED, RUNNING, ...)."""
+    return {topic: [s for s, _ in itertools.groupby(s for t, s in pairs if t == topic)]
+            for topic in (STATUS, AVOID_STATUS)}
+
+
 @pytest.fixture(scope="module")
 def chain(trace_master: Any, tmp_path_factory: pytest.TempPathFactory  # noqa: F811
           ) -> Iterator[dict[str, Any]]:
@@ -155,7 +162,11 @@ def test_the_business_node_runs_the_seeds_diagram(chain: dict[str, Any]) -> None
                                                               SPEED, POSE)}
     statuses = [(t, m.STATUS_NAMES[msg.status]) for t, _, msg, _, _ in records
                 if t in (STATUS, AVOID_STATUS)]
-    assert statuses == seen
+    # per topic, as each status changed: the bag and the business node are two subscribers
+    # on connections of their own, so their order across the two topics may differ, and a
+    # loaded host may drop one of a run of periodic RUNNING reports for one of them (rospy's
+    # per-connection queue), never a change
+    assert _changes(statuses) == _changes(seen)
     done = [msg for t, _, msg, _, _ in records if t == STATUS][-1]
     assert [s.finished for s in done.lists] == [1.0, 1.0]
     resumed = [msg for t, _, msg, _, _ in records if t == ROUTE][-1]

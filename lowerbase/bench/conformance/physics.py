@@ -43,6 +43,11 @@ SPEED_TOLERANCE = 0.05
 #: ... and the absolute part: two resolutions of Velocity (quantisation of the mean and of the
 #: command)
 VELOCITY_LSB = 0.001
+#: the Counter's span of a window against its reception times (relative): beyond this the
+#: sender skipped cycles (reception jitter is milliseconds of a 1 s window), and a span off by
+#: more would eat up SPEED_TOLERANCE; it was 0.25, which let a 16-cycle gap (0.32 s: the
+#: Counter wrapped) through as a 21 % short span
+SPAN_DISAGREEMENT = 0.04
 #: relative allowance between two signals computed from one measurement in one control step
 #: (MotionState from the wheel speeds): sampling skew between frames of one cycle
 KINEMATIC_TOLERANCE = 0.02
@@ -209,9 +214,11 @@ def _firmware_span(ctx: Context, samples: list[WheelSample]) -> float:
     steps = [(b.counter - a.counter) % modulo for a, b in itertools.pairwise(samples)]
     received = samples[-1].t - samples[0].t
     span = sum(steps) * cycle
-    # a counter that stalls or disagrees grossly with the clock is the counter check's
-    # finding (frame.WheelFeedback.counter), not this one's: fall back to reception times
-    if 0 in steps or abs(span - received) > 0.25 * received:
+    # a counter that stalls or disagrees with the clock by more than reception jitter (a
+    # sender that skipped cycles: its Counter counts frames sent, not the time between them;
+    # a 16-cycle gap wraps it) is the counter check's finding (frame.WheelFeedback.counter),
+    # not this one's: fall back to reception times
+    if 0 in steps or abs(span - received) > SPAN_DISAGREEMENT * received:
         return received
     return span
 

@@ -1,0 +1,40 @@
+"""The wheel-count check's time base: the WheelFeedback Counter's span, unless the sender
+skipped cycles (tests/bench/test_conformance_defects.py once failed physics.wheel_count on a
+loaded host: a 16-cycle gap wrapped the 4-bit Counter and the span came out 21 % short)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+
+from lowerbase.bench.conformance.catalog import WheelSample
+from lowerbase.bench.conformance.physics import _firmware_span
+from lowerbase.protocol.codec import default_codec
+
+CYCLE = default_codec().message("WheelFeedback").cycle_time or 0.02
+CTX = SimpleNamespace(codec=default_codec())
+
+
+def _samples(gap_at: int | None = None, gap_cycles: int = 0, jitter: float = 0.0
+             ) -> list[WheelSample]:
+    """75 WheelFeedback frames one cycle apart (a Counter +1 each); at ``gap_at`` the sender
+    skips ``gap_cycles`` cycles (time goes on, the Counter does not)."""
+    out, t = [], 0.0
+    for k in range(75):
+        if k == gap_at:
+            t += gap_cycles * CYCLE
+        out.append(WheelSample(t + (jitter if k % 2 else 0.0), 0, 0.5, k % 16))
+        t += CYCLE
+    return out
+
+
+def test_the_counter_span_is_used_despite_reception_jitter() -> None:
+    samples = _samples(jitter=0.004)
+    assert _firmware_span(CTX, samples) == pytest.approx(74 * CYCLE)
+
+
+@pytest.mark.parametrize("gap_cycles", [4, 8, 16, 20])
+def test_a_sender_that_skipped_cycles_is_timed_by_reception(gap_cycles: int) -> None:
+    samples = _samples(gap_at=40, gap_cycles=gap_cycles)
+    assert _firmware_span(CTX, samples) == pytest.approx((74 + gap_cycles) * CYCLE)

@@ -14,7 +14,7 @@ task machine) in one process (:mod:`lowerbase.bench.tasks_run`; its report:
     [world]
     map = "empty_room"
     [tasks]                                   # TaskConfig: load_time, unload_time, full_soc,
-    unload_time = 5.0                         # dock_timeout, auto_charge
+    unload_time = 5.0                         # dock_timeout, auto_charge, blocked_delay
     [[timeline]]
     at = 1.0                                  # [s]; with when = "idle": the first moment from
     when = "idle"                             # `at` on that no task runs (a queue of work)
@@ -57,7 +57,8 @@ from lowerbase.tasks.model import (
     TaskState,
 )
 
-TASK_KEYS = {"load_time", "unload_time", "full_soc", "dock_timeout", "auto_charge"}
+TASK_KEYS = {"load_time", "unload_time", "full_soc", "dock_timeout", "auto_charge",
+             "blocked_delay"}
 FIELDS: dict[str, type[IntEnum]] = {"task_state": TaskState, "action_type": ActionType,
                            "action_state": ActionState, "robot_state": RobotState}
 MAX_DURATION = 8 * 3600.0

@@ -33,6 +33,9 @@ def add_subparser(subparsers: Any) -> None:
                    help="duration of the timed unloading action (default 10)")
     p.add_argument("--full-soc", type=float, default=100.0, metavar="PERCENT",
                    help="a charging task undocks at this charge (default 100)")
+    p.add_argument("--blocked-delay", type=float, default=0.5, metavar="S",
+                   help="warn \"path blocked\" on robot_status only after navigation reports "
+                   "the path blocked this long in a row (0: at once; default 0.5)")
     p.add_argument("--no-auto-charge", action="store_true",
                    help="do not go and charge on a low battery by itself")
     p.add_argument("ros_args", nargs="*", metavar="NAME:=VALUE",
@@ -40,18 +43,36 @@ def add_subparser(subparsers: Any) -> None:
     p.set_defaults(func=run)
 
 
+#: TaskConfig's fields set by options, and the option's name
+OPTIONS = {"load_time": "--load-time", "unload_time": "--unload-time", "full_soc": "--full-soc",
+           "blocked_delay": "--blocked-delay"}
+
+
+def task_config(args: argparse.Namespace) -> Any:
+    """The TaskConfig of the options; a bad value is a ConfigError line naming the option."""
+    from lowerbase.errors import ConfigError, LowerbaseError
+    from lowerbase.tasks.plan import TaskConfig
+
+    try:
+        return TaskConfig(**{field: getattr(args, field) for field in OPTIONS},
+                          auto_charge=not args.no_auto_charge)
+    except LowerbaseError as exc:
+        msg = str(exc)
+        for field, option in OPTIONS.items():
+            msg = msg.replace(f"task config {field} ", f"{option} ")
+        raise ConfigError(msg) from None
+
+
 def run(args: argparse.Namespace) -> int:
     from lowerbase.cli.driver import split_ros_args
     from lowerbase.tasks import node
-    from lowerbase.tasks.plan import TaskConfig
     from lowerbase.world.maps import load_map
     from lowerbase.world.places import load_places
 
     ros_args = split_ros_args(args.ros_args)
     grid = load_map(args.map)
     places = load_places(args.map, grid)
-    config = TaskConfig(load_time=args.load_time, unload_time=args.unload_time,
-                        full_soc=args.full_soc, auto_charge=not args.no_auto_charge)
+    config = task_config(args)
     setup = node.TasksSetup(places, config)
     node.import_ros()  # one clear line when ROS is missing, before anything starts
     where = (f"map {args.map}: {len(places.storage)} storage points, "

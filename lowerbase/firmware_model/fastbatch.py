@@ -60,30 +60,36 @@ def run(kl: KernelLoop, n: int) -> int:
     ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
     stuck = mcu._enc_stuck
     imu_due0 = mcu._imu_due
-    r = kl.lb.batch(
-        n, kl.k, now, mcu.boot_time, mode == 1, targets, v, w,
-        ml.omega, ml.setpoint, ml.current, ml.over_current, ml.stalled, ml._over_time,
-        ml._stall_time,
-        mr.omega, mr.setpoint, mr.current, mr.over_current, mr.stalled, mr._over_time,
-        mr._stall_time,
-        el.total, el._frac, er.total, er._frac,
-        truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x, truth.distance,
-        mcu.odometer, stuck["left"], stuck["right"],
-        mcu._imu_due, lean.imu_cycle, noise, kl._rows_arr if noise else kl.zero_rows,
-        len(rows) - 1 if noise else 0, mcu._imu_last is not None, kl.imu, mcu._imu_same,
-        bms is not None, mcu._bms_charge, mcu._bms_elapsed, mcu._bms_last_answer,
-        mcu._bms_bits, mcu._bms_next_poll, m.BMS_STEP, mcu._saved_odometer, mcu._last_save,
-        m.ODOMETER_SAVE_PERIOD, mcu._last_cmd_time, float(mcu.chassis.command_timeout),
-        mcu.status, mcu.motion_fault, int(mcu.state), mcu.estop_command, mcu._watchdog,
-        mcu._standby_cmd_time, mcu._speed_limited,
-        kl.due, kl.per, kl.hot, kl.counters, kl.vals, kl.sig, kl.scale, kl.frames, kl.out,
-        kl.ids, kl.lens, kl.pidx)
-    done = r[35]
+    fs, js = kl.fs, kl.js
+    fs[:] = (ml.omega, ml.setpoint, ml.current, ml._over_time, ml._stall_time,
+             mr.omega, mr.setpoint, mr.current, mr._over_time, mr._stall_time,
+             el._frac, er._frac, truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x,
+             truth.distance, mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge,
+             mcu._bms_elapsed, imu_due0, now, mcu.boot_time, v, w, lean.imu_cycle,
+             mcu._bms_last_answer, mcu._bms_next_poll, m.BMS_STEP, mcu._saved_odometer,
+             mcu._last_save, m.ODOMETER_SAVE_PERIOD, mcu._last_cmd_time,
+             mcu.chassis.command_timeout, mcu._standby_cmd_time)
+    js[:] = (ml.over_current, ml.stalled, mr.over_current, mr.stalled, el.total, er.total,
+             mcu._imu_same, mcu.status, mcu.motion_fault, mcu.state,
+             len(rows) - 1 if noise else 0, mcu._imu_last is not None, 0, 0, 0,
+             n, mode == 1, noise, bms is not None, mcu._bms_bits, mcu.estop_command,
+             mcu._watchdog, mcu._speed_limited)
+    kl.lb.batch(kl.k, fs, js, targets, kl._rows_arr if noise else kl.zero_rows, kl.imu,
+                kl.due, kl.per, kl.hot, kl.counters, kl.vals, kl.sig, kl.scale, kl.frames,
+                kl.out, kl.ids, kl.lens, kl.pidx)
+    (oc_l, st_l, oc_r, st_r, el.total, er.total, mcu._imu_same, mcu.status, mcu.motion_fault,
+     state, row, _, count, done, python_emit) = js[:15].tolist()
     if mode == 1:  # the smoother as after the last period done
         smoother.v, smoother.w = wound[done - 1] if done else start
     if not done:
         return 0
-    state, count, _, row, mcu._imu_due, _, python_emit = kl.store_state(r)
+    (ml.omega, ml.setpoint, ml.current, ml._over_time, ml._stall_time,
+     mr.omega, mr.setpoint, mr.current, mr._over_time, mr._stall_time,
+     el._frac, er._frac, truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x,
+     truth.distance, mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge,
+     mcu._bms_elapsed, mcu._imu_due) = fs[:25].tolist()
+    ml.over_current, ml.stalled = oc_l != 0, st_l != 0
+    mr.over_current, mr.stalled = oc_r != 0, st_r != 0
     ml._steady = mr._steady = None
     mcu._watchdog = mcu._watchdog_ramp = False
     if mode != 1:

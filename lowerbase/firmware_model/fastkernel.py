@@ -110,11 +110,9 @@ def _warm_up(lk: Any, lb: Any) -> None:
               f, f, f, f, f, f, f, f, f, True, True, z, b, imu, i, True, f, f, f, i, i, i, i,
               b, b, f, b, True, due, per, hot, counters, vals, sig, scale, frames, out, ids,
               lens, i)
-    lb.batch(1, k, f, f, b, np.ones((1, 2)), f, f, f, f, f, b, b, f, f, f, f, f, b, b, f, f, i,
-             f, i, f,
-             f, f, f, f, f, f, f, f, f, f, f, f, True, np.zeros((1, 12)), i, b, imu, i, True, f,
-             f, f, i, f, f, f, f, f, f, f, i, i, i, b, b, f, b, due, per, hot, counters, vals,
-             sig, scale, frames, out, ids, lens, np.zeros(8, np.int64))
+    lb.batch(k, np.zeros(lb.F_SIZE), np.zeros(lb.J_SIZE, np.int64), np.ones((1, 2)),
+             np.zeros((1, 12)), imu, due, per, hot, counters, vals, sig, scale, frames, out,
+             ids, lens, np.zeros(8, np.int64))
 
 
 class KernelLoop:
@@ -136,6 +134,7 @@ class KernelLoop:
         self.imu = np.zeros(12)
         self.zero_row = np.zeros(12)
         self.lb = lb  # lean_batch: runs of periods (fastbatch.py)
+        self.fs, self.js = np.zeros(lb.F_SIZE), np.zeros(lb.J_SIZE, np.int64)  # their state
         size = 5 * fastbatch.MAX_RUN + 2 * n + 8
         self.out, self.ids = np.zeros((size, 8), np.uint8), np.zeros(size, np.int64)
         self.lens, self.pidx = np.zeros(size, np.int64), np.zeros(size, np.int64)

@@ -1,11 +1,14 @@
 """A run of lean control periods in one compiled call (:func:`batch`, driven by
-``fastkernel.KernelLoop.run`` for ``Mcu.advance``): :func:`.lean_kernel.period` after period,
-on the simulated clock, while nothing needs Python.
+``fastbatch.run`` for ``Mcu.advance``): :func:`.lean_kernel.period` after period, on the
+simulated clock, while nothing needs Python.
 
 The run stops before a period whose BMS is polled, whose command has timed out (the watchdog)
 or whose IMU needs a new noise block, and after a period that emitted a frame Python builds
 (not one of the hot ones), stepped the BMS pack, is due to save the odometer, or changed the
 status word, the motion fault bits or the state (any of which can change ``Mcu._target``).
+
+The state goes in and out through two arrays (``fs``: floats, ``js``: integers; the slots
+below), not as scalar arguments: numba's handling of ~75 scalars was half a call's cost.
 """
 
 from __future__ import annotations
@@ -14,40 +17,53 @@ import numpy as np
 
 from lowerbase.firmware_model.lean_kernel import C_DT, _jit, period
 
+#: ``fs`` slots: the state (in and out) ...
+(F_OM_L, F_SP_L, F_CUR_L, F_OT_L, F_STT_L, F_OM_R, F_SP_R, F_CUR_R, F_OT_R, F_STT_R, F_FR_L,
+ F_FR_R, F_X, F_Y, F_YAW, F_TV, F_TW, F_ACCEL, F_DIST, F_ODO, F_STUCK_L, F_STUCK_R, F_CHARGE,
+ F_ELAPSED, F_IMU_DUE) = range(25)
+#: ... then what only goes in
+(F_NOW, F_BOOT, F_TARGET_V, F_TARGET_W, F_IMU_CYCLE, F_LAST_ANSWER, F_NEXT_POLL, F_BMS_STEP,
+ F_SAVED_ODO, F_LAST_SAVE, F_SAVE_PERIOD, F_LAST_CMD, F_TIMEOUT, F_STANDBY_CMD) = range(25, 39)
+F_SIZE = 39
+#: ``js`` slots: the state (in and out; the flags 0/1) ...
+(J_OC_L, J_ST_L, J_OC_R, J_ST_R, J_TOT_L, J_TOT_R, J_IMU_SAME, J_STATUS, J_FAULT, J_STATE,
+ J_ROW, J_HAS_LAST) = range(12)
+#: ... what comes out (frame count, periods done, the last period's frames are Python's) ...
+J_COUNT, J_DONE, J_PY_EMIT = 12, 13, 14
+#: ... and what only goes in
+J_N, J_SMOOTHED, J_NOISE, J_BMS, J_BMS_BITS, J_ESTOP, J_WATCHDOG, J_LIMITED = range(15, 23)
+J_SIZE = 23
+
 
 @_jit
-def batch(n: int, k: np.ndarray, now: float, boot_time: float, smoothed: bool,
-          targets: np.ndarray, target_v: float, target_w: float,
-          om_l: float, sp_l: float, cur_l: float, oc_l: bool, st_l: bool, ot_l: float,
-          stt_l: float,
-          om_r: float, sp_r: float, cur_r: float, oc_r: bool, st_r: bool, ot_r: float,
-          stt_r: float,
-          tot_l: int, fr_l: float, tot_r: int, fr_r: float,
-          x: float, y: float, yaw: float, tv: float, tw: float, accel_x: float, distance: float,
-          odometer: float, stuck_l: float, stuck_r: float,
-          imu_due_t: float, imu_cycle: float, noise: bool, rows: np.ndarray, row: int,
-          has_last: bool, imu: np.ndarray, imu_same: int,
-          bms: bool, charge: float, elapsed: float, last_answer: float, bms_bits: int,
-          next_poll: float, bms_step: float, saved_odometer: float, last_save: float,
-          save_period: float, last_cmd_time: float, timeout: float,
-          status: int, motion_fault: int, state: int, estop_command: bool, watchdog: bool,
-          standby_cmd_time: float, limited: bool,
+def batch(k: np.ndarray, fs: np.ndarray, js: np.ndarray, targets: np.ndarray,
+          rows: np.ndarray, imu: np.ndarray,
           due: np.ndarray, per: np.ndarray, hot: np.ndarray,
           counters: np.ndarray, vals: np.ndarray, sig: np.ndarray, scale: np.ndarray,
           frames: np.ndarray, out: np.ndarray, ids: np.ndarray, lens: np.ndarray,
-          pidx: np.ndarray,
-          ) -> tuple[float, float, float, bool, bool, float, float,
-                     float, float, float, bool, bool, float, float,
-                     int, float, int, float,
-                     float, float, float, float, float, float, float,
-                     float, float, float, float, float, int,
-                     int, int, int, int, int, int, float, bool, bool]:
-    """Up to ``n`` periods from ``now``, driving at ``target_v``, ``target_w`` (``smoothed``:
-    at ``targets[j]`` in period j), no brake.
-    Returns the state as :func:`.lean_kernel.period` does, then the frame count (``pidx``:
-    each frame's period), the periods done, the next IMU noise row and due time, whether an
-    IMU sample exists, and whether the last period's frames are Python's to emit."""
+          pidx: np.ndarray) -> None:
+    """Up to ``js[J_N]`` periods from ``fs[F_NOW]``, driving at the target twist
+    (``js[J_SMOOTHED]``: at ``targets[j]`` in period j), no brake; the state in ``fs``/``js``
+    is replaced by the state after them (see the slots above; ``pidx``: each frame's
+    period)."""
     dt = k[C_DT]
+    (om_l, sp_l, cur_l, ot_l, stt_l, om_r, sp_r, cur_r, ot_r, stt_r, fr_l, fr_r,
+     x, y, yaw, tv, tw, accel_x, distance, odometer, stuck_l, stuck_r, charge, elapsed,
+     imu_due_t, now, boot_time, target_v, target_w, imu_cycle, last_answer, next_poll,
+     bms_step, saved_odometer, last_save, save_period, last_cmd_time, timeout,
+     standby_cmd_time) = (
+        fs[0], fs[1], fs[2], fs[3], fs[4], fs[5], fs[6], fs[7], fs[8], fs[9], fs[10], fs[11],
+        fs[12], fs[13], fs[14], fs[15], fs[16], fs[17], fs[18], fs[19], fs[20], fs[21],
+        fs[22], fs[23], fs[24], fs[25], fs[26], fs[27], fs[28], fs[29], fs[30], fs[31],
+        fs[32], fs[33], fs[34], fs[35], fs[36], fs[37], fs[38])
+    oc_l, st_l = js[J_OC_L] != 0, js[J_ST_L] != 0
+    oc_r, st_r = js[J_OC_R] != 0, js[J_ST_R] != 0
+    tot_l, tot_r, imu_same = js[J_TOT_L], js[J_TOT_R], js[J_IMU_SAME]
+    status, motion_fault, state = js[J_STATUS], js[J_FAULT], js[J_STATE]
+    row, has_last = js[J_ROW], js[J_HAS_LAST] != 0
+    n, smoothed, noise, bms = js[J_N], js[J_SMOOTHED] != 0, js[J_NOISE] != 0, js[J_BMS] != 0
+    bms_bits, estop_command = js[J_BMS_BITS], js[J_ESTOP] != 0
+    watchdog, limited = js[J_WATCHDOG] != 0, js[J_LIMITED] != 0
     count = 0
     done = 0
     python_emit = False
@@ -99,9 +115,13 @@ def batch(n: int, k: np.ndarray, now: float, boot_time: float, smoothed: bool,
         now += dt
         if stop:
             break
-    return (om_l, sp_l, cur_l, oc_l, st_l, ot_l, stt_l,
-            om_r, sp_r, cur_r, oc_r, st_r, ot_r, stt_r,
-            tot_l, fr_l, tot_r, fr_r,
-            x, y, yaw, tv, tw, accel_x, distance,
-            odometer, stuck_l, stuck_r, charge, elapsed, imu_same,
-            status, motion_fault, state, count, done, row, imu_due_t, has_last, python_emit)
+    fs[0], fs[1], fs[2], fs[3], fs[4] = om_l, sp_l, cur_l, ot_l, stt_l
+    fs[5], fs[6], fs[7], fs[8], fs[9] = om_r, sp_r, cur_r, ot_r, stt_r
+    fs[10], fs[11], fs[12], fs[13], fs[14] = fr_l, fr_r, x, y, yaw
+    fs[15], fs[16], fs[17], fs[18], fs[19] = tv, tw, accel_x, distance, odometer
+    fs[20], fs[21], fs[22], fs[23], fs[24] = stuck_l, stuck_r, charge, elapsed, imu_due_t
+    js[J_OC_L], js[J_ST_L], js[J_OC_R], js[J_ST_R] = oc_l, st_l, oc_r, st_r
+    js[J_TOT_L], js[J_TOT_R], js[J_IMU_SAME] = tot_l, tot_r, imu_same
+    js[J_STATUS], js[J_FAULT], js[J_STATE] = status, motion_fault, state
+    js[J_ROW], js[J_HAS_LAST] = row, has_last
+    js[J_COUNT], js[J_DONE], js[J_PY_EMIT] = count, done, python_emit

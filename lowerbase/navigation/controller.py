@@ -253,7 +253,9 @@ class PathController:
         reach = min(reach, max(up_to, abs(v_next) * cfg.period))
         turn = w_next * w_next / (2.0 * lim.angular_decel) + abs(w_next) * cfg.period + 0.05
         n = max(3, math.ceil(reach / (0.5 * self.resolution)), math.ceil(turn / 0.02))
-        s = np.linspace(0.0, 1.0, n + 1)[1:]
+        s = np.arange(1, n + 1, dtype=np.float64)  # np.linspace(0, 1, n + 1)[1:], bit for bit
+        s *= 1.0 / n
+        s[-1] = 1.0
         direction = 1.0 if v_next >= 0 else -1.0
         if abs(v_next) > 1e-6:
             duration = reach / abs(v_next)

@@ -9,6 +9,10 @@ cost under the footprint's cells of that bin; ``NO_INFORMATION`` counts 0, and a
 cell off the map is ``LETHAL`` (tests/navigation/test_footprint_kernel.py pins it against the
 numpy gather). The controller checks its arc with it every control period.
 
+:func:`polygon_cells`, behind :meth:`Costmap2D.polygon_cells` (the footprint cleared from the
+local costmap at every update): skimage's ``draw.polygon`` and ``draw.line`` outline, the same
+cells in the same order (tests/navigation/test_polygon_cells_kernel.py).
+
 :func:`clear_lines`, the obstacle layer's clearing (:meth:`ObstacleLayer.update`): every cell of
 the lines from the sensor's cell to each ray's end cell set free, the cells
 :func:`lowerbase.navigation.layers.line_cells` lists (tests/navigation/test_clear_lines.py).
@@ -126,3 +130,91 @@ def squared_distances(lethal: np.ndarray, cap: int, out: np.ndarray) -> None:
             p = v[j]
             d2 = (q - p) * (q - p) + g[r, p] * g[r, p]
             out[r, q] = d2 if d2 < cap else cap
+
+
+@_jit
+def _in_polygon(xp: np.ndarray, yp: np.ndarray, x: float, y: float) -> bool:
+    """skimage's point_in_polygon (O'Rourke's ray crossings) is not 0: inside, on a vertex
+    (within 1e-12) or on an edge (left and right crossings of different parity)."""
+    eps = 1e-12
+    nv = xp.size
+    right = left = 0
+    x1 = xp[nv - 1] - x
+    y1 = yp[nv - 1] - y
+    for i in range(nv):
+        x0 = xp[i] - x
+        y0 = yp[i] - y
+        if -eps < x0 < eps and -eps < y0 < eps:
+            return True
+        if (y0 > 0) != (y1 > 0) and (x0 * y1 - x1 * y0) / (y1 - y0) > 0:
+            right += 1
+        if (y0 < 0) != (y1 < 0) and (x0 * y1 - x1 * y0) / (y1 - y0) < 0:
+            left += 1
+        x1 = x0
+        y1 = y0
+    return (right & 1) != (left & 1) or (right & 1) == 1
+
+
+@_jit
+def polygon_cells(fr: np.ndarray, fc: np.ndarray, ir: np.ndarray, ic: np.ndarray, h: int,
+                  w: int) -> tuple[np.ndarray, np.ndarray, bool]:
+    """:meth:`Costmap2D.polygon_cells` in one call: skimage's ``draw.polygon(fr, fc)`` (the
+    cells whose centre is inside or on the outline, :func:`_in_polygon`; rows and columns
+    from max(0, min) to ceil(max)), then ``draw.line`` (Bresenham) along the outline between
+    the rounded vertices ``ir`` / ``ic``, the cells off an h x w grid dropped: (cols, rows, any
+    dropped), in that order (tests/navigation/test_polygon_cells_kernel.py against skimage)."""
+    nv = fr.size
+    minr = int(max(0.0, fr.min()))
+    maxr = int(np.ceil(fr.max()))
+    minc = int(max(0.0, fc.min()))
+    maxc = int(np.ceil(fc.max()))
+    area = max(maxr - minr + 1, 0) * max(maxc - minc + 1, 0)
+    line = 0
+    for i in range(nv):
+        j = (i + 1) % nv
+        line += max(abs(ir[j] - ir[i]), abs(ic[j] - ic[i])) + 1
+    rows = np.empty(area + line, dtype=np.int64)
+    cols = np.empty(area + line, dtype=np.int64)
+    n = 0
+    dropped = False
+    for r in range(minr, maxr + 1):
+        y = float(r)
+        for c in range(minc, maxc + 1):
+            x = float(c)
+            if _in_polygon(fc, fr, x, y):
+                if r < h and c < w:
+                    rows[n] = r
+                    cols[n] = c
+                    n += 1
+                else:
+                    dropped = True
+    for i in range(nv):  # skimage's _line, variable for variable
+        j = (i + 1) % nv
+        r, c, r1, c1 = ir[i], ic[i], ir[j], ic[j]
+        dr, dc = abs(r1 - r), abs(c1 - c)
+        sc = 1 if c1 - c > 0 else -1
+        sr = 1 if r1 - r > 0 else -1
+        steep = dr > dc
+        if steep:
+            r, c, dr, dc, sr, sc = c, r, dc, dr, sc, sr
+        d = 2 * dr - dc
+        for k in range(dc + 1):
+            if k == dc:
+                rr, cc = r1, c1
+            elif steep:
+                rr, cc = c, r
+            else:
+                rr, cc = r, c
+            if 0 <= rr < h and 0 <= cc < w:
+                rows[n] = rr
+                cols[n] = cc
+                n += 1
+            else:
+                dropped = True
+            if k < dc:
+                while d >= 0:
+                    r += sr
+                    d -= 2 * dc
+                c += sc
+                d += 2 * dr
+    return cols[:n], rows[:n], dropped

@@ -14,7 +14,7 @@ import numpy as np
 from skimage import draw
 
 from lowerbase.errors import ConfigError, WorldError
-from lowerbase.navigation.kernels import clear_lines, squared_distances
+from lowerbase.navigation.kernels import clear_lines, polygon_cells, squared_distances
 from lowerbase.world.footprint import Footprint
 from lowerbase.world.grid import OccupancyGrid
 
@@ -107,12 +107,10 @@ class Costmap2D:
         plus the cells its outline runs through) and whether any part leaves the grid."""
         fc = (xy[:, 0] - self.origin[0]) / self.resolution - 0.5
         fr = (xy[:, 1] - self.origin[1]) / self.resolution - 0.5
-        rr, cc = draw.polygon(fr, fc)
-        pr, pc = _polygon_perimeter(np.round(fr).astype(int), np.round(fc).astype(int))
-        rows = np.concatenate((rr, pr)).astype(np.int64)
-        cols = np.concatenate((cc, pc)).astype(np.int64)
-        ok = self.inside(cols, rows)
-        return cols[ok], rows[ok], bool(not ok.all())
+        # skimage's draw.polygon and the Bresenham outline of _polygon_perimeter, compiled
+        cols, rows, off = polygon_cells(fr, fc, np.round(fr).astype(np.int64),
+                                        np.round(fc).astype(np.int64), self.height, self.width)
+        return cols, rows, bool(off)
 
 
 # ---------------------------------------------------------------------------- footprint radii

@@ -17,8 +17,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lowerbase.errors import ConfigError
-from lowerbase.world.raycast import Scene, cast_grid, cast_solids, solids_taller_than
+from lowerbase.errors import ConfigError, WorldError
+from lowerbase.world.raycast import (
+    Rays,
+    Scene,
+    cast_grid,
+    cast_rays_prepared,
+    cast_solids,
+    solids_taller_than,
+)
 
 TWO_PI = 2.0 * math.pi
 #: one scan's random numbers: range noise (standard normal), dropouts (uniform) or None
@@ -121,13 +128,17 @@ class Lidar:
         self.rng = np.random.default_rng(config.seed)
         self._angles = config.angles
 
-    def rays(self, pose: tuple[float, float, float]) -> tuple[float, float, np.ndarray]:
-        """The beams' origin (x, y) and world angles [rad] with the base at ``pose``."""
+    def origin(self, pose: tuple[float, float, float]) -> tuple[float, float, float]:
+        """The lidar's position (x, y) and heading [rad] on the map with the base at ``pose``."""
         cfg = self.config
         bx, by, bt = pose
         c, s = math.cos(bt), math.sin(bt)
-        lx, ly = bx + c * cfg.x - s * cfg.y, by + s * cfg.x + c * cfg.y
-        return lx, ly, self._angles + (bt + cfg.yaw)
+        return bx + c * cfg.x - s * cfg.y, by + s * cfg.x + c * cfg.y, bt + cfg.yaw
+
+    def rays(self, pose: tuple[float, float, float]) -> tuple[float, float, np.ndarray]:
+        """The beams' origin (x, y) and world angles [rad] with the base at ``pose``."""
+        lx, ly, heading = self.origin(pose)
+        return lx, ly, self._angles + heading
 
     def true_ranges(self, scene: Scene, pose: tuple[float, float, float],
                     grid_distance: np.ndarray | None = None) -> np.ndarray:
@@ -327,6 +338,11 @@ class LidarRig:
                  merged: MergedScanConfig | None = None) -> None:
         self.merger = ScanMerger(list(lidars), merged or MergedScanConfig())
         self.lidars = [Lidar(lc) for lc in lidars]
+        # what every scan's rays share: beams per lidar, their angles in the lidar frames
+        self._sizes = [lidar.config.beams for lidar in self.lidars]
+        self._bounds = np.cumsum(self._sizes)[:-1]
+        self._angles = np.concatenate([lidar._angles for lidar in self.lidars])
+        self._u_max: tuple[float, np.ndarray] | None = None  #: (resolution, ranges [cells])
 
     @property
     def rate_hz(self) -> float:
@@ -336,20 +352,39 @@ class LidarRig:
         """Every lidar's random numbers for one scan (:meth:`Lidar.draw`)."""
         return [lidar.draw() for lidar in self.lidars]
 
+    def _rays(self, scene: Scene, pose: tuple[float, float, float]) -> Rays:
+        """Every lidar's rays in grid cells, as :func:`prepare_rays` makes them from the
+        lidars' :meth:`Lidar.rays` (the same expressions, per lidar instead of per ray: each
+        ray's origin, angle and range are the same floats), without its per-ray checks: a
+        finite pose gives finite rays."""
+        if not all(math.isfinite(v) for v in pose):
+            raise WorldError("ray casting needs finite origins and angles and non-NaN ranges")
+        grid = scene.grid
+        if grid.origin[2] != 0.0:
+            raise WorldError("sensors need a map whose origin yaw is 0; rotate the map image "
+                             "instead")
+        res = grid.resolution
+        if self._u_max is None or self._u_max[0] != res:
+            self._u_max = (res, np.repeat([lidar.config.range_max / res
+                                           for lidar in self.lidars], self._sizes))
+        gx, gy, yaw = [], [], []
+        for lidar in self.lidars:
+            cfg = lidar.config
+            lx, ly, _ = lidar.origin(pose)
+            gx.append((lx - grid.origin[0]) / res)
+            gy.append((ly - grid.origin[1]) / res)
+            yaw.append(pose[2] + cfg.yaw)
+        ang = self._angles + np.repeat(yaw, self._sizes)
+        return Rays(scene.grid_field, ang.shape, np.repeat(gx, self._sizes),
+                    np.repeat(gy, self._sizes), np.cos(ang), np.sin(ang), self._u_max[1])
+
     def scans(self, scene: Scene, pose: tuple[float, float, float],
               stamp: float, draws: Sequence[Draws] | None = None) -> list[LaserScan]:
         """Each lidar's own scan, in its own frame. The map is cast for all lidars' rays in one
         :func:`cast_grid` call (fewer, larger array operations; each ray's result is its own,
         bit for bit as cast alone: tests/world/test_lidar.py)."""
-        rays = [lidar.rays(pose) for lidar in self.lidars]
-        sizes = [ang.size for _, _, ang in rays]
-        xs = np.concatenate([np.full(n, x) for (x, _, _), n in zip(rays, sizes, strict=True)])
-        ys = np.concatenate([np.full(n, y) for (_, y, _), n in zip(rays, sizes, strict=True)])
-        ranges = np.concatenate([np.full(n, lidar.config.range_max)
-                                 for lidar, n in zip(self.lidars, sizes, strict=True)])
-        dist = cast_grid(scene.mask, scene.grid, xs, ys, np.concatenate([a for *_, a in rays]),
-                         ranges, scene.grid_field).distance
-        parts = np.split(dist, np.cumsum(sizes)[:-1])
+        dist = cast_rays_prepared(scene.grid, self._rays(scene, pose)).distance
+        parts = np.split(dist, self._bounds)
         ds: Sequence[Draws | None] = draws if draws is not None else [None] * len(parts)
         return [lidar.scan(scene, pose, stamp, part, d)
                 for lidar, part, d in zip(self.lidars, parts, ds, strict=True)]

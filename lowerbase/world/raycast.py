@@ -90,9 +90,16 @@ def cast_grid(mask: np.ndarray, grid: OccupancyGrid, x0: np.ndarray | float,
     built here (a distance transform of the whole mask). The rays are cast by the compiled
     kernel (:mod:`raycast_kernel`), bit for bit as the numpy reference
     (:func:`raycast_reference.cast_grid_reference`) casts them."""
+    return cast_rays_prepared(grid, prepare_rays(mask, grid, x0, y0, angles, max_range,
+                                                 grid_field))
+
+
+def cast_rays_prepared(grid: OccupancyGrid, rays: Rays) -> GridHits:
+    """:func:`cast_grid` of rays already in grid cells (:func:`prepare_rays`, or a caller that
+    builds the same :class:`Rays` with the same expressions: :class:`~lowerbase.world.lidar.
+    LidarRig`)."""
     from lowerbase.world.raycast_kernel import cast_rays
 
-    rays = prepare_rays(mask, grid, x0, y0, angles, max_range, grid_field)
     fld, n = rays.field, rays.c.size
     dist, face, coord = np.empty(n), np.empty(n, dtype=np.int8), np.empty(n)
     h, w = fld.shape

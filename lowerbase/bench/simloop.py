@@ -5,6 +5,13 @@ core with their send time, the driver ticks, and its frames reach the MCU. What 
 would publish (/odom_raw, /odom, /battery, ...) is read off ``loop.driver``; the ground truth
 off ``loop.mcu.truth``. Scenarios, the demo and the odometry benchmark run on this.
 
+``run`` and ``drive`` without an ``on_step`` (and :meth:`SimLoop.advance`) run the MCU ahead in
+one ``Mcu.advance(k)`` up to the next period whose driver tick may send (its MotionCommand
+grid, a stale twist's stop): the driver then gets each period's frames and tick at that
+period's time (its clock pinned there), so the frames, /odom and the commands are those of
+``k`` single steps, bit for bit. Only while nothing else can make the driver send: the link
+READY, no listener, no tap, no fault in the MCU, nothing but MotionCommands pending for it.
+
 ``surroundings`` (a :class:`~lowerbase.firmware_model.truth.Surroundings`, e.g. the world's
 footprint contact) is what the robot can bump into; None (the default): open floor.
 """
@@ -15,13 +22,33 @@ from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
 from lowerbase.clock import SimClock
-from lowerbase.driver.core import DriverConfig, DriverCore
+from lowerbase.driver.core import DriverConfig, DriverCore, LinkState
 from lowerbase.firmware_model.faults import Fault
-from lowerbase.firmware_model.mcu import Mcu
+from lowerbase.firmware_model.mcu import Mcu, RobotState
 from lowerbase.firmware_model.profile import Profile, load_profile
 from lowerbase.firmware_model.truth import Surroundings
 
 FrameTap = Callable[[float, str, int, bytes], None]
+
+#: at most this many periods per Mcu.advance call (the frames of a batch wait in a list)
+MAX_BATCH = 64
+
+
+class _DriverClock:
+    """The loop's clock as the driver core reads it: the loop's own, or pinned to a period's
+    time while that period's frames and tick are handed to the driver after a batch."""
+
+    is_simulated = True
+
+    def __init__(self, base: SimClock) -> None:
+        self.base = base
+        self.pinned: float | None = None
+
+    def now(self) -> float:
+        return self.base.now() if self.pinned is None else self.pinned
+
+    def sleep_until(self, deadline: float) -> None:
+        self.base.sleep_until(deadline)
 
 
 L = TypeVar("L", bound="SteppedLoop")
@@ -70,11 +97,19 @@ class SteppedLoop:
     def step(self) -> None:
         raise NotImplementedError
 
-    def run(self: L, seconds: float, on_step: Callable[[L], None] | None = None) -> None:
-        for _ in range(round(seconds / self.control_dt)):
+    def advance(self, periods: int) -> None:
+        """``periods`` steps (SimLoop: batched where that changes nothing)."""
+        for _ in range(periods):
             self.step()
-            if on_step is not None:
-                on_step(self)
+
+    def run(self: L, seconds: float, on_step: Callable[[L], None] | None = None) -> None:
+        periods = round(seconds / self.control_dt)
+        if on_step is None:
+            self.advance(periods)
+            return
+        for _ in range(periods):
+            self.step()
+            on_step(self)
 
     def run_until(self: L, condition: Callable[[L], bool], timeout: float) -> bool:
         """Step until ``condition`` holds (True) or ``timeout`` [s] of simulated time passes."""
@@ -89,12 +124,17 @@ class SteppedLoop:
               on_step: Callable[[L], None] | None = None) -> None:
         """Publish a twist at 20 Hz (as a navigation stack does) for ``seconds``."""
         every = max(1, round(0.05 / self.control_dt))
-        for k in range(round(seconds / self.control_dt)):
+        periods = round(seconds / self.control_dt)
+        if on_step is None:
+            for k in range(0, periods, every):
+                self.twist_driver.set_twist(linear, angular, smoothed)
+                self.advance(min(every, periods - k))
+            return
+        for k in range(periods):
             if k % every == 0:
                 self.twist_driver.set_twist(linear, angular, smoothed)
             self.step()
-            if on_step is not None:
-                on_step(self)
+            on_step(self)
 
 
 class SimLoop(SteppedLoop):
@@ -121,10 +161,15 @@ class SimLoop(SteppedLoop):
             bms = McuBmsAdapter.from_profile(self.profile, soc=soc)
         self.mcu = Mcu(self.profile, self.clock, self._from_mcu, params_path=params_path,
                        bms=bms, faults=faults)
-        self.driver = DriverCore(self._from_driver, self.clock, driver_config)
+        self._driver_clock = _DriverClock(self.clock)
+        self.driver = DriverCore(self._from_driver, self._driver_clock, driver_config)
+        #: periods run in batches, and batches whose driver sent early (never expected: the
+        #: conditions in _batchable exclude it; then no more batches, see advance)
+        self.batch_stats = {"periods": 0, "batches": 0, "early_sends": 0}
         self.control_dt = self.mcu.dt
         self.twist_driver = self.driver
         self.mcu.truth.surroundings = surroundings
+        self._motion_id = self.driver.codec.message("MotionCommand").frame_id
 
     @property
     def surroundings(self) -> Surroundings | None:
@@ -144,7 +189,7 @@ class SimLoop(SteppedLoop):
     def _from_driver(self, frame_id: int, data: bytes) -> None:
         self._to_mcu.append((frame_id, data))
         if self.tap is not None:
-            self.tap(self.clock.now(), "upper", frame_id, data)
+            self.tap(self._driver_clock.now(), "upper", frame_id, data)
 
     @property
     def now(self) -> float:
@@ -163,3 +208,64 @@ class SimLoop(SteppedLoop):
             on_frame(frame_id, data, stamp)
         driver.tick()
         self.clock.advance(self.mcu.dt)
+
+    def advance(self, periods: int) -> None:
+        """``periods`` control periods: what as many :meth:`step` calls do, frame for frame
+        and bit for bit, with runs of periods in which the driver cannot send in one
+        ``Mcu.advance`` (see the module docstring)."""
+        while periods > 0:
+            k = self._batchable(periods)
+            if k <= 1:
+                self.step()
+                periods -= 1
+            else:
+                self._batch(k)
+                periods -= k
+
+    def _batchable(self, periods: int) -> int:
+        """How many periods from now may run as one batch: up to and including the first
+        whose driver tick may send; 1 when anything but the tick could make the driver send
+        (or the MCU take something else than a MotionCommand)."""
+        driver, mcu = self.driver, self.mcu
+        if (periods < 2 or driver.state is not LinkState.READY or driver.listeners
+                or self.tap is not None or mcu.faults or mcu._delayed
+                or mcu.state is not RobotState.ACTIVE or driver.heard_until is not None
+                or driver._reboot_suspect is not None or self.batch_stats["early_sends"]
+                or type(self).step is not SimLoop.step
+                or any(frame_id != self._motion_id for frame_id, _ in self._to_mcu)):
+            return 1
+        return max(1, driver.quiet_ticks(self.clock.now(), mcu.dt, min(periods, MAX_BATCH) - 1)
+                   + 1)
+
+    def _batch(self, k: int) -> None:
+        """``k`` periods: the MCU in one advance, then the driver period by period, each
+        period's frames and tick at its time. A tick that cannot do anything is skipped: the
+        link READY (so quiet_ticks holds: frames change neither the twist nor its grid) and
+        a Heartbeat within link_timeout (no link loss to notice)."""
+        mcu, clock, driver = self.mcu, self.clock, self.driver
+        for frame_id, data in self._to_mcu:
+            mcu.receive(frame_id, data)
+        self._to_mcu.clear()
+        t = clock.now()
+        mcu.advance(k)
+        frames, self._to_driver = self._to_driver, []
+        on_frame, tick, pin = driver.on_frame, driver.tick, self._driver_clock
+        timeout, ready = driver.config.link_timeout, LinkState.READY
+        dt, n, i, last = mcu.dt, len(frames), 0, k - 1
+        try:
+            for j in range(k):
+                pin.pinned = t
+                while i < n and frames[i][0] <= t:
+                    stamp, frame_id, data = frames[i]
+                    on_frame(frame_id, data, stamp)
+                    i += 1
+                if (j == last or driver.state is not ready
+                        or t - driver._last_heartbeat > timeout):
+                    tick()
+                if self._to_mcu and j < last:  # a command late to the MCU: never expected
+                    self.batch_stats["early_sends"] += 1
+                t += dt
+        finally:
+            pin.pinned = None
+        self.batch_stats["periods"] += k
+        self.batch_stats["batches"] += 1

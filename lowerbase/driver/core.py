@@ -599,6 +599,29 @@ class DriverCore:
             self._twist = None
             self.stats["twist_stale"] += 1
 
+    def quiet_ticks(self, start: float, dt: float, limit: int) -> int:
+        """How many of the ticks at ``start``, ``start + dt``, ... (the times of a SimClock
+        advanced by ``dt``) send nothing, at most ``limit``, as far as the state now tells (no
+        frame handled in between): none while configuring or enabling; else up to the first
+        MotionCommand slot or final stop that falls due. SimLoop runs the MCU ahead to there."""
+        if self.state == LinkState.CONFIGURING or self._enable_wanted:
+            return 0
+        if self._twist is None:
+            return limit
+        # the comparisons tick() makes, on the same floats
+        slot = self._next_command - 0.5 * (1.0 / self.config.command_rate)
+        stamp, timeout, stale_sent = self._twist_stamp, self.config.command_timeout, \
+            self._stale_sent
+        now = start
+        for k in range(limit):
+            if now - stamp < timeout:  # fresh
+                if now >= slot:
+                    return k
+            elif not stale_sent:
+                return k
+            now += dt
+        return limit
+
     def _send_motion(self, now: float) -> None:
         assert self._twist is not None
         v, w, smoothed = self._twist

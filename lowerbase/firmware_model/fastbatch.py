@@ -25,7 +25,7 @@ MAX_RUN = 32  #: periods per kernel call
 def run(kl: KernelLoop, n: int) -> int:
     """Up to ``n`` periods (each followed by ``clock.advance(dt)``); returns how many were
     done, 0 when the next one is not for a run (the caller steps it)."""
-    mcu, m, lean = kl.mcu, kl.m, kl.lean
+    mcu, m, lean, lb = kl.mcu, kl.m, kl.lean, kl.lb
     truth, slip, bms = mcu.truth, mcu.slip, mcu.bms
     cmd = mcu._last_cmd
     if (cmd is None or mcu.state != m.RobotState.ACTIVE or mcu.status & m.STOPPING
@@ -33,13 +33,13 @@ def run(kl: KernelLoop, n: int) -> int:
             or slip.events or slip.params.slip_rate_per_km):
         return 0
     now = mcu.clock.now()
-    if bms is not None and now >= mcu._bms_next_poll:
-        return 0
     imu = mcu.imu
     noise = imu.params.noise
     rows = imu._rows
     if noise and not rows:
         return 0  # the next sample refills the noise block: a single step does it
+    if bms is not None and now >= mcu._bms_next_poll and not kl.poll_ahead(now):
+        return 0
     if not kl.owned:
         kl.acquire()
     if kl._key != kl._current_key():
@@ -61,7 +61,8 @@ def run(kl: KernelLoop, n: int) -> int:
     stuck = mcu._enc_stuck
     imu_due0 = mcu._imu_due
     fs, js = kl.fs, kl.js
-    fs[:] = (ml.omega, ml.setpoint, ml.current, ml._over_time, ml._stall_time,
+    status_in, state_in = mcu.status, mcu.state  # motion_fault is 0 here
+    fs[:lb.F_IN] = (ml.omega, ml.setpoint, ml.current, ml._over_time, ml._stall_time,
              mr.omega, mr.setpoint, mr.current, mr._over_time, mr._stall_time,
              el._frac, er._frac, truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x,
              truth.distance, mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge,
@@ -70,15 +71,15 @@ def run(kl: KernelLoop, n: int) -> int:
              mcu._last_save, m.ODOMETER_SAVE_PERIOD, mcu._last_cmd_time,
              mcu.chassis.command_timeout, mcu._standby_cmd_time)
     js[:] = (ml.over_current, ml.stalled, mr.over_current, mr.stalled, el.total, er.total,
-             mcu._imu_same, mcu.status, mcu.motion_fault, mcu.state,
-             len(rows) - 1 if noise else 0, mcu._imu_last is not None, 0, 0, 0,
+             mcu._imu_same, status_in, 0, state_in,
+             len(rows) - 1 if noise else 0, mcu._imu_last is not None, 0, 0, 0, 0, 0,
              n, mode == 1, noise, bms is not None, mcu._bms_bits, mcu.estop_command,
              mcu._watchdog, mcu._speed_limited)
-    kl.lb.batch(kl.k, fs, js, targets, kl._rows_arr if noise else kl.zero_rows, kl.imu,
+    lb.batch(kl.k, fs, js, targets, kl._rows_arr if noise else kl.zero_rows, kl.imu,
                 kl.due, kl.per, kl.hot, kl.counters, kl.vals, kl.sig, kl.scale, kl.frames,
                 kl.out, kl.ids, kl.lens, kl.pidx)
     (oc_l, st_l, oc_r, st_r, el.total, er.total, mcu._imu_same, mcu.status, mcu.motion_fault,
-     state, row, _, count, done, python_emit) = js[:15].tolist()
+     state, row, _, count, done, python_emit, steps, py_frames) = js[:17].tolist()
     if mode == 1:  # the smoother as after the last period done
         smoother.v, smoother.w = wound[done - 1] if done else start
     if not done:
@@ -107,20 +108,32 @@ def run(kl: KernelLoop, n: int) -> int:
             del rows[row + 1:]
         imu._last = mcu._imu_last = mcu.imu_sample = sample
     clock = cast(SimClock, mcu.clock)  # the compiled loop runs on a SimClock only
+    if steps:
+        step = fs[lb.F_STEPS:lb.F_STEPS + 2 * steps].tolist()
+        for i in range(0, 2 * steps, 2):
+            bms.step(step[i], step[i + 1] / step[i])  # type: ignore[union-attr]
     last = done - 1
     data = kl.out[:count].tobytes()
     ids, lens = kl.ids[:count].tolist(), kl.lens[:count].tolist()
     pidx = kl.pidx[:count].tolist()
     kl._next = float(kl.due[-1])
+    final = None
     f = sent = 0
     for j in range(done):
         if j == last:
+            if final is not None:  # back to the state after the run
+                mcu.odometer, mcu.status, mcu.motion_fault, mcu.state = final
             if bms is not None and mcu._bms_elapsed >= m.BMS_STEP - 1e-9:
                 bms.step(mcu._bms_elapsed, mcu._bms_charge / mcu._bms_elapsed)
                 mcu._bms_charge = mcu._bms_elapsed = 0.0
             if (mcu.odometer != mcu._saved_odometer
                     and clock.now() - mcu._last_save >= m.ODOMETER_SAVE_PERIOD):
                 mcu._save_state()
+        elif py_frames >> j & 1:  # Python builds a frame of period j: its odometer and status
+            if final is None:
+                final = mcu.odometer, mcu.status, mcu.motion_fault, mcu.state
+            mcu.odometer = float(fs[lb.F_ODO_AT + j])
+            mcu.status, mcu.motion_fault, mcu.state = status_in, 0, state_in
         end = f
         while end < count and pidx[end] == j:
             end += 1

@@ -110,7 +110,7 @@ def _warm_up(lk: Any, lb: Any) -> None:
               f, f, f, f, f, f, f, f, f, True, True, z, b, imu, i, True, f, f, f, i, i, i, i,
               b, b, f, b, True, due, per, hot, counters, vals, sig, scale, frames, out, ids,
               lens, i)
-    lb.batch(k, np.zeros(lb.F_SIZE), np.zeros(lb.J_SIZE, np.int64), np.ones((1, 2)),
+    lb.batch(k, np.zeros(lb.F_ODO_AT + 1), np.zeros(lb.J_SIZE, np.int64), np.ones((1, 2)),
              np.zeros((1, 12)), imu, due, per, hot, counters, vals, sig, scale, frames, out,
              ids, lens, np.zeros(8, np.int64))
 
@@ -134,7 +134,8 @@ class KernelLoop:
         self.imu = np.zeros(12)
         self.zero_row = np.zeros(12)
         self.lb = lb  # lean_batch: runs of periods (fastbatch.py)
-        self.fs, self.js = np.zeros(lb.F_SIZE), np.zeros(lb.J_SIZE, np.int64)  # their state
+        self.fs = np.zeros(lb.F_ODO_AT + fastbatch.MAX_RUN)  # the state of a run (lean_batch)
+        self.js = np.zeros(lb.J_SIZE, np.int64)
         size = 5 * fastbatch.MAX_RUN + 2 * n + 8
         self.out, self.ids = np.zeros((size, 8), np.uint8), np.zeros(size, np.int64)
         self.lens, self.pidx = np.zeros(size, np.int64), np.zeros(size, np.int64)
@@ -226,7 +227,7 @@ class KernelLoop:
         truth, slip, bms = mcu.truth, mcu.slip, mcu.bms
         now = mcu.clock.now()
         if (truth.surroundings is not None or slip.events or slip.params.slip_rate_per_km
-                or (bms is not None and now >= mcu._bms_next_poll)):
+                or (bms is not None and now >= mcu._bms_next_poll and not self.poll_ahead(now))):
             self.release()
             return False
         if not self.owned:
@@ -287,6 +288,23 @@ class KernelLoop:
             mcu._save_state()
         if count:
             self._send(now, count)
+        return True
+
+    def poll_ahead(self, now: float) -> bool:
+        """The BMS poll of the period at ``now``, done before the kernel runs the period
+        (LeanLoop polls after the period's current integration and pack step: the poll reads
+        only the pack, which only the step changes); False, nothing done, when this period
+        also steps the pack (the same float sum as the kernel's): Python then runs it."""
+        mcu, m = self.mcu, self.m
+        bms = mcu.bms
+        if bms is None or mcu._bms_elapsed + mcu.dt >= m.BMS_STEP - 1e-9:
+            return False
+        mcu._bms_next_poll += m.BMS_POLL_PERIOD
+        snapshot = bms.poll()
+        if snapshot is not None:
+            mcu.bms_snapshot = snapshot
+            mcu._bms_bits = int(bms.status_bits(snapshot))
+            mcu._bms_last_answer = now
         return True
 
     def store_state(self, r: tuple[Any, ...]) -> tuple[Any, ...]:

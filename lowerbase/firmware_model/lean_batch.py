@@ -3,9 +3,13 @@
 simulated clock, while nothing needs Python.
 
 The run stops before a period whose BMS is polled, whose command has timed out (the watchdog)
-or whose IMU needs a new noise block, and after a period that emitted a frame Python builds
-(not one of the hot ones), stepped the BMS pack, is due to save the odometer, or changed the
-status word, the motion fault bits or the state (any of which can change ``Mcu._target``).
+or whose IMU needs a new noise block, and after a period that is due to save the odometer or
+changed the status word, the motion fault bits or the state (any of which can change
+``Mcu._target``). It does not stop for the frames Python builds (StatusCode, SystemStatus,
+Odometer, Heartbeat, LedState, Bms*) nor for the BMS pack step: the odometer after each period
+is kept (``fs[F_ODO_AT + j]``; status and state are the run's first until its last period,
+which alone may change them), and the pack steps' (elapsed, charge) pairs, for Python to build
+and step after the run (nothing in a run reads the pack: the BMS frames are the last poll's).
 
 The state goes in and out through two arrays (``fs``: floats, ``js``: integers; the slots
 below), not as scalar arguments: numba's handling of ~75 scalars was half a call's cost.
@@ -24,15 +28,19 @@ from lowerbase.firmware_model.lean_kernel import C_DT, _jit, period
 #: ... then what only goes in
 (F_NOW, F_BOOT, F_TARGET_V, F_TARGET_W, F_IMU_CYCLE, F_LAST_ANSWER, F_NEXT_POLL, F_BMS_STEP,
  F_SAVED_ODO, F_LAST_SAVE, F_SAVE_PERIOD, F_LAST_CMD, F_TIMEOUT, F_STANDBY_CMD) = range(25, 39)
-F_SIZE = 39
+F_IN = 39  #: the slots filled before a call
+#: ... then up to MAX_STEPS BMS pack steps (elapsed, charge) and the odometer after each period
+F_STEPS, MAX_STEPS = 39, 4
+F_ODO_AT = F_STEPS + 2 * MAX_STEPS  #: ``fs`` has F_ODO_AT + the run's most periods slots
 #: ``js`` slots: the state (in and out; the flags 0/1) ...
 (J_OC_L, J_ST_L, J_OC_R, J_ST_R, J_TOT_L, J_TOT_R, J_IMU_SAME, J_STATUS, J_FAULT, J_STATE,
  J_ROW, J_HAS_LAST) = range(12)
-#: ... what comes out (frame count, periods done, the last period's frames are Python's) ...
-J_COUNT, J_DONE, J_PY_EMIT = 12, 13, 14
+#: ... what comes out (frame count, periods done, the last period's frames are Python's, the
+#: BMS pack steps, bit j: period j emitted a frame Python builds) ...
+J_COUNT, J_DONE, J_PY_EMIT, J_STEPS, J_PY_FRAMES = range(12, 17)
 #: ... and what only goes in
-J_N, J_SMOOTHED, J_NOISE, J_BMS, J_BMS_BITS, J_ESTOP, J_WATCHDOG, J_LIMITED = range(15, 23)
-J_SIZE = 23
+J_N, J_SMOOTHED, J_NOISE, J_BMS, J_BMS_BITS, J_ESTOP, J_WATCHDOG, J_LIMITED = range(17, 25)
+J_SIZE = 25
 
 
 @_jit
@@ -67,6 +75,8 @@ def batch(k: np.ndarray, fs: np.ndarray, js: np.ndarray, targets: np.ndarray,
     count = 0
     done = 0
     python_emit = False
+    steps = 0
+    py_frames = 0
     for j in range(n):
         if bms and now >= next_poll:
             break
@@ -99,17 +109,23 @@ def batch(k: np.ndarray, fs: np.ndarray, js: np.ndarray, targets: np.ndarray,
         if c < 0:
             python_emit = True
             break
-        python_frame = False
         for f in range(count, c):
             pidx[f] = j
-            python_frame = python_frame or ids[f] < 0
+            if ids[f] < 0:
+                py_frames |= 1 << j
         count = c
+        fs[F_ODO_AT + j] = odometer
+        if bms and elapsed >= bms_step - 1e-9:  # the pack's step, for Python after the run
+            fs[F_STEPS + 2 * steps] = elapsed
+            fs[F_STEPS + 2 * steps + 1] = charge
+            steps += 1
+            charge = elapsed = 0.0
         if imu_due:
             imu_due_t += imu_cycle
             has_last = True
             if noise:
                 row -= 1
-        stop = (python_frame or (bms and elapsed >= bms_step - 1e-9)
+        stop = (steps == MAX_STEPS
                 or (odometer != saved_odometer and now - last_save >= save_period)
                 or status != status0 or motion_fault != fault0 or state != state0)
         now += dt
@@ -125,3 +141,4 @@ def batch(k: np.ndarray, fs: np.ndarray, js: np.ndarray, targets: np.ndarray,
     js[J_STATUS], js[J_FAULT], js[J_STATE] = status, motion_fault, state
     js[J_ROW], js[J_HAS_LAST] = row, has_last
     js[J_COUNT], js[J_DONE], js[J_PY_EMIT] = count, done, python_emit
+    js[J_STEPS], js[J_PY_FRAMES] = steps, py_frames

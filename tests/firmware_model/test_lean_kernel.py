@@ -20,6 +20,7 @@ from lowerbase.firmware_model.fastloop import LeanLoop
 from lowerbase.firmware_model.mcu import Mcu
 from lowerbase.firmware_model.profile import load_profile
 from lowerbase.firmware_model.truth import SlipEvent, TruePose
+from lowerbase.protocol.status_codes import StatusBit
 from tests.firmware_model.test_frame_trace import EXPECTED, TraceRig, record
 
 pytestmark = pytest.mark.skipif(fastkernel.kernel() is None, reason="numba not available")
@@ -50,8 +51,9 @@ def test_the_kernel_runs_most_lean_periods_and_keeps_the_trace(
         monkeypatch: pytest.MonkeyPatch) -> None:
     seen = _count_kernel_periods(monkeypatch)
     assert record() == EXPECTED
-    # the BMS polls stay in Python; SimRig.drive and run go through Mcu.advance
-    assert seen["run"] > seen["kernel"] > 10 * seen["python"] > 0
+    # SimRig.drive and run go through Mcu.advance; the BMS polls run in the kernel too (in
+    # this drive none comes in a period that also steps the pack: see the test below)
+    assert seen["run"] > seen["kernel"] > 0 and seen["python"] == 0
 
 
 def test_the_python_lean_loop_gives_the_same_trace(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -155,3 +157,47 @@ def test_without_numba_the_python_loop_runs(monkeypatch: pytest.MonkeyPatch) -> 
     compiled = TraceRig(profile=load_profile(), keep=False)
     assert compiled.mcu._lean.kernel is not None
     assert _run(compiled, 1.0) == python
+
+
+
+def _drive_polled(shift: int) -> tuple[tuple[Any, ...], int]:
+    """A drive on a pack near LOW_BATTERY, a charger connected midway (the CHARGING bit comes
+    with a poll), the pack's step phase moved by ``shift`` periods against the polls: (frames
+    and end state with the BMS's reading, how many polls came in a period that stepped the
+    pack, as the step() loop calls them)."""
+    p = load_profile()
+    bms = McuBmsAdapter.from_battery_table(p.battery, soc=20.02)
+    rig = TraceRig(profile=p, bms=bms, keep=False)
+    stepped, both = [-1.0], [0]
+    step, poll = bms.step, bms.poll
+
+    def counted_step(dt: float, load: float) -> None:
+        stepped[0] = rig.clock.now()
+        step(dt, load)
+
+    def counted_poll() -> Any:
+        both[0] += stepped[0] == rig.clock.now()
+        return poll()
+
+    bms.step, bms.poll = counted_step, counted_poll  # type: ignore[method-assign]
+    rig.mcu._bms_elapsed = shift * rig.mcu.dt
+    rig.enable()
+    rig.drive(0.8, 0.3, 4.0)
+    bms.connect_charger()
+    rig.drive(0.6, -0.2, 3.0)
+    m = rig.mcu
+    return (rig.trace, m.status, m._bms_bits, m._bms_last_answer, m.bms_snapshot,
+            m._bms_charge, m.truth.x, m.odometer), both[0]
+
+
+@pytest.mark.parametrize("shift", [0, 7, 19])
+def test_bms_polls_run_in_the_kernel_unless_the_pack_steps_in_the_same_period(
+        monkeypatch: pytest.MonkeyPatch, shift: int) -> None:
+    seen = _count_kernel_periods(monkeypatch)
+    got, _ = _drive_polled(shift)
+    assert got[2] & int(StatusBit.CHARGING) and got[1] & int(StatusBit.CHARGING)
+    monkeypatch.setattr(Mcu, "lean", False)
+    general, both = _drive_polled(shift)  # the general loop, step by step
+    assert got == general
+    # only a poll in a period that also steps the pack leaves the kernel (shift 19: some do)
+    assert seen["python"] == both and (both > 0) == (shift == 19)

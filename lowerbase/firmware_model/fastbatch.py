@@ -111,7 +111,7 @@ def run(kl: KernelLoop, n: int) -> int:
     if steps:
         step = fs[lb.F_STEPS:lb.F_STEPS + 2 * steps].tolist()
         for i in range(0, 2 * steps, 2):
-            bms.step(step[i], step[i + 1] / step[i])  # type: ignore[union-attr]
+            bms.step(step[i], step[i + 1] / step[i])
     last = done - 1
     data = kl.out[:count].tobytes()
     ids, lens = kl.ids[:count].tolist(), kl.lens[:count].tolist()

@@ -171,9 +171,9 @@ def _drive_polled(shift: int) -> tuple[tuple[Any, ...], int]:
     stepped, both = [-1.0], [0]
     step, poll = bms.step, bms.poll
 
-    def counted_step(dt: float, load: float) -> None:
+    def counted_step(dt: float, load_current: float) -> None:
         stepped[0] = rig.clock.now()
-        step(dt, load)
+        step(dt, load_current)
 
     def counted_poll() -> Any:
         both[0] += stepped[0] == rig.clock.now()

@@ -109,6 +109,35 @@ class LikelihoodField:
         bx, by = beams.end_xy[:, 0], beams.end_xy[:, 1]
         return poses[:, 0:1] + c * bx - s * by, poses[:, 1:2] + s * bx + c * by
 
+    def gather(self, poses: np.ndarray, beams: Beams
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per particle and beam: the end's flat cell index (0 off the map), inside the map,
+        its float32 z_hit term and ``pz`` (float64): compiled (:mod:`likelihood_kernel`),
+        the floats of :meth:`gather_numpy`."""
+        from lowerbase.world.localization.likelihood_kernel import gather
+
+        n, m = poses.shape[0], beams.end_xy.shape[0]
+        c, s = np.cos(poses[:, 2:3]), np.sin(poses[:, 2:3])  # as _ends takes them
+        flat, inside = np.empty((n, m), np.int64), np.empty((n, m), bool)
+        hit, pz = np.empty((n, m), np.float32), np.empty((n, m))
+        ox, oy, _ = self.grid.origin
+        gather(np.ascontiguousarray(poses[:, 0]), np.ascontiguousarray(poses[:, 1]),
+               c[:, 0], s[:, 0], np.ascontiguousarray(beams.end_xy[:, 0]),
+               np.ascontiguousarray(beams.end_xy[:, 1]), float(ox), float(oy),
+               float(self.grid.resolution), int(self.grid.width), int(self.grid.height),
+               self.hit, np.float32(self.hit_outside),
+               self.params.laser_z_rand / beams.range_max, flat, inside, hit, pz)
+        return flat, inside, hit, pz
+
+    def gather_numpy(self, poses: np.ndarray, beams: Beams
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`gather` in numpy, as :meth:`score` computed it before (the reference)."""
+        x, y = self._ends(poses, beams)
+        flat, inside = self._cells(x, y)
+        hit = np.where(inside, self.hit[flat], self.hit_outside)
+        pz = hit.astype(np.float64) + self.params.laser_z_rand / beams.range_max
+        return flat, inside, hit, pz
+
     def distances(self, pose: np.ndarray, beams: Beams) -> np.ndarray:
         """Distance [m] of each beam end to the nearest obstacle, seen from ``pose``."""
         x, y = self._ends(np.asarray(pose, dtype=np.float64).reshape(1, 3), beams)
@@ -127,10 +156,7 @@ class LikelihoodField:
         m = beams.end_xy.shape[0]
         if m == 0:
             return np.zeros(poses.shape[0]), self.model_type == "likelihood_field", 0
-        x, y = self._ends(poses, beams)
-        flat, inside = self._cells(x, y)
-        hit = np.where(inside, self.hit[flat], self.hit_outside)
-        pz = hit.astype(np.float64) + self.params.laser_z_rand / beams.range_max
+        flat, inside, hit, pz = self.gather(poses, beams)
         k = self.params.laser_likelihood_exponent
         if self.model_type == "likelihood_field":
             return k * np.log1p(np.sum(pz * pz * pz, axis=1)), True, m

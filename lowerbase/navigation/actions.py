@@ -7,7 +7,11 @@ period): feedback every period, the result when the controller says so.
 
 - /move_base (woosh_msgs/MoveBaseAction): SUCCEEDED at the goal; ABORTED with the reason in the
   status text (no path, stuck, a bad goal); PREEMPTED on cancel or a newer goal (actionlib's
-  simple-server policy). Feedback: ``base_position`` (the robot in the map frame).
+  simple-server policy). Feedback: ``base_position`` (the robot in the map frame). While the
+  navigator reports its path BLOCKED, the ACTIVE goal's status text (in /move_base/status, and
+  a SimpleActionClient's ``get_goal_status_text()``) is ``path blocked: <reason>``
+  (:data:`BLOCKED_TEXT`), published at once, and back to the accepted text on the first free
+  tick; the messages stay the vendor's (no field added). ``lowerbase tasks`` reads it.
 - /cmd_vel_control (woosh_msgs/StepControlAction): ``mode`` EXCUTE starts a list, PAUSE/RESUM
   act on the running one, CANCEL ends it. A new goal supersedes the goal handle that was
   following the list (that handle ends PREEMPTED); a PAUSE/RESUM goal follows the list to its
@@ -29,12 +33,15 @@ import logging
 from typing import Any
 
 from lowerbase.errors import LowerbaseError, WorldError
+from lowerbase.navigation.controller import Status
 from lowerbase.navigation.steps import CANCEL, CANCELLED, EXCUTE, MODE_NAMES, REJECTED, Step
 
 log = logging.getLogger(__name__)
 
 #: the goal thread re-checks at least this often even without a tick [s]
 WAKE = 0.5
+#: the ACTIVE /move_base goal's status text starts so while its path is blocked
+BLOCKED_TEXT = "path blocked: "
 
 
 class ActionServers:
@@ -108,6 +115,7 @@ class ActionServers:
             return
         log.info("move_base: goal (%.2f, %.2f, %.2f), %d path poses", *target, len(poses))
         seen = node.tick_count
+        accepted = shown = self._goal_text()
         while True:
             seen = self._wait_tick(seen)
             if node.stop.is_set():
@@ -121,6 +129,7 @@ class ActionServers:
                     server.set_preempted(text=f"preempted: {why}")
                     return
                 state, reason = node.navigator.state, node.navigator.reason
+                command = node.last_command
             if pose is not None:
                 fb = MoveBaseFeedback(base_position=io.pose_stamped(pose, node.rospy.Time.now(),
                                                                     frame))
@@ -134,6 +143,35 @@ class ActionServers:
             if state == GoalState.PREEMPTED:
                 server.set_preempted(text=reason)
                 return
+            text = accepted
+            if command is not None and command.status is Status.BLOCKED:
+                text = BLOCKED_TEXT + (command.reason or "an obstacle")
+            if text != shown:
+                shown = text
+                self._set_goal_text(text)
+
+    def _goal_text(self) -> str:
+        """The current /move_base goal's status text."""
+        with self.move_base.action_server.lock:
+            tracker = self.move_base.current_goal.status_tracker
+            return str(tracker.status.text) if tracker is not None else ""
+
+    def _set_goal_text(self, text: str) -> None:
+        """Set the ACTIVE /move_base goal's status text and publish /move_base/status now.
+
+        SimpleActionServer has no call for this (a text goes with a transition only), so the
+        goal handle's status is changed under the server's lock, as its own calls do; nothing
+        is published once the server is quiet (shutting down) or the goal has ended."""
+        from actionlib_msgs.msg import GoalStatus  # type: ignore[import-untyped]
+
+        inner = self.move_base.action_server
+        with inner.lock:
+            tracker = self.move_base.current_goal.status_tracker
+            if not inner.started or tracker is None or \
+                    tracker.status.status != GoalStatus.ACTIVE:
+                return
+            tracker.status.text = text
+            inner.publish_status()
 
     # -- /cmd_vel_control ----------------------------------------------------------------------
     def _step_control(self, goal: Any) -> None:

@@ -5,7 +5,9 @@ Only :mod:`lowerbase.tasks.node` imports this, after checking that ROS is there.
 - :class:`ActionNavigation`: the machine's ``Navigation`` as a SimpleActionClient of /move_base
   (woosh_msgs/MoveBaseAction, served by ``lowerbase navigation``). Its ``tick`` reports the
   goal's actionlib state as the navigator's (PENDING, ACTIVE, SUCCEEDED, ABORTED, PREEMPTED) and
-  the status text as the reason; the twist is always zero: the navigation node drives.
+  the status text as the reason; an ACTIVE goal whose text is ``path blocked: <reason>`` (the
+  navigation node's :data:`~lowerbase.navigation.actions.BLOCKED_TEXT`) is the navigator's
+  BLOCKED with that reason, as in TaskSim. The twist is always zero: the navigation node drives.
 - :class:`ActionSteps`: the machine's step moves (docking) as a SimpleActionClient of
   /cmd_vel_control (woosh_msgs/StepControlAction). A PAUSE or RESUM goal supersedes the EXCUTE
   goal on the server and carries the list's result, so the client follows the latest goal only.
@@ -29,6 +31,7 @@ from woosh_msgs.msg import (
 )
 
 from lowerbase.errors import LowerbaseError
+from lowerbase.navigation.actions import BLOCKED_TEXT
 from lowerbase.navigation.ros_msgs import pose_stamped
 from lowerbase.navigation.steps import (
     CANCEL,
@@ -104,6 +107,8 @@ class ActionNavigation:
         name = _NAV_STATE.get(state, "ACTIVE")
         if state == GoalStatus.LOST and not text:
             text = "the /move_base goal was lost (is lowerbase navigation running?)"
+        if name == "ACTIVE" and text.startswith(BLOCKED_TEXT):
+            return ActionFeedback(0.0, 0.0, name, "BLOCKED", text[len(BLOCKED_TEXT):])
         return ActionFeedback(0.0, 0.0, name, _state_name(state), text)
 
 

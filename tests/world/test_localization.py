@@ -20,7 +20,12 @@ from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.localization import AmclParams, Localizer, PoseEstimate
 from lowerbase.world.localization.likelihood import LikelihoodField
 from lowerbase.world.localization.motion import odom_delta, sample_diff
-from lowerbase.world.localization.particles import kld_count, kld_limit, systematic_indices
+from lowerbase.world.localization.particles import (
+    kld_count,
+    kld_count_numpy,
+    kld_limit,
+    systematic_indices,
+)
 from lowerbase.world.localization.poses import Pose2D, compose, inverse
 from tests.world.localization_sim import (
     cast,
@@ -103,6 +108,22 @@ def test_kld_limit_is_amcls_formula_and_kld_count_adapts_to_the_spread() -> None
                             rng.uniform(-3, 3, 5000)))
     assert kld_count(tight, p) == kld_limit(np.array([8]), p)[0] + 1 == 526
     assert kld_count(wide, p) == 5000
+
+
+def test_kld_count_is_the_numpy_count() -> None:
+    """The compiled count (pf_kernel) against the numpy count it replaced, in the given order
+    and in a permuted order (resample's ``poses[perm]``), spreads from one bin to thousands."""
+    rng = np.random.default_rng(9)
+    for params in (AmclParams(), AmclParams(min_particles=10, max_particles=3000),
+                   AmclParams(min_particles=500, kld_err=0.05)):
+        for spread in (0.0, 0.02, 0.1, 0.4, 3.0):
+            n = params.max_particles
+            poses = np.column_stack((rng.normal(4.0, spread + 1e-9, n),
+                                     rng.normal(-2.0, spread + 1e-9, n),
+                                     rng.normal(0.5, 0.3 * spread + 1e-9, n)))
+            perm = rng.permutation(n)
+            assert kld_count(poses, params) == kld_count_numpy(poses, params)
+            assert kld_count(poses, params, perm) == kld_count_numpy(poses[perm], params)
 
 
 def test_systematic_resampling_keeps_each_particle_in_proportion() -> None:

@@ -73,11 +73,50 @@ def bin_keys(poses: np.ndarray, params: AmclParams) -> tuple[np.ndarray, np.ndar
     return ix, iy, ia
 
 
-def kld_count(poses: np.ndarray, params: AmclParams) -> int:
-    """How many of ``poses`` (in the order given) KLD-sampling keeps."""
+def kld_count(poses: np.ndarray, params: AmclParams, order: np.ndarray | None = None) -> int:
+    """How many of ``poses`` (in the order given; ``order``: in the order ``poses[order]``)
+    KLD-sampling keeps. The count is taken by a compiled scan that stops where it stops
+    (:mod:`pf_kernel`); :func:`kld_count_numpy` is the numpy count it replaced."""
+    from lowerbase.world.localization.pf_kernel import kld_count_poses
+
+    n = poses.shape[0]
+    if n == 0:
+        return 0
+    if order is None:
+        order = np.arange(n)
+    return int(kld_count_poses(
+        np.ascontiguousarray(poses[:, 0]), np.ascontiguousarray(poses[:, 1]),
+        np.ascontiguousarray(poses[:, 2]), np.asarray(order, dtype=np.int64),
+        float(params.kld_bin_xy), float(params.kld_bin_yaw),
+        math.ceil(2 * math.pi / params.kld_bin_yaw), math.pi, _limit_table(params, n),
+        int(params.min_particles)))
+
+
+_LIMITS: dict[tuple[float, float, int, int, int], np.ndarray] = {}
+
+
+def _limit_table(params: AmclParams, n: int) -> np.ndarray:
+    """``kld_limit(k)`` for k = 0 .. n (elementwise numpy: the same floats as computed for
+    any other array of k)."""
+    key = (params.kld_err, params.kld_z, params.min_particles, params.max_particles, n)
+    table = _LIMITS.get(key)
+    if table is None:
+        if len(_LIMITS) > 16:
+            _LIMITS.clear()
+        table = _LIMITS[key] = kld_limit(np.arange(n + 1), params)
+    return table
+
+
+def _bin_index(poses: np.ndarray, params: AmclParams) -> np.ndarray:
+    """One integer per histogram bin of ``poses`` (x, y, heading)."""
     ix, iy, ia = bin_keys(poses, params)
     ix, iy = ix - ix.min(), iy - iy.min()
-    key = (ix * (int(iy.max()) + 1) + iy) * 64 + ia
+    return (ix * (int(iy.max()) + 1) + iy) * 64 + ia
+
+
+def kld_count_numpy(poses: np.ndarray, params: AmclParams) -> int:
+    """:func:`kld_count` in numpy (the reference the compiled count is tested against)."""
+    key = _bin_index(poses, params)
     _, first = np.unique(key, return_index=True)
     new_bin = np.zeros(key.size, dtype=bool)
     new_bin[first] = True
@@ -200,9 +239,9 @@ class ParticleSet:
         n_rand = int(self.rng.binomial(m, w_diff)) if w_diff > 0 else 0
         kept = self.poses[systematic_indices(self.weights, m - n_rand, self.rng)]
         new = np.concatenate((kept, field.uniform_poses(n_rand, self.rng))) if n_rand else kept
-        if p.kld_sampling:
-            new = new[self.rng.permutation(m)]
-            new = new[:kld_count(new, p)]
+        if p.kld_sampling:  # new[perm][:count], only the rows kept gathered
+            perm = self.rng.permutation(m)
+            new = new[perm[:kld_count(new, p, perm)]]
         n_rand_kept = round(n_rand * new.shape[0] / m)
         self.poses = np.ascontiguousarray(new)
         self.weights = np.full(new.shape[0], 1.0 / new.shape[0])

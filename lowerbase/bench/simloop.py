@@ -6,11 +6,12 @@ would publish (/odom_raw, /odom, /battery, ...) is read off ``loop.driver``; the
 off ``loop.mcu.truth``. Scenarios, the demo and the odometry benchmark run on this.
 
 ``run`` and ``drive`` without an ``on_step`` (and :meth:`SimLoop.advance`) run the MCU ahead in
-one ``Mcu.advance(k)`` up to the next period whose driver tick may send (its MotionCommand
-grid, a stale twist's stop): the driver then gets each period's frames and tick at that
-period's time (its clock pinned there), so the frames, /odom and the commands are those of
-``k`` single steps, bit for bit. Only while nothing else can make the driver send: the link
-READY, no listener, no tap, no fault in the MCU, nothing but MotionCommands pending for it.
+one ``Mcu.advance(k)`` up to the next period whose driver tick may do anything (its
+MotionCommand grid, a stale twist's stop, a silent link): the frames reach the driver as the
+MCU sends them, each at its period's time, then the last period's tick runs at that period's
+time, so the frames, /odom and the commands are those of ``k`` single steps, bit for bit. Only
+while nothing else can make the driver send: the link READY, no listener, no tap, no fault in
+the MCU, nothing but MotionCommands pending for it.
 
 ``surroundings`` (a :class:`~lowerbase.firmware_model.truth.Surroundings`, e.g. the world's
 footprint contact) is what the robot can bump into; None (the default): open floor.
@@ -163,9 +164,12 @@ class SimLoop(SteppedLoop):
                        bms=bms, faults=faults)
         self._driver_clock = _DriverClock(self.clock)
         self.driver = DriverCore(self._from_driver, self._driver_clock, driver_config)
-        #: periods run in batches, and batches whose driver sent early (never expected: the
-        #: conditions in _batchable exclude it; then no more batches, see advance)
-        self.batch_stats = {"periods": 0, "batches": 0, "early_sends": 0}
+        #: periods run in batches, batches, and driver sends that fell inside a batch (never
+        #: expected: the conditions in _batchable exclude them; then no more batches)
+        self.batch_stats = {"periods": 0, "batches": 0, "mistimed": 0}
+        #: in a batch: the driver's on_frame (frames go straight to it), the last period's time
+        self._direct: Callable[[int, bytes, float], None] | None = None
+        self._last_of_batch = 0.0
         self.control_dt = self.mcu.dt
         self.twist_driver = self.driver
         self.mcu.truth.surroundings = surroundings
@@ -182,12 +186,17 @@ class SimLoop(SteppedLoop):
 
     def _from_mcu(self, frame_id: int, data: bytes) -> None:
         now = self.clock.now()
+        if self._direct is not None:  # in a batch: straight to the driver
+            self._direct(frame_id, data, now)
+            return
         self._to_driver.append((now, frame_id, data))
         if self.tap is not None:
             self.tap(now, "lower", frame_id, data)
 
     def _from_driver(self, frame_id: int, data: bytes) -> None:
         self._to_mcu.append((frame_id, data))
+        if self._direct is not None and self.clock.now() < self._last_of_batch:
+            self.batch_stats["mistimed"] += 1  # in a batch, before its last period
         if self.tap is not None:
             self.tap(self._driver_clock.now(), "upper", frame_id, data)
 
@@ -224,48 +233,44 @@ class SimLoop(SteppedLoop):
 
     def _batchable(self, periods: int) -> int:
         """How many periods from now may run as one batch: up to and including the first
-        whose driver tick may send; 1 when anything but the tick could make the driver send
-        (or the MCU take something else than a MotionCommand)."""
+        whose driver tick may do anything; 1 when anything but the tick could make the driver
+        send (or the MCU take something else than a MotionCommand)."""
         driver, mcu = self.driver, self.mcu
         if (periods < 2 or driver.state is not LinkState.READY or driver.listeners
                 or self.tap is not None or mcu.faults or mcu._delayed
                 or mcu.state is not RobotState.ACTIVE or driver.heard_until is not None
-                or driver._reboot_suspect is not None or self.batch_stats["early_sends"]
+                or driver._reboot_suspect is not None or self.batch_stats["mistimed"]
                 or type(self).step is not SimLoop.step
                 or any(frame_id != self._motion_id for frame_id, _ in self._to_mcu)):
             return 1
-        return max(1, driver.quiet_ticks(self.clock.now(), mcu.dt, min(periods, MAX_BATCH) - 1)
-                   + 1)
+        return driver.idle_ticks(self.clock.now(), mcu.dt, min(periods, MAX_BATCH) - 1) + 1
 
     def _batch(self, k: int) -> None:
-        """``k`` periods: the MCU in one advance, then the driver period by period, each
-        period's frames and tick at its time. A tick that cannot do anything is skipped: the
-        link READY (so quiet_ticks holds: frames change neither the twist nor its grid) and
-        a Heartbeat within link_timeout (no link loss to notice)."""
+        """``k`` periods: the MCU in one advance, its frames handed to the driver as they are
+        sent (each at its period's time, on the loop's clock), then the last period's tick
+        at that period's time (the ticks before it do nothing: :meth:`DriverCore.idle_ticks`).
+        A send by the driver before the last period (never expected: a frame made it
+        configure, or send itself) is counted in ``batch_stats["mistimed"]`` and ends
+        batching."""
         mcu, clock, driver = self.mcu, self.clock, self.driver
         for frame_id, data in self._to_mcu:
             mcu.receive(frame_id, data)
         self._to_mcu.clear()
-        t = clock.now()
-        mcu.advance(k)
-        frames, self._to_driver = self._to_driver, []
-        on_frame, tick, pin = driver.on_frame, driver.tick, self._driver_clock
-        timeout, ready = driver.config.link_timeout, LinkState.READY
-        dt, n, i, last = mcu.dt, len(frames), 0, k - 1
+        last = clock.now()
+        for _ in range(k - 1):
+            last += mcu.dt  # as the clock advances
+        self._last_of_batch = last
+        self._direct = driver.on_frame
         try:
-            for j in range(k):
-                pin.pinned = t
-                while i < n and frames[i][0] <= t:
-                    stamp, frame_id, data = frames[i]
-                    on_frame(frame_id, data, stamp)
-                    i += 1
-                if (j == last or driver.state is not ready
-                        or t - driver._last_heartbeat > timeout):
-                    tick()
-                if self._to_mcu and j < last:  # a command late to the MCU: never expected
-                    self.batch_stats["early_sends"] += 1
-                t += dt
+            mcu.advance(k)
         finally:
-            pin.pinned = None
+            self._direct = None
+        if driver.state is LinkState.CONFIGURING or driver._enable_wanted:
+            self.batch_stats["mistimed"] += 1  # its requests would go out before the tick
+        self._driver_clock.pinned = last
+        try:
+            driver.tick()
+        finally:
+            self._driver_clock.pinned = None
         self.batch_stats["periods"] += k
         self.batch_stats["batches"] += 1

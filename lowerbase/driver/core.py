@@ -599,26 +599,30 @@ class DriverCore:
             self._twist = None
             self.stats["twist_stale"] += 1
 
-    def quiet_ticks(self, start: float, dt: float, limit: int) -> int:
+    def idle_ticks(self, start: float, dt: float, limit: int) -> int:
         """How many of the ticks at ``start``, ``start + dt``, ... (the times of a SimClock
-        advanced by ``dt``) send nothing, at most ``limit``, as far as the state now tells (no
-        frame handled in between): none while configuring or enabling; else up to the first
-        MotionCommand slot or final stop that falls due. SimLoop runs the MCU ahead to there."""
-        if self.state == LinkState.CONFIGURING or self._enable_wanted:
+        advanced by ``dt``) do nothing at all, at most ``limit``, as far as the state now
+        tells (no frame handled in between; ``heard_until`` None): none unless READY and not
+        enabling; else up to the first that finds the link silent, or a MotionCommand slot or
+        a stale twist's stop due. SimLoop runs the MCU ahead to there."""
+        if self.state is not LinkState.READY or self._enable_wanted:
             return 0
-        if self._twist is None:
-            return limit
         # the comparisons tick() makes, on the same floats
+        heartbeat, link_timeout = self._last_heartbeat, self.config.link_timeout
+        twist = self._twist is not None
         slot = self._next_command - 0.5 * (1.0 / self.config.command_rate)
         stamp, timeout, stale_sent = self._twist_stamp, self.config.command_timeout, \
             self._stale_sent
         now = start
         for k in range(limit):
-            if now - stamp < timeout:  # fresh
-                if now >= slot:
-                    return k
-            elif not stale_sent:
+            if now - heartbeat > link_timeout:
                 return k
+            if twist:
+                if now - stamp < timeout:  # fresh
+                    if now >= slot:
+                        return k
+                elif not stale_sent:
+                    return k
             now += dt
         return limit
 

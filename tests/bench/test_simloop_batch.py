@@ -22,12 +22,13 @@ from lowerbase.firmware_model.profile import load_profile
 Frame = tuple[float, int, bytes]
 
 
-def _recording(loop: SimLoop) -> tuple[list[tuple[float, Frame]], list[Frame]]:
-    """(frames the driver was handed, with its clock's time then; frames the MCU took),
-    recorded from now on."""
+def _recording(loop: SimLoop) -> tuple[list[tuple[float, Frame]], list[Frame], list[Frame]]:
+    """(frames the driver was handed, with its clock's time then; frames the MCU took; frames
+    the driver sent, at its clock's time), recorded from now on."""
     to_driver: list[tuple[float, Frame]] = []
     to_mcu: list[Frame] = []
-    on_frame, receive = loop.driver.on_frame, loop.mcu.receive
+    sent: list[Frame] = []
+    on_frame, receive, send = loop.driver.on_frame, loop.mcu.receive, loop.driver._send
 
     def driver_gets(frame_id: int, data: bytes, stamp: float | None = None) -> None:
         assert stamp is not None
@@ -38,9 +39,14 @@ def _recording(loop: SimLoop) -> tuple[list[tuple[float, Frame]], list[Frame]]:
         to_mcu.append((loop.clock.now(), frame_id, bytes(data)))
         receive(frame_id, data)
 
+    def driver_sends(frame_id: int, data: bytes) -> None:
+        sent.append((loop.driver.clock.now(), frame_id, bytes(data)))
+        send(frame_id, data)
+
     loop.driver.on_frame = driver_gets  # type: ignore[method-assign]
     loop.mcu.receive = mcu_gets  # type: ignore[method-assign]
-    return to_driver, to_mcu
+    loop.driver._send = driver_sends
+    return to_driver, to_mcu, sent
 
 
 def _state(loop: SimLoop) -> dict[str, Any]:
@@ -95,13 +101,14 @@ def test_batched_periods_match_single_steps_bit_for_bit(profile_kw: dict[str, bo
     states_b = _script(batched, stepped=False)
     assert rec_b[0] == rec_s[0]  # every frame the driver got, with its stamp and clock
     assert rec_b[1] == rec_s[1]  # every command the MCU took, at its time
+    assert rec_b[2] == rec_s[2]  # every frame the driver sent, at its time
     assert len(rec_s[1]) > 100
     for b, s in zip(states_b, states_s, strict=True):
         assert b == s
     assert stepped.batch_stats["periods"] == 0
     # most periods ran in batches, and none had a command sent early
     assert batched.batch_stats["periods"] > 0.8 * round(batched.now / batched.control_dt)
-    assert batched.batch_stats["early_sends"] == 0
+    assert batched.batch_stats["mistimed"] == 0
 
 
 def test_no_batching_while_something_else_may_send() -> None:

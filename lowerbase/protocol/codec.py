@@ -47,6 +47,7 @@ DBC_PATH = Path(__file__).with_name("chassis.dbc")
 
 SignalValue = int | float | str
 Signals = dict[str, SignalValue]
+Payload = bytes | bytearray | memoryview
 
 
 class DecodeFunction(Protocol):
@@ -252,7 +253,7 @@ class MessageCodec:
             raise EncodeError(f"{self.name} has no signal {name!r}") from None
 
     def decode(
-        self, data: bytes | bytearray | memoryview, *, decode_choices: bool = False,
+        self, data: bytes | bytearray | memoryview, decode_choices: bool = False,
         strict: bool = True,
     ) -> Signals:
         """Decode a payload into physical values.
@@ -260,7 +261,14 @@ class MessageCodec:
         ``strict`` (default) raises :class:`SignalRangeError` for a value outside the
         catalog range; ``decode_choices`` replaces values that have a name by the name.
         """
-        values: Signals = self._decode(data, strict)  # type: ignore[arg-type]  # any buffer
+        # no keyword-only parameters: CPython (3.11+) specializes only calls of functions
+        # without them; the functions are read into locals (``self._f(...)`` is a method
+        # lookup, which CPython does not specialize for an instance's attribute)
+        if strict and not decode_choices:
+            fast = self._decode_strict
+            return fast(data)
+        loose = self._decode
+        values: Signals = loose(data, strict)  # type: ignore[arg-type]  # any buffer
         if decode_choices:
             for name, table in ((s.name, s.choices) for s in self.signals if s.choices):
                 raw = values.get(name)
@@ -348,7 +356,7 @@ class MessageCodec:
         if shift:
             expr = f"({expr} >> {shift})"
         width = sum(w for _, _, w in parts)
-        if shift + s.length < width or len(parts) > 1:
+        if shift + s.length < width:  # bits above the signal
             expr = f"{expr} & {s.mask:#x}"
         return expr
 
@@ -427,9 +435,11 @@ class MessageCodec:
     def _decode_body(
         self, signals: tuple[SignalSpec, ...], fields: list[tuple[str, int, int]],
         tables: dict[int, list[SignalSpec]], tag: str, namespace: dict[str, Any],
+        always_strict: bool,
     ) -> list[str]:
         """Lines (indented by 4) that decode ``signals`` from the unpacked ``fields`` and end
-        in ``return {...}``; lookup tables go into ``namespace`` with the suffix ``tag``."""
+        in ``return {...}``; lookup tables go into ``namespace`` with the suffix ``tag``.
+        ``always_strict``: the range checks without the test of a ``strict`` argument."""
         direct = {f[0] for f in fields if f[0].startswith("d")}
         pieces = [f for f in fields if f[0].startswith("p")]
         lines: list[str] = []
@@ -460,10 +470,14 @@ class MessageCodec:
             else:
                 namespace[f"_TS{b}{tag}"] = tuple(r if ok else None for r, ok in
                                                    zip(loose, valid, strict=True))
-                lines.append(f"    e{b} = (_TS{b}{tag} if strict else _TL{b}{tag})[t{b}]")
-                lines.append(f"    if e{b} is None:")
+                pick = (f"_TS{b}{tag}[t{b}]" if always_strict else
+                        f"(_TS{b}{tag} if strict else _TL{b}{tag})[t{b}]")
+                if len(sigs) == 1:
+                    lines.append(f"    {target} = {pick}")
+                    lines.append(f"    if {target} is None:")
+                else:  # unpacking None (a signal out of range) raises: no test on the way
+                    lines += ["    try:", f"        {target} = {pick}", "    except TypeError:"]
                 lines.append("        _out_of_range(codec, decode_loose(data))")
-                lines.append(f"    {target} = e{b}")
         checks: list[str] = []
         out = []
         for s in signals:
@@ -500,12 +514,14 @@ class MessageCodec:
                 out.append(f"'{s.name}': {v}")
             elif s.offset == 0 and s.scale > 0:
                 # x + 0 == x for every x a positive scale can produce (no -0.0), so cantools'
-                # ``raw * scale + offset`` reduces to the product
-                out.append(f"'{s.name}': {v} * {s.scale!r}")
+                # ``raw * scale + offset`` reduces to the product; written ``scale * raw``
+                # (the same IEEE product): float's multiply is then tried first, not int's
+                out.append(f"'{s.name}': {s.scale!r} * {v}")
             else:
-                out.append(f"'{s.name}': {v} * {s.scale!r} + {s.offset!r}")
+                out.append(f"'{s.name}': {s.scale!r} * {v} + {s.offset!r}")
         if checks:
-            lines.append(f"    if strict and ({' or '.join(checks)}):")
+            lines.append(f"    if {' or '.join(checks)}:" if always_strict else
+                         f"    if strict and ({' or '.join(checks)}):")
             lines.append("        _out_of_range(codec, decode_loose(data))")
         lines.append("    return {" + ", ".join(out) + "}")
         return lines
@@ -529,21 +545,28 @@ class MessageCodec:
             "_unknown_mux": _unknown_mux,
             "codec": self,
         }
-        body: list[str] = []
-        if self.multiplexer is None:
-            body = self._decode_body(self.signals, fields, cuts[0][2], "", namespace)
-        else:
-            body.append(f"    mux = {self._raw_expr(self.multiplexer, fields)}")
+
+        def make_body(always_strict: bool) -> list[str]:
+            if self.multiplexer is None:
+                return self._decode_body(self.signals, fields, cuts[0][2], "", namespace,
+                                         always_strict)
+            body = [f"    mux = {self._raw_expr(self.multiplexer, fields)}"]
             # when the values cover every raw multiplexer value, the last needs no test
             every = len(self.variants) == 1 << self.multiplexer.length
             for n, ((k, sigs), (_, _, tables)) in enumerate(
                     zip(self.variants.items(), cuts, strict=True)):
                 body.append("    if True:" if every and n == len(cuts) - 1 else
                             f"    if mux == {k}:")
-                body += ["    " + ln for ln in
-                         self._decode_body(sigs, fields, tables, f"_{k}", namespace)]
+                body += ["    " + ln for ln in self._decode_body(
+                    sigs, fields, tables, f"_{k}", namespace, always_strict)]
             if not every:
                 body.append("    _unknown_mux(codec, mux)")
+            return body
+
+        def named(body: list[str]) -> list[str]:
+            return [ln.replace("return {", f"return '{self.name}', {{", 1)
+                    if ln.lstrip().startswith("return {") else ln for ln in body]
+
         head = [
             "    try:",
             f"        {', '.join(f[0] for f in fields)}, = _unpack("
@@ -552,17 +575,22 @@ class MessageCodec:
             f"        raise FrameLengthError('{self.name}: payload of %d bytes, the catalog "
             f"says {self.length}' % len(data)) from None",
         ]
-        # the same body returning (name, values), for Codec.decode's hot path
-        named = [ln.replace("return {", f"return '{self.name}', {{", 1)
-                 if ln.lstrip().startswith("return {") else ln for ln in body]
+        # the same body returning (name, values), for Codec.decode; and both with the range
+        # checks built in (strict=True, the default: one argument and its tests less)
+        body, always = make_body(False), make_body(True)
         lines = ["def decode(data, strict):", *head, *body,
-                 "def decode_named(data, strict):", *head, *named]
+                 "def decode_named(data, strict):", *head, *named(body),
+                 "def decode_strict(data):", *head, *always,
+                 "def decode_named_strict(data):", *head, *named(always)]
         self._decode_source = "\n".join(lines)
         exec(compile(self._decode_source, f"<lowerbase codec {self.name}.decode>", "exec"),
              namespace)
         decode = namespace["decode"]
         namespace["decode_loose"] = lambda data: decode(data, False)
         self._decode_named = namespace["decode_named"]
+        self._decode_strict: Callable[[Payload], Signals] = namespace["decode_strict"]
+        self._decode_named_strict: Callable[[Payload], tuple[str, Signals]] = (
+            namespace["decode_named_strict"])
         return decode
 
     def _encode_body(self, signals: tuple[SignalSpec, ...], tag: str,
@@ -730,9 +758,9 @@ def _out_of_range(codec: MessageCodec, values: Signals) -> None:
             continue
         v = values[s.name]
         if not (s.minimum <= v <= s.maximum):  # type: ignore[operator]
-            raise SignalRangeError(
+            raise SignalRangeError(  # from None: raised while handling the unpack's TypeError
                 f"{codec.name}.{s.name} = {v!r} is outside [{s.minimum}, {s.maximum}] {s.unit}"
-                .rstrip())
+                .rstrip()) from None
     raise AssertionError("no signal out of range")  # pragma: no cover
 
 
@@ -758,8 +786,7 @@ class Codec:
         self._by_name = {m.name: m for m in self.messages}
         self._by_id = {m.frame_id: m for m in self.messages}
         self._decoders = {m.frame_id: m._decode_named for m in self.messages}
-        #: ``decode(frame_id, data, *, decode_choices=False, strict=True) -> (name, signals)``
-        self.decode: DecodeFunction = self._make_decode()
+        self._strict_decoders = {m.frame_id: m._decode_named_strict for m in self.messages}
 
     def __iter__(self) -> Iterator[MessageCodec]:
         return iter(self.messages)
@@ -798,25 +825,27 @@ class Codec:
             raise UnknownMessageError(f"the catalog has no message with ID {frame_id:#05x}")
         return msg.name, msg.decode(data, decode_choices=decode_choices, strict=strict)
 
-    def _make_decode(self) -> DecodeFunction:
-        # a plain function held by the instance: no method binding, one dict lookup, one call
-        table = self._decoders
-        slow = self._decode_slow
-
-        def decode(
-            frame_id: int, data: bytes | bytearray | memoryview, *,
-            decode_choices: bool = False, strict: bool = True,
-        ) -> tuple[str, Signals]:
-            """Decode a frame; returns (message name, signals)."""
-            if decode_choices:
-                return slow(frame_id, data, decode_choices, strict)
+    def decode(
+        self, frame_id: int, data: bytes | bytearray | memoryview,
+        decode_choices: bool = False, strict: bool = True,
+    ) -> tuple[str, Signals]:
+        """Decode a frame; returns (message name, signals)."""
+        # a method (CPython specializes the attribute lookup of a class's function, not of an
+        # instance's) without keyword-only parameters (which leave the call unspecialized);
+        # strict (the default) calls the decoder with the range checks built in
+        if decode_choices:
+            return self._decode_slow(frame_id, data, decode_choices, strict)
+        if strict:
             try:
-                fast = table[frame_id]  # subscript: cheaper than a call to dict.get
+                fast = self._strict_decoders[frame_id]  # subscript: cheaper than dict.get
             except KeyError:
-                return slow(frame_id, data, decode_choices, strict)  # raises UnknownMessage
-            return fast(data, strict)
-
-        return decode
+                return self._decode_slow(frame_id, data, decode_choices, strict)  # raises
+            return fast(data)
+        try:
+            loose = self._decoders[frame_id]
+        except KeyError:
+            return self._decode_slow(frame_id, data, decode_choices, strict)  # raises
+        return loose(data, False)
 
 
 @cache

@@ -75,9 +75,9 @@ def run(kl: KernelLoop, n: int) -> int:
              len(rows) - 1 if noise else 0, mcu._imu_last is not None, 0, 0, 0, 0, 0,
              n, mode == 1, noise, bms is not None, mcu._bms_bits, mcu.estop_command,
              mcu._watchdog, mcu._speed_limited)
-    lb.batch(kl.k, fs, js, targets, kl._rows_arr if noise else kl.zero_rows, kl.imu,
-                kl.due, kl.per, kl.hot, kl.counters, kl.vals, kl.sig, kl.scale, kl.frames,
-                kl.out, kl.ids, kl.lens, kl.pidx)
+    kl.batch(kl.k, fs, js, targets, kl._rows_arr if noise else kl.zero_rows, kl.imu,
+             kl.due, kl.per, kl.hot, kl.counters, kl.vals, kl.sig, kl.scale, kl.frames,
+             kl.out, kl.ids, kl.lens, kl.pidx)
     (oc_l, st_l, oc_r, st_r, el.total, er.total, mcu._imu_same, mcu.status, mcu.motion_fault,
      state, row, _, count, done, python_emit, steps, py_frames) = js[:17].tolist()
     if mode == 1:  # the smoother as after the last period done

@@ -165,6 +165,9 @@ class Mcu:
         self._watchdog = False
         self._watchdog_ramp = False  # watchdog stop down the smoother's decel limits
         self._speed_limited = False
+        #: the last command's limit_twist (linear, angular, chassis) -> result
+        self._limited_key: tuple[float, float, ChassisParams] | None = None
+        self._limited = kinematics.LimitedTwist(0.0, 0.0, clipped=False)
         # when each periodic message is due next, in catalog order (self._periodic)
         self._due = [now + (m.cycle_time or 0.0) for m in self._periodic]
         # like a CANopen boot-up message: the first frame after a boot is the Heartbeat with
@@ -283,7 +286,12 @@ class Mcu:
             self._standby_cmd_time = now
             self.stats["rx_motion_ignored"] += 1
             return False
-        lim = kinematics.limit_twist(linear, angular, self.chassis)
+        key = (linear, angular, self.chassis)
+        if linear and angular and key == self._limited_key:  # 0.0 and -0.0 compare equal
+            lim = self._limited  # the same command again: limit_twist is a pure function
+        else:
+            lim = kinematics.limit_twist(linear, angular, self.chassis)
+            self._limited_key, self._limited = key, lim
         if not lim.valid:
             self.status |= SB.COMMAND_REJECTED
             self.stats["rx_motion_rejected"] += 1

@@ -246,6 +246,22 @@ def _param(rig: SimRig, name: str, value: float | None = None) -> dict[str, obje
     return after[-1].values
 
 
+
+def test_a_repeated_command_is_limited_by_the_parameters_in_force() -> None:
+    """Mcu._motion keeps the last limit_twist result for a repeated command: a parameter
+    written between two equal commands still takes effect, and -0.0/0.0 keep their sign."""
+    rig = SimRig()
+    rig.enable()
+    rig.drive(1.1, 0.3, 0.1)
+    assert rig.mcu._last_cmd == (1.1, 0.3, 0)
+    assert _param(rig, "maxLinear", 0.8)["Result"] == 0
+    rig.drive(1.1, 0.3, 0.1)
+    assert rig.mcu._last_cmd is not None and rig.mcu._last_cmd[0] == pytest.approx(0.8)
+    rig.mcu.command(0.5, -0.0)
+    rig.mcu.command(0.5, 0.0)
+    assert math.copysign(1.0, rig.mcu._last_cmd[1]) == 1.0
+
+
 def test_parameters_read_write_nack_and_persist(tmp_path: Path) -> None:
     path = tmp_path / "params.json"
     rig = SimRig(params_path=path)

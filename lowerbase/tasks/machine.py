@@ -5,14 +5,17 @@
 command (None: nothing to command). Every change of the status goes through a
 :class:`~lowerbase.tasks.status.StatusTracker` (robot_status, only on change). docs/tasks.md
 has the whole table: transitions, what faults do, which requests are refused when.
+
+The machine is three parts: this module (the actions' life cycle and the tick: chassis events,
+navigation, timed actions, charging), :mod:`~lowerbase.tasks.requests` (exec_task requests) and
+:mod:`~lowerbase.tasks.docking` (dock in / out); :mod:`~lowerbase.tasks.task` holds the
+:class:`Task` and the :class:`Navigation` it drives (importable from here as before).
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import Any, Protocol
 
 from lowerbase.errors import LowerbaseError
 from lowerbase.navigation.steps import CANCEL, PAUSE, RESUM, StepController
@@ -20,7 +23,6 @@ from lowerbase.tasks.blocked import BlockedDebounce, blocked
 from lowerbase.tasks.docking import Docking, StepMoves
 from lowerbase.tasks.model import (
     AUTO_TASK_ID,
-    FINAL_STATES,
     ActionState,
     ActionType,
     Pose,
@@ -28,79 +30,21 @@ from lowerbase.tasks.model import (
     Status,
     TaskExect,
     TaskRequest,
-    TaskResponse,
     TaskState,
     TaskType,
 )
-from lowerbase.tasks.plan import Action, TaskConfig, TaskRefused, plan
+from lowerbase.tasks.plan import TaskConfig, TaskRefused
+from lowerbase.tasks.requests import Requests
 from lowerbase.tasks.status import Chassis, StatusTracker, robot_state
+from lowerbase.tasks.task import ESTOP_MSG, NavFeedback, Navigation, Task, Twist, pct
 from lowerbase.world.places import Places
 
+__all__ = ["ESTOP_MSG", "NavFeedback", "Navigation", "Task", "TaskMachine", "Twist"]
+
 log = logging.getLogger(__name__)
-Twist = tuple[float, float]
-ESTOP_MSG = "the emergency stop is on: release it, then continue (3)"
 
 
-class NavFeedback(Protocol):
-    """What a navigation tick returns (the Navigator's NavCommand)."""
-
-    @property
-    def linear(self) -> float: ...
-
-    @property
-    def angular(self) -> float: ...
-
-    @property
-    def state(self) -> Any: ...  # a ``name``: PENDING ACTIVE SUCCEEDED ABORTED PREEMPTED
-
-    @property
-    def status(self) -> Any: ...
-
-    @property
-    def reason(self) -> str: ...
-
-
-class Navigation(Protocol):
-    """What the task machine needs of navigation."""
-
-    def send_goal(self, target: Pose, poses: Sequence[Pose] = (), execution_mode: int = 0,
-                  now: float = 0.0) -> None: ...
-
-    def cancel(self, now: float) -> None: ...
-
-    def tick(self, now: float, pose: Pose) -> NavFeedback: ...
-
-
-def _pct(soc: float | None) -> str:
-    return "" if soc is None else f" ({soc:.0f} %)"
-
-
-@dataclass
-class Task:
-    request: TaskRequest
-    actions: list[Action]
-    dest: str
-    state: TaskState = TaskState.EXECUTING
-    index: int = 0
-    action_state: ActionState = ActionState.EXECUTING
-    msg: str = ""
-    wait_id: int = 0
-    elapsed: float = 0.0  #: [s] into a timed action
-    contact_wait: float | None = None  #: [s] docked, waiting for the charger this long
-    lost: bool = False  #: navigation held while localization is lost
-    dock_corrections: int = 0  #: dock-in moves planned again so far (lowerbase.tasks.docking)
-    dock_elapsed: float = 0.0  #: [s] the current docking moves have run
-
-    @property
-    def action(self) -> Action:
-        return self.actions[min(self.index, len(self.actions) - 1)]
-
-    @property
-    def active(self) -> bool:
-        return self.state not in FINAL_STATES
-
-
-class TaskMachine(Docking):
+class TaskMachine(Requests, Docking):
     def __init__(self, nav: Navigation, places: Places, config: TaskConfig | None = None, *,
                  on_status: Callable[[Status], None] | None = None,
                  steps: StepMoves | None = None) -> None:
@@ -134,9 +78,9 @@ class TaskMachine(Docking):
         ch, t, rs = self.chassis, self.task, self.robot_state()
         note = ch.abnormal()
         if not note and ch.critical_battery:
-            note = f"battery critical{_pct(ch.soc)}"
+            note = f"battery critical{pct(ch.soc)}"
         elif not note and ch.low_battery:
-            note = f"battery low{_pct(ch.soc)}"
+            note = f"battery low{pct(ch.soc)}"
         elif not note and not ch.localized:
             note = "localization lost"
         if t is None:
@@ -148,96 +92,6 @@ class TaskMachine(Docking):
 
     def _refresh(self) -> None:
         self.tracker.update(self.status(), self.now)
-
-    # -- requests -------------------------------------------------------------------------------
-    def request(self, req: TaskRequest, now: float) -> TaskResponse:
-        """Answer an ExecTask request (refusals: success False and why in ``message``)."""
-        self.now = now
-        try:
-            message, ok = self._handle(req), True
-        except TaskRefused as exc:
-            message, ok = str(exc), False
-            log.info("exec_task refused: %s", message)
-        self._refresh()
-        return TaskResponse(ok, message, int(self.robot_state()))
-
-    def _handle(self, req: TaskRequest) -> str:
-        verbs = {2: "pause", 3: "continue", 4: "cancel", 6: "wait"}
-        if req.task_exect == TaskExect.EXECUTE:
-            return self._execute(req)
-        if req.task_exect not in verbs:
-            raise TaskRefused(f"unknown task_exect {req.task_exect}: 1 execute, 2 pause, "
-                              "3 continue, 4 cancel, 6 wait for interruption")
-        t = self.task
-        if t is None or not t.active:
-            raise TaskRefused(f"no task is running: nothing to {verbs[req.task_exect]}")
-        tid = t.request.task_id
-        if req.task_id != tid:
-            raise TaskRefused(f"task {req.task_id} is not the running task: that is {tid}")
-        charging = t.action.kind == ActionType.CHARGING
-        if req.task_exect == TaskExect.CANCEL:
-            self._stop(t, TaskState.CANCELLED, ActionState.CANCELLED, "cancelled by request")
-            return f"task {tid} cancelled"
-        if req.task_exect == TaskExect.CONTINUE:
-            if t.state == TaskState.EXECUTING:
-                raise TaskRefused(f"task {tid} is not paused: nothing to continue")
-            why = self.chassis.abnormal()
-            if why:
-                raise TaskRefused(f"{why}: clear it first, then continue")
-            self._resume(t)
-            return f"task {tid} continues"
-        if charging:
-            raise TaskRefused(f"task {tid} is charging, which cannot be paused: cancel it (4) "
-                              "or send a new task")
-        if t.state != TaskState.EXECUTING:
-            raise TaskRefused(f"task {tid} is {t.state.name.lower()} already: continue (3) or "
-                              "cancel (4) it")
-        if req.task_exect == TaskExect.PAUSE:
-            self._halt(t, TaskState.PAUSED, "paused by request")
-            return f"task {tid} paused"
-        self._wait_ids += 1
-        t.wait_id = self._wait_ids
-        self._halt(t, TaskState.WAITING, "waiting for interruption: continue (3) to go on")
-        t.action_state = ActionState.EXECUTING
-        return f"task {tid} waits (wait_id {t.wait_id})"
-
-    def _execute(self, req: TaskRequest, own: bool = False) -> str:
-        ch = self.chassis
-        if not ch.initialized:
-            raise TaskRefused("the chassis is not initialized: wait until driver_base has "
-                              "configured the lower computer")
-        if ch.abnormal():
-            raise TaskRefused(f"{ch.abnormal()}: clear it, then send the task again")
-        t = self.task
-        if t is not None and t.active and t.action.kind != ActionType.CHARGING:
-            tid = t.request.task_id
-            if tid == req.task_id:
-                raise TaskRefused(f"task {tid} is already running")
-            raise TaskRefused(f"task {tid} is {t.state.name.lower()}: cancel it (4) first")
-        if ch.critical_battery and req.task_type != TaskType.CHARGING:
-            raise TaskRefused(f"the battery is critical{_pct(ch.soc)}: send a charging "
-                              "task (task_type 3) first")
-        if own:
-            req_checked = TaskRequest(req.task_exect, 1, req.task_type)
-            actions, dest = plan(req_checked, self.places, self.config)
-        else:
-            actions, dest = plan(req, self.places, self.config)
-        if self.docked:
-            if req.task_type == TaskType.CHARGING:
-                actions = [a for a in actions if a.kind in (ActionType.CHARGING,
-                                                            ActionType.DOCK_OUT)]
-            else:
-                actions.insert(0, Action(ActionType.DOCK_OUT))
-        new = Task(req, actions, dest)
-        self._start(new)
-        if new.state == TaskState.FAILED:
-            raise TaskRefused(new.msg)
-        if t is not None and t.active:  # charging: ended by the new task
-            t.state, t.action_state = TaskState.COMPLETED, ActionState.COMPLETED
-            t.msg = f"charging ended{_pct(ch.soc)} for task {req.task_id}"
-            self._refresh()
-        self.task = new
-        return f"task {req.task_id} accepted: {TaskType(req.task_type).name.lower()} to {dest}"
 
     # -- actions --------------------------------------------------------------------------------
     def _start(self, t: Task) -> None:
@@ -351,7 +205,7 @@ class TaskMachine(Docking):
         if t.state == TaskState.PAUSED and t.msg == ESTOP_MSG:
             t.msg = "the emergency stop was released: continue (3) to go on"
         if ch.critical_battery and t.request.task_type != TaskType.CHARGING:
-            return self._fail(t, f"battery critical{_pct(ch.soc)}: the task is abandoned")
+            return self._fail(t, f"battery critical{pct(ch.soc)}: the task is abandoned")
         if t.state != TaskState.EXECUTING or t.action.kind != ActionType.NAVIGATION:
             return None
         if not ch.localized or ch.pose is None:

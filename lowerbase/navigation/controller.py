@@ -311,9 +311,18 @@ class PathController:
         if tight:
             ld = 0.5 * cfg.min_lookahead
         rest = self.path[self._index:, :2]
-        d = np.hypot(rest[:, 0] - x, rest[:, 1] - y)
-        beyond = np.nonzero(d >= ld)[0]
-        k = int(beyond[0]) if len(beyond) else len(rest) - 1
+        # the first point at least ld away: looked for in growing chunks from the progress
+        # index (the same distances as over the whole rest, which is mostly far beyond it)
+        start, chunk = 0, 64
+        while start < len(rest):
+            part = rest[start:start + chunk]
+            beyond = np.flatnonzero(np.hypot(part[:, 0] - x, part[:, 1] - y) >= ld)
+            if beyond.size:
+                k = start + int(beyond[0])
+                return float(rest[k, 0]), float(rest[k, 1])
+            start += chunk
+            chunk *= 4
+        k = len(rest) - 1
         return float(rest[k, 0]), float(rest[k, 1])
 
     def _cost_at(self, x: float, y: float) -> int:

@@ -133,6 +133,27 @@ def squared_distances(lethal: np.ndarray, cap: int, out: np.ndarray) -> None:
 
 
 @_jit
+def footprint_max_at(costs: np.ndarray, ox: float, oy: float, res: float, x: np.ndarray,
+                     y: np.ndarray, yaw: np.ndarray, bins: int, dr: np.ndarray,
+                     dc: np.ndarray, lethal: int, no_information: int, out: np.ndarray
+                     ) -> None:
+    """:func:`footprint_max` at poses (x, y, yaw) [m, rad], each pose's cell and heading bin
+    computed as :meth:`FootprintCells.max_cost` computes them with numpy: row and column
+    ``floor((y - oy) / res)``, ``floor((x - ox) / res)``; bin ``round(mod(yaw, 2 pi) / (2 pi)
+    * bins) % bins`` (Python's float modulo is numpy's, round half to even)."""
+    two_pi = 2.0 * np.pi
+    n = x.size
+    rows = np.empty(n, dtype=np.int64)
+    cols = np.empty(n, dtype=np.int64)
+    ks = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        rows[i] = np.int64(np.floor((y[i] - oy) / res))
+        cols[i] = np.int64(np.floor((x[i] - ox) / res))
+        ks[i] = np.int64(np.rint((yaw[i] % two_pi) / two_pi * bins)) % bins
+    footprint_max(costs, rows, cols, ks, dr, dc, lethal, no_information, out)
+
+
+@_jit
 def _in_polygon(xp: np.ndarray, yp: np.ndarray, x: float, y: float) -> bool:
     """skimage's point_in_polygon (O'Rourke's ray crossings) is not 0: inside, on a vertex
     (within 1e-12) or on an edge (left and right crossings of different parity)."""

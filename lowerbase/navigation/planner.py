@@ -36,7 +36,7 @@ from skimage import draw
 from skimage.graph import MCP_Geometric
 
 from lowerbase.errors import WorldError
-from lowerbase.navigation.kernels import footprint_max
+from lowerbase.navigation.kernels import footprint_max, footprint_max_at
 
 LETHAL = 254
 INSCRIBED = 253
@@ -129,6 +129,14 @@ class FootprintCells:
     def max_cost(self, costs: np.ndarray, origin: Sequence[float], x: np.ndarray | float,
                  y: np.ndarray | float, yaw: np.ndarray | float) -> np.ndarray:
         """Highest cost under the footprint at each pose; LETHAL where it leaves the map."""
+        if costs.dtype == np.uint8 and isinstance(x, np.ndarray) and isinstance(y, np.ndarray) \
+                and isinstance(yaw, np.ndarray) and x.ndim == 1 and x.shape == y.shape \
+                == yaw.shape and x.dtype == y.dtype == yaw.dtype == np.float64:
+            # 1D float poses (the controller's arc, the path ahead): one compiled call
+            out = np.empty(x.size, dtype=np.int64)
+            footprint_max_at(costs, float(origin[0]), float(origin[1]), self.resolution, x, y,
+                             yaw, self.bins, self._dr, self._dc, LETHAL, NO_INFORMATION, out)
+            return out
         x, y, yaw = np.broadcast_arrays(np.atleast_1d(np.asarray(x, dtype=np.float64)),
                                         np.atleast_1d(np.asarray(y, dtype=np.float64)),
                                         np.atleast_1d(np.asarray(yaw, dtype=np.float64)))

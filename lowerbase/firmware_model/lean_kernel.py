@@ -225,24 +225,10 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
         s |= COMMAND_IN_STANDBY
     if limited:
         s |= SPEED_LIMITED
-    if oc_l:
-        s |= L_OVER
-    if st_l:
-        s |= L_STALL
-    if oc_l or st_l:
-        s |= L_FAULT
-        motion_fault |= L_FAULT
-    if stuck_l >= k[C_ENC_T]:
-        s |= L_ENC
-    if oc_r:
-        s |= R_OVER
-    if st_r:
-        s |= R_STALL
-    if oc_r or st_r:
-        s |= R_FAULT
-        motion_fault |= R_FAULT
-    if stuck_r >= k[C_ENC_T]:
-        s |= R_ENC
+    s, motion_fault = side_bits(s, motion_fault, oc_l, st_l, stuck_l >= k[C_ENC_T],
+                                L_OVER, L_STALL, L_FAULT, L_ENC)
+    s, motion_fault = side_bits(s, motion_fault, oc_r, st_r, stuck_r >= k[C_ENC_T],
+                                R_OVER, R_STALL, R_FAULT, R_ENC)
     s |= motion_fault
     if imu_same >= k[C_IMU_N]:
         s |= IMU_FAULT
@@ -267,6 +253,24 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
             x, y, yaw, tv, tw, accel_x, distance,
             odometer, stuck_l, stuck_r, charge, elapsed, imu_same,
             status, motion_fault, state, count)
+
+
+@_jit
+def side_bits(s: int, motion_fault: int, over_current: bool, stalled: bool, encoder: bool,
+              over_bit: int, stall_bit: int, fault_bit: int, encoder_bit: int
+              ) -> tuple[int, int]:
+    """One side's status bits (LeanLoop._status): over-current, stall, the motor fault they
+    latch (also into ``motion_fault``), the encoder fault; returns (status, motion_fault)."""
+    if over_current:
+        s |= over_bit
+    if stalled:
+        s |= stall_bit
+    if over_current or stalled:
+        s |= fault_bit
+        motion_fault |= fault_bit
+    if encoder:
+        s |= encoder_bit
+    return s, motion_fault
 
 
 @_jit

@@ -26,10 +26,34 @@ import numpy as np
 from lowerbase.jit import compiled
 
 _jit = compiled()
+_inlined = compiled(inline="always")  # the product helpers: inlined in numba's IR
 
 # state indices (as lowerbase.driver.ekf_model's; repeated: numba reads module globals as
 # compile-time constants, and this module must not import the model's numpy objects)
 _X, _Y, _YAW, _V, _W, _B = 0, 1, 2, 3, 4, 5
+
+
+@_inlined
+def _product(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """``out <- a @ b``, each entry summed in index order from 0.0 (no reordering, no fused
+    multiply-add: the same bits on every CPU)."""
+    for i in range(a.shape[0]):
+        for j in range(b.shape[1]):
+            acc = 0.0
+            for k in range(a.shape[1]):
+                acc += a[i, k] * b[k, j]
+            out[i, j] = acc
+
+
+@_inlined
+def _product_t(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """``out <- a @ b^T``, summed as :func:`_product` sums."""
+    for i in range(a.shape[0]):
+        for j in range(b.shape[0]):
+            acc = 0.0
+            for k in range(a.shape[1]):
+                acc += a[i, k] * b[j, k]
+            out[i, j] = acc
 
 
 @_jit
@@ -48,23 +72,13 @@ def measure(
     n = x.shape[0]
     m = h.shape[0]
     pht = np.empty((n, m))
-    for i in range(n):
-        for j in range(m):
-            acc = 0.0
-            for k in range(n):
-                acc += p[i, k] * h[j, k]
-            pht[i, j] = acc
+    _product_t(p, h, pht)
+    _product(h, pht, s)
+    _product(h, x, y)
     for i in range(m):
         for j in range(m):
-            acc = 0.0
-            for k in range(n):
-                acc += h[i, k] * pht[k, j]
-            s[i, j] = acc + r[i, j]
-    for i in range(m):
-        acc = 0.0
-        for k in range(n):
-            acc += h[i, k] * x[k, 0]
-        y[i, 0] = z[i, 0] - acc
+            s[i, j] = s[i, j] + r[i, j]
+        y[i, 0] = z[i, 0] - y[i, 0]
     if m == 1:
         si[0, 0] = 1.0 / s[0, 0]
         d2 = y[0, 0] ** 2 * si[0, 0]
@@ -77,19 +91,9 @@ def measure(
     if gated and not d2 <= gate:
         gain[:, :] = 0.0
         return d2, False
-    for i in range(n):  # the optimal gain P H^T S^-1
-        for j in range(m):
-            acc = 0.0
-            for k in range(m):
-                acc += pht[i, k] * si[k, j]
-            gain[i, j] = acc
+    _product(pht, si, gain)  # the optimal gain P H^T S^-1
     cov = np.empty((n, n))  # C = K_opt (P H^T)^T, before the consider rows are zeroed
-    for i in range(n):
-        for j in range(n):
-            acc = 0.0
-            for k in range(m):
-                acc += gain[i, k] * pht[j, k]
-            cov[i, j] = acc
+    _product_t(gain, pht, cov)
     for i in range(n):
         if keep[i] == 0:
             for j in range(m):
@@ -97,11 +101,10 @@ def measure(
             for j in range(n):
                 if keep[j] == 0:
                     cov[i, j] = 0.0  # the consider x consider block keeps its P
+    dx = pht[:, :1]  # (P H^T is used up)
+    _product(gain, y, dx)
     for i in range(n):
-        acc = 0.0
-        for k in range(m):
-            acc += gain[i, k] * y[k, 0]
-        x[i, 0] = x[i, 0] + acc
+        x[i, 0] = x[i, 0] + dx[i, 0]
     _subtract_symmetric(p, cov)
     return d2, True
 
@@ -142,22 +145,15 @@ def drive(x: np.ndarray, p: np.ndarray, dt: float, max_step: float, frozen: bool
             f[_Y, _V] = h * s
             f[_Y, _W] = v * h * c * 0.5 * h
             f[_YAW, _W] = h
-            for i in range(n):
-                for j in range(n):
-                    acc = 0.0
-                    for k in range(n):
-                        acc += f[i, k] * p[k, j]
-                    fp[i, j] = acc
+            _product(f, p, fp)
             scale = lateral_slip_sq * h
             nx, ny = -math.sin(yaw), math.cos(yaw)
             q[_X, _X], q[_X, _Y] = scale * (nx * nx), scale * (nx * ny)
             q[_Y, _X], q[_Y, _Y] = scale * (ny * nx), scale * (ny * ny)
+            _product_t(fp, f, p)
             for i in range(n):
                 for j in range(n):
-                    acc = 0.0
-                    for k in range(n):
-                        acc += fp[i, k] * f[j, k]
-                    p[i, j] = acc + q[i, j]
+                    p[i, j] = p[i, j] + q[i, j]
         x[_X, 0] = x[_X, 0] + v * h * c
         x[_Y, 0] = x[_Y, 0] + v * h * s
         x[_YAW, 0] = yaw + w * h

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from lowerbase.driver.ekf import B, PlanarEkf
-from lowerbase.driver.ekf_kernels import drive, measure
+from lowerbase.driver.ekf_kernels import _product, _product_t, drive, measure
 from lowerbase.driver.ekf_model import (
     DIM_X,
     H_GYRO,
@@ -159,3 +159,29 @@ def test_the_filter_fails_over_to_the_gate_outcomes_when_the_wheels_fail_the_gat
     assert ekf.statistics["gyro.accepted"] >= 1 and ekf.mahalanobis_sq > EkfNoise().gate_2dof
     assert ekf.kf.K.shape == (DIM_X, 1)  # the speed-only update's gain
     assert ekf.kf.x[0, 0] > x0[0, 0]  # the pose was driven over the cycle all the same
+
+
+@pytest.mark.parametrize("shape", [(6, 6, 6), (6, 2, 2), (2, 6, 1), (1, 6, 6)])
+def test_the_products_sum_in_index_order(shape: tuple[int, int, int]) -> None:
+    """Every fixed-order product of the kernels: each entry ``0.0 + a0*b0 + a1*b1 + ...`` in
+    index order, bit for bit (what makes the filter's bits the same on every CPU)."""
+    n, k, m = shape
+    rng = np.random.default_rng(7)
+    a, b = rng.normal(size=(n, k)), rng.normal(size=(k, m))
+
+    def plain(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        out = np.empty((a.shape[0], b.shape[1]))
+        for i in range(a.shape[0]):
+            for j in range(b.shape[1]):
+                acc = 0.0
+                for q in range(a.shape[1]):
+                    acc += float(a[i, q]) * float(b[q, j])
+                out[i, j] = acc
+        return out
+
+    out = np.empty((n, m))
+    _product(a, b, out)
+    assert out.tobytes() == plain(a, b).tobytes()
+    out_t = np.empty((n, m))
+    _product_t(a, np.ascontiguousarray(b.T), out_t)
+    assert out_t.tobytes() == plain(a, b).tobytes()

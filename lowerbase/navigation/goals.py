@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lowerbase.errors import WorldError
-from lowerbase.navigation.controller import ControllerConfig, Status
+from lowerbase.navigation.controller import ControllerConfig, Status, wrap
 from lowerbase.navigation.costmap import CostmapParams
 from lowerbase.navigation.layers import InflationParams
 from lowerbase.navigation.planner import INSCRIBED, GlobalPlanner
@@ -194,3 +194,30 @@ def remaining(path: Sequence[Pose], index: int, p: Pose, approach_distance: floa
     along = float(seg.sum()) if seg.size else 0.0
     x0, y0 = float(path[index][0]), float(path[index][1])
     return math.hypot(x0 - p[0], y0 - p[1]) + along
+
+
+class ProgressWatch:
+    """move_base's oscillation / progress check: a goal is stuck when the robot has not moved
+    ``distance`` [m] or turned ``angle`` [rad] from the last reference pose for ``timeout`` s.
+    Waiting for an obstacle, recovering and replanning restart it (:meth:`restart`)."""
+
+    def __init__(self, distance: float, angle: float, timeout: float) -> None:
+        self.distance, self.angle, self.timeout = distance, angle, timeout
+        self.ref: tuple[float, Pose] | None = None
+
+    def restart(self, now: float, pose: Pose) -> None:
+        self.ref = (now, pose)
+
+    def stuck(self, now: float, pose: Pose) -> str:
+        """'' while progressing (a move from the reference restarts it), else why stuck."""
+        if self.ref is None:
+            self.restart(now, pose)
+            return ""
+        t0, q = self.ref
+        if math.hypot(pose[0] - q[0], pose[1] - q[1]) >= self.distance or \
+                abs(wrap(pose[2] - q[2])) >= self.angle:
+            self.restart(now, pose)
+            return ""
+        if now - t0 >= self.timeout:
+            return f"stuck: no progress for {self.timeout:g} s"
+        return ""

@@ -52,19 +52,18 @@ from lowerbase.navigation.goals import (
     NavigationError,
     NavigatorConfig,
     Pose,
+    ProgressWatch,
     _pose,
     path_blocked,
     remaining,
-    unblocked_start,
 )
-from lowerbase.navigation.modes import Mode, NavDir, NavigationModeGoal
+from lowerbase.navigation.modes import Mode, NavigationModeGoal
 from lowerbase.navigation.planner import (
     LETHAL,
     FootprintCells,
-    GlobalPlanner,
     Plan,
-    PlanningError,
 )
+from lowerbase.navigation.planning import GoalPlanner, drive_reversed
 from lowerbase.navigation.recovery import BackOff
 from lowerbase.world.footprint import DEFAULT_POINTS, Footprint
 from lowerbase.world.grid import OccupancyGrid
@@ -111,10 +110,15 @@ class Navigator:
         self.distance_remaining = 0.0
         self.replans = 0  #: replans of the current goal because it was blocked
         self.early_replans = 0  #: replans because the local costmap blocked the path ahead
-        self.plans = 0
+        self.planning = GoalPlanner(cfg, self.global_costmap, self.combined, grid.resolution)
         self.path: list[Pose] = []  #: the plan being followed (map frame)
         self._backoff = BackOff(self.config.back_off)
         self._reset_goal_state()
+
+    @property
+    def plans(self) -> int:
+        """Plans made for goals."""
+        return self.planning.plans
 
     # -- setup -----------------------------------------------------------------------------------
     def _footprints(self) -> None:
@@ -136,7 +140,8 @@ class Navigator:
         self._leg_ends: list[int] = []  # free mode: path index where each waypoint is
         self._need_plan = False
         self._blocked_since: float | None = None
-        self._progress_ref: tuple[float, Pose] | None = None
+        self._progress = ProgressWatch(self.config.progress_distance,
+                                       self.config.progress_angle, self.config.stuck_timeout)
         self._last_early = -math.inf
         self._seen_version = -1
         self._reverse = False
@@ -202,33 +207,13 @@ class Navigator:
         self.local_costmap.clear()
         self.combined.refresh()
 
-    def _clearance(self) -> float:
-        cm = self.global_costmap
-        r = cm.inscribed_radius if self.mode.fuzzy else cm.circumscribed_radius
-        return r + self.config.clearance_margin
-
-    def _planner(self) -> GlobalPlanner:
-        fuzzy = self.mode.fuzzy
-        scale = self.config.fuzzy_cost_scale if fuzzy else self.config.cost_scale
-        planner = GlobalPlanner(self.combined.planning_costs(self._clearance()),
-                                self.grid.resolution, self.combined.origin, cost_scale=scale,
-                                narrow_cost=self.global_costmap.circumscribed_cost,
-                                narrow_penalty=1.0 if fuzzy else self.config.narrow_penalty)
-        planner.footprint = self._fp_forward
-        return planner
-
     def make_plan(self, start: Sequence[float], goal: Sequence[float],
                   tolerance: float = 0.0) -> Plan:
         """/move_base/make_plan (nav_msgs/GetPlan): a plan on the global costmap with the local
         marks and the mode's clearance; empty with a reason when there is none. A start inside
         an obstacle's inflation is planned out of (the robot may be there after localization
         error); a NaN pose or bad tolerance: :class:`PlanningError`."""
-        planner = self._planner()
-        s = _pose(start, "start")
-        r, c = planner.cell(s[0], s[1])
-        if planner.inside(r, c) and planner.blocked[r, c]:
-            planner = unblocked_start(planner, s, self.global_costmap.inscribed_radius)
-        return planner.make_plan(s, goal, tolerance)
+        return self.planning.make_plan(start, goal, tolerance, self.mode, self._fp_forward)
 
     # -- goals -----------------------------------------------------------------------------------
     def send_goal(self, target: Sequence[float], poses: Sequence[Sequence[float]] = (),
@@ -277,23 +262,12 @@ class Navigator:
     def _plan(self, pose: Pose) -> str:
         """Plan from ``pose`` through the remaining waypoints; '' or why there is no plan."""
         goals = self._waypoints[:1] if self._point_by_point else self._waypoints
-        poses: list[Pose] = []
-        ends: list[int] = []
-        start = pose
-        try:
-            for goal in goals:
-                plan = self.make_plan(start, goal, self.config.goal_tolerance)
-                if not plan.ok:
-                    return plan.reason
-                poses.extend(plan.poses if not poses else plan.poses[1:])
-                ends.append(len(poses) - 1)
-                start = poses[-1]
-        except PlanningError as exc:
-            return str(exc)
-        self.plans += 1
-        self._leg_ends = ends
+        planned = self.planning.through(pose, goals, self.mode, self._fp_forward)
+        if isinstance(planned, str):
+            return planned
+        poses, self._leg_ends = planned
         self.path = poses
-        self._reverse = self._drive_reversed(pose, poses)
+        self._reverse = drive_reversed(self.mode.nav_dir, pose, poses)
         self.controller.footprint = self._fp_reverse if self._reverse else self._fp_forward
         self.controller.set_costmap(self.combined.costs, self.grid.resolution,
                                     self.combined.origin)
@@ -302,19 +276,6 @@ class Navigator:
         else:
             self.controller.set_plan(poses)
         return ""
-
-    def _drive_reversed(self, pose: Pose, poses: list[Pose]) -> bool:
-        d = NavDir(self.mode.nav_dir)
-        if d is NavDir.BACKWARD:
-            return True
-        if d is not NavDir.FOLLOW_PATH:
-            return False
-        x, y, yaw = pose
-        ahead = [p for p in poses if math.hypot(p[0] - x, p[1] - y) >= 1.0]
-        px, py = (ahead[0][0], ahead[0][1]) if ahead else (poses[-1][0], poses[-1][1])
-        if math.hypot(px - x, py - y) < 1e-6:
-            return False
-        return abs(wrap(math.atan2(py - y, px - x) - yaw)) > math.pi / 2
 
     def _passed_waypoints(self) -> int:
         """Free mode: how many waypoints the robot has passed on the current path."""
@@ -326,7 +287,7 @@ class Navigator:
             del self._waypoints[:self._passed_waypoints()]
         why = self._plan(pose)
         self._blocked_since = None
-        self._progress_ref = (now, pose)
+        self._progress.restart(now, pose)
         return why
 
     # -- the control step ------------------------------------------------------------------------
@@ -343,12 +304,12 @@ class Navigator:
             why = self._plan(p)
             if why:
                 return self._finish(GoalState.ABORTED, f"no path: {why}", now)
-            self._progress_ref = (now, p)
+            self._progress.restart(now, p)
         if self._backoff.active:
             v = self._backoff.step(p, now, self.combined.costs, self.combined.origin,
                                    self._fp_forward)
             if v is not None:
-                self._progress_ref = (now, p)  # recovering is not being stuck
+                self._progress.restart(now, p)  # recovering is not being stuck
                 return NavCommand(v, 0.0, GoalState.ACTIVE, Status.BLOCKED, RECOVERY)
             self.controller.v = self.controller.w = 0.0
             why = self._replan(p, now)
@@ -379,7 +340,7 @@ class Navigator:
             return self._blocked(p, now, command)
         self._blocked_since = None
         self.reason = ""
-        stuck = self._stuck(p, now)
+        stuck = self._progress.stuck(now, p)
         if stuck:
             return self._finish(GoalState.ABORTED, stuck, now)
         return NavCommand(command.linear, command.angular, GoalState.ACTIVE, command.status)
@@ -397,7 +358,7 @@ class Navigator:
             why = self._plan(p)
             if why:
                 return self._finish(GoalState.ABORTED, f"no path: {why}", now)
-            self._progress_ref = (now, p)
+            self._progress.restart(now, p)
             return NavCommand(0.0, 0.0, GoalState.ACTIVE, Status.SUCCEEDED,
                               "waypoint reached")
         return self._finish(GoalState.SUCCEEDED, "goal reached", now)
@@ -405,7 +366,7 @@ class Navigator:
     def _blocked(self, p: Pose, now: float, command: NavCommand) -> NavCommand:
         if self._blocked_since is None:
             self._blocked_since = now
-        self._progress_ref = (now, p)  # waiting for an obstacle is not being stuck
+        self._progress.restart(now, p)  # waiting for an obstacle is not being stuck
         if now - self._blocked_since >= self.mode.avoids_after(self.config.blocked_patience):
             self.replans += 1
             if self.replans > self.config.max_replans:
@@ -426,20 +387,6 @@ class Navigator:
         self.reason = "waiting: an obstacle blocks the path"
         return NavCommand(command.linear, command.angular, GoalState.ACTIVE, Status.BLOCKED,
                           self.reason)
-
-    def _stuck(self, p: Pose, now: float) -> str:
-        ref = self._progress_ref
-        if ref is None:
-            self._progress_ref = (now, p)
-            return ""
-        t0, q = ref
-        if math.hypot(p[0] - q[0], p[1] - q[1]) >= self.config.progress_distance or \
-                abs(wrap(p[2] - q[2])) >= self.config.progress_angle:
-            self._progress_ref = (now, p)
-            return ""
-        if now - t0 >= self.config.stuck_timeout:
-            return f"stuck: no progress for {self.config.stuck_timeout:g} s"
-        return ""
 
     def _path_ahead_blocked(self) -> bool:
         """Whether the rest of the plan crosses an INSCRIBED or LETHAL cell now."""

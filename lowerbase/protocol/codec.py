@@ -465,7 +465,9 @@ class MessageCodec:
             if len(sigs) == 1:  # a table of values, not of 1-tuples
                 loose = [row[0] for row in loose]  # type: ignore[misc]
             namespace[f"_TL{b}{tag}"] = tuple(loose)
-            if all(valid):
+            if all(valid) and len(sigs) == 1:  # read once: inline in the result
+                table_var[sigs[0].name] = f"_TL{b}{tag}[t{b}]"
+            elif all(valid):
                 lines.append(f"    {target} = _TL{b}{tag}[t{b}]")
             else:
                 namespace[f"_TS{b}{tag}"] = tuple(r if ok else None for r, ok in
@@ -484,6 +486,23 @@ class MessageCodec:
             i = self.signals.index(s)
             if s.name in table_var:
                 out.append(f"'{s.name}': {table_var[s.name]}")
+                continue
+            if (_direct_var(s) not in direct and not s.is_float and s.length <= _NARROW_BITS
+                    and (s.is_signed or s.kind != "identity")):
+                # a small field that needs sign or scale: its physical value from a table
+                # indexed by its raw bits (None in the strict table: outside the range)
+                loose_table, strict_table = _narrow_tables(self, s)
+                namespace[f"_NL{i}"] = loose_table
+                expr = self._piece_expr(s, pieces)
+                if strict_table is None:
+                    out.append(f"'{s.name}': _NL{i}[{expr}]")
+                    continue
+                namespace[f"_NS{i}"] = strict_table
+                lines.append(f"    v{i} = _NS{i}[{expr}]" if always_strict else
+                             f"    v{i} = (_NS{i} if strict else _NL{i})[{expr}]")
+                lines.append(f"    if v{i} is None:")
+                lines.append("        _out_of_range(codec, decode_loose(data))")
+                out.append(f"'{s.name}': v{i}")
                 continue
             full_lo = -(1 << (s.length - 1)) if s.is_signed else 0
             full_hi = (1 << (s.length - 1)) - 1 if s.is_signed else (1 << s.length) - 1
@@ -567,21 +586,26 @@ class MessageCodec:
             return [ln.replace("return {", f"return '{self.name}', {{", 1)
                     if ln.lstrip().startswith("return {") else ln for ln in body]
 
-        head = [
-            "    try:",
-            f"        {', '.join(f[0] for f in fields)}, = _unpack("
-            + ("bytes(data)[::-1])" if self.big_endian else "data)"),
+        # the whole body in the try (only the unpack raises struct.error): no jump over the
+        # handler on the way to the return
+        unpack = (f"        {', '.join(f[0] for f in fields)}, = _unpack("
+                  + ("bytes(data)[::-1])" if self.big_endian else "data)"))
+        handler = [
             "    except _StructError:",
             f"        raise FrameLengthError('{self.name}: payload of %d bytes, the catalog "
             f"says {self.length}' % len(data)) from None",
         ]
+
+        def function(head: str, body: list[str]) -> list[str]:
+            return [head, "    try:", unpack, *("    " + ln for ln in body), *handler]
+
         # the same body returning (name, values), for Codec.decode; and both with the range
         # checks built in (strict=True, the default: one argument and its tests less)
         body, always = make_body(False), make_body(True)
-        lines = ["def decode(data, strict):", *head, *body,
-                 "def decode_named(data, strict):", *head, *named(body),
-                 "def decode_strict(data):", *head, *always,
-                 "def decode_named_strict(data):", *head, *named(always)]
+        lines = [*function("def decode(data, strict):", body),
+                 *function("def decode_named(data, strict):", named(body)),
+                 *function("def decode_strict(data):", always),
+                 *function("def decode_named_strict(data):", named(always))]
         self._decode_source = "\n".join(lines)
         exec(compile(self._decode_source, f"<lowerbase codec {self.name}.decode>", "exec"),
              namespace)
@@ -764,6 +788,27 @@ def _out_of_range(codec: MessageCodec, values: Signals) -> None:
     raise AssertionError("no signal out of range")  # pragma: no cover
 
 
+#: fields up to this width that need a sign or a scale decode through a table of 2**bits values
+_NARROW_BITS = 12
+_NARROW_CACHE: dict[tuple[Any, ...], tuple[tuple[Any, ...], tuple[Any, ...] | None]] = {}
+
+
+def _narrow_tables(codec: MessageCodec, s: SignalSpec) -> tuple[
+        tuple[int | float, ...], tuple[int | float | None, ...] | None]:
+    """Raw bits -> physical value of a small field (the loose table), and the same with None
+    outside the raw range (None when every value is in range); shared between equal fields."""
+    key = (s.length, s.is_signed, s.kind, repr(s.scale), repr(s.offset), s.raw_min, s.raw_max)
+    if key not in _NARROW_CACHE:
+        loose, strict = [], []
+        for bits in range(1 << s.length):
+            raw = bits - (1 << s.length) if s.is_signed and bits >> (s.length - 1) else bits
+            value = codec._physical(s, raw)
+            loose.append(value)
+            strict.append(value if s.raw_min <= raw <= s.raw_max else None)
+        _NARROW_CACHE[key] = (tuple(loose), None if None not in strict else tuple(strict))
+    return _NARROW_CACHE[key]
+
+
 def _range_error(codec: MessageCodec, name: str, value: float) -> None:
     s = codec.signal(name)
     raise SignalRangeError(
@@ -832,20 +877,16 @@ class Codec:
         """Decode a frame; returns (message name, signals)."""
         # a method (CPython specializes the attribute lookup of a class's function, not of an
         # instance's) without keyword-only parameters (which leave the call unspecialized);
-        # strict (the default) calls the decoder with the range checks built in
-        if decode_choices:
-            return self._decode_slow(frame_id, data, decode_choices, strict)
-        if strict:
-            try:
-                fast = self._strict_decoders[frame_id]  # subscript: cheaper than dict.get
-            except KeyError:
-                return self._decode_slow(frame_id, data, decode_choices, strict)  # raises
-            return fast(data)
+        # strict (the default) calls the decoder with the range checks built in. The compiled
+        # decoders raise no KeyError: one here is an unknown ID (the slow path raises it typed)
         try:
-            loose = self._decoders[frame_id]
+            if strict and not decode_choices:
+                return self._strict_decoders[frame_id](data)
+            if not decode_choices:
+                return self._decoders[frame_id](data, False)
         except KeyError:
-            return self._decode_slow(frame_id, data, decode_choices, strict)  # raises
-        return loose(data, False)
+            pass
+        return self._decode_slow(frame_id, data, decode_choices, strict)
 
 
 @cache

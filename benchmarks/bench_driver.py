@@ -8,7 +8,9 @@
 * Cost: DriverCore.on_frame per frame (and as x real time on the recorded frames), the
   EKF per wheel and gyro update and per wheel cycle as the driver runs it [us].
 * SimLoop: the emulated MCU and the driver core on the simulated clock (the scenario path),
-  x real time by CPU time, and the driver's share of it in ms per simulated second.
+  x real time by CPU time, and the driver's share of it in ms per simulated second. The MCU
+  runs in batches up to the driver's next send (one Mcu.advance each, bit for bit the
+  period-by-period run: tests/bench/test_simloop_batch.py).
 * Latency: a Twist published on /base_cmd_vel -> the MotionCommand on the bus, through a real
   rosmaster and the real node (``lowerbase driver`` in a process of its own, udp_multicast on
   loopback), p50/p99. Without ROS it falls back to DriverCore.set_twist -> send, and says so.
@@ -183,8 +185,10 @@ def bench_simloop(quick: bool) -> dict[str, float]:
         for _ in range(int(spent[1])):
             nothing()
         driver = min(driver, spent[0] - empty[0])
+    per_batch = loop.batch_stats["periods"] / max(1, loop.batch_stats["batches"])
     return {"cpu_x": seconds / cpu, "wall_x": seconds / wall,
-            "driver_ms": driver / seconds * 1e3, "load": os.getloadavg()[0]}
+            "driver_ms": driver / seconds * 1e3, "load": os.getloadavg()[0],
+            "per_batch": per_batch}
 
 
 # -- latency ------------------------------------------------------------------------------------
@@ -341,7 +345,8 @@ def run(quick: bool = False) -> list[Row]:
             "the recorded frames (all decoded) through DriverCore.on_frame, CPU, best of 3"),
         Row("driver", "MCU + driver core (SimLoop), simulated clock", loop["cpu_x"],
             "x real time", f"target >= 250x; CPU time, best of 3 (wall {loop['wall_x']:.0f}x, "
-            f"load {loop['load']:.1f}); driving, every frame decoded, 50 Hz odometry + EKF"),
+            f"load {loop['load']:.1f}); driving, every frame decoded, 50 Hz odometry + EKF; "
+            f"{loop['per_batch']:.1f} periods per Mcu.advance"),
         Row("driver", "driver core per simulated second in SimLoop", loop["driver_ms"],
             "ms", "on_frame + tick + set_twist, CPU, timed per call less the timer's cost"),
     ]

@@ -244,13 +244,6 @@ class ScanMerger:
     def range_max(self) -> float:
         return max(lc.range_max + math.hypot(lc.x, lc.y) for lc in self.lidars)
 
-    def _constants(self, scans: Sequence[LaserScan]) -> _MergeConstants:
-        """What :meth:`merge` computes the same way for every scan of these beams."""
-        key = tuple((s.ranges.size, s.angle_min, s.angle_increment) for s in scans)
-        if self._cached is None or self._cached.key != key:
-            self._cached = _MergeConstants.build(self.lidars, key)
-        return self._cached
-
     def merge(self, scans: Sequence[LaserScan], stamp: float) -> LaserScan:
         """Nearest valid return per merged beam. A beam with none is ``-inf`` if a lidar saw
         something too close in it, else ``+inf`` if a lidar looked through it without a return,
@@ -260,45 +253,30 @@ class ScanMerger:
         per-beam constants (mount, direction cosines, the reach of a non-finite return) are
         computed once (:class:`_MergeConstants`), with the same numpy expressions, so the
         result is bit for bit what computing them per scan gave (tests/world/test_lidar_merge.py
-        pins it against that)."""
+        pins it against that). The per-return work is compiled (:mod:`scan_kernel`)."""
+        key = tuple((s.ranges.size, s.angle_min, s.angle_increment) for s in scans)
+        return self.merge_ranges(np.concatenate([scan.ranges for scan in scans]), key, stamp)
+
+    def merge_ranges(self, ranges: np.ndarray, key: tuple[tuple[int, float, float], ...],
+                     stamp: float) -> LaserScan:
+        """:meth:`merge` of the lidars' ranges concatenated, ``key`` each scan's (size,
+        angle_min, angle_increment)."""
+        from lowerbase.world.scan_kernel import merge_bins, merge_points
+
         m = self.merged
         n = m.beams
         inc = m.increment
-        k = self._constants(scans)
-        r = np.concatenate([scan.ranges for scan in scans]).astype(float)
-        finite = np.isfinite(r)
-        all_finite = bool(finite.all())
-        reach = r if all_finite else np.where(finite, r, np.where(r == np.inf, k.far, k.near))
-        px = k.lx + reach * k.cos
-        py = k.ly + reach * k.sin
-        rel = np.arctan2(py, px) - m.angle_min
-        # np.mod(rel, 2 pi) is rel itself on [0, 2 pi): only the others need the (slow) mod
-        wrapped = (rel < 0.0) | (rel >= TWO_PI)
-        if wrapped.any():
-            rel[wrapped] = np.mod(rel[wrapped], TWO_PI)
-        idx = np.round(rel / inc).astype(np.int64)
-        if m.full_circle:
-            idx %= n
-        inside = (idx >= 0) & (idx < n)
-        best = np.full(n, np.inf)
-        valid = inside & finite
-        if valid.all():
-            np.minimum.at(best, idx, np.hypot(px, py))
-        else:
-            np.minimum.at(best, idx[valid], np.hypot(px[valid], py[valid]))
-        if all_finite:
-            out = np.where(np.isfinite(best), best, np.nan)
-        else:
-            too_close = np.zeros(n, dtype=bool)
-            clear = np.zeros(n, dtype=bool)
-            too_close[idx[inside & (r == -np.inf)]] = True
-            clear[idx[inside & (r == np.inf)]] = True
-            out = np.where(np.isfinite(best), best,
-                           np.where(too_close, -np.inf, np.where(clear, np.inf, np.nan)))
+        if self._cached is None or self._cached.key != key:
+            self._cached = _MergeConstants.build(self.lidars, key)
+        k = self._cached
+        px, py = np.empty(ranges.size), np.empty(ranges.size)
+        merge_points(ranges, k.lx, k.ly, k.cos, k.sin, k.far, k.near, px, py)
+        rel = np.arctan2(py, px) - m.angle_min  # numpy's arctan2 (see scan_kernel)
+        out = np.empty(n, dtype=np.float32)
+        merge_bins(ranges, px, py, rel, n, inc, m.full_circle, TWO_PI, out)
         period = 1.0 / self.rate_hz
         return LaserScan(m.frame_id, stamp, m.angle_min, m.angle_min + (n - 1) * inc, inc,
-                         period / n, period, self.range_min, self.range_max,
-                         out.astype(np.float32))
+                         period / n, period, self.range_min, self.range_max, out)
 
 
 @dataclass(frozen=True)
@@ -343,6 +321,9 @@ class LidarRig:
         self._bounds = np.cumsum(self._sizes)[:-1]
         self._angles = np.concatenate([lidar._angles for lidar in self.lidars])
         self._u_max: tuple[float, np.ndarray] | None = None  #: (resolution, ranges [cells])
+        #: each lidar scan's (size, angle_min, angle_increment), as LaserScan carries them
+        self._key = tuple((lidar.config.beams, lidar.config.angle_min, lidar.config.angular_step)
+                          for lidar in self.lidars)
 
     @property
     def rate_hz(self) -> float:
@@ -391,5 +372,21 @@ class LidarRig:
 
     def scan(self, scene: Scene, pose: tuple[float, float, float], stamp: float,
              draws: Sequence[Draws] | None = None) -> LaserScan:
-        """The merged scan in base_link (``draws``: its random numbers, :meth:`draw`)."""
-        return self.merger.merge(self.scans(scene, pose, stamp, draws), stamp)
+        """The merged scan in base_link (``draws``: its random numbers, :meth:`draw`): the
+        merge of :meth:`scans`, each lidar's noise compiled (:func:`scan_kernel.measure`, the
+        floats of :meth:`Lidar.measure`) into one array for the merge."""
+        from lowerbase.world.scan_kernel import measure
+
+        dist = cast_rays_prepared(scene.grid, self._rays(scene, pose)).distance
+        ranges = np.empty(dist.size, dtype=np.float32)
+        start = 0
+        for i, (lidar, part) in enumerate(zip(self.lidars, np.split(dist, self._bounds),
+                                              strict=True)):
+            cfg = lidar.config
+            normal, uniform = draws[i] if draws is not None else lidar.draw()
+            measure(lidar.true_ranges(scene, pose, part), normal,
+                    uniform if uniform is not None else normal, uniform is not None,
+                    cfg.range_sigma, cfg.range_sigma_per_m, cfg.range_min, cfg.range_max,
+                    cfg.dropout_prob, ranges[start:start + part.size])
+            start += part.size
+        return self.merger.merge_ranges(ranges, self._key, stamp)

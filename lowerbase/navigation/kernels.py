@@ -239,3 +239,24 @@ def polygon_cells(fr: np.ndarray, fc: np.ndarray, ir: np.ndarray, ic: np.ndarray
                 c += sc
                 d += 2 * dr
     return cols[:n], rows[:n], dropped
+
+
+@_jit
+def ray_end_cells(ox: float, oy: float, px: np.ndarray, py: np.ndarray, max_len: float,
+                  xmin: float, ymin: float, xmax: float, ymax: float, x0: float, y0: float,
+                  res: float, w: int, h: int, cols: np.ndarray, rows: np.ndarray) -> None:
+    """The cells where the obstacle layer's clearing rays end, clamped onto the grid: each ray
+    from (ox, oy) towards (px, py) shortened to ``max_len`` and to the box, as
+    :func:`~lowerbase.navigation.layers.clip_rays` computes it, then the cell
+    ``floor((x - x0) / res)`` as ``Costmap2D.world_to_map``, clamped
+    (tests/navigation/test_clear_lines.py::test_ray_end_cells_are_clip_rays_cells)."""
+    for i in range(px.size):
+        dx, dy = px[i] - ox, py[i] - oy
+        t = min(1.0, max_len / max(np.hypot(dx, dy), 1e-12))
+        tx = (xmax - ox) / dx if dx > 0 else ((xmin - ox) / dx if dx < 0 else np.inf)
+        ty = (ymax - oy) / dy if dy > 0 else ((ymin - oy) / dy if dy < 0 else np.inf)
+        t = min(t, min(tx, ty))
+        c = np.int64(np.floor((ox + t * dx - x0) / res))
+        r = np.int64(np.floor((oy + t * dy - y0) / res))
+        cols[i] = min(max(c, 0), w - 1)
+        rows[i] = min(max(r, 0), h - 1)

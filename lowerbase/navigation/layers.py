@@ -14,7 +14,12 @@ import numpy as np
 from skimage import draw
 
 from lowerbase.errors import ConfigError, WorldError
-from lowerbase.navigation.kernels import clear_lines, polygon_cells, squared_distances
+from lowerbase.navigation.kernels import (
+    clear_lines,
+    polygon_cells,
+    ray_end_cells,
+    squared_distances,
+)
 from lowerbase.world.footprint import Footprint
 from lowerbase.world.grid import OccupancyGrid
 
@@ -268,12 +273,17 @@ class ObstacleLayer:
             oc, orow = cm.world_to_map(obs.origin[0], obs.origin[1])
             if not cm.inside(oc, orow):
                 continue  # costmap_2d: "sensor origin out of map bounds", no clearing
-            ex, ey = clip_rays(obs.origin[0], obs.origin[1], obs.points[:, 0],
-                               obs.points[:, 1], obs.raytrace_range, box)
-            ec, er = cm.world_to_map(ex, ey)
-            # the cells of line_cells to every (distinct) end cell, compiled (kernels.py)
-            clear_lines(cm.data, int(oc), int(orow), np.clip(ec, 0, cm.width - 1),
-                        np.clip(er, 0, cm.height - 1), FREE_SPACE)
+            # the rays clipped (clip_rays) and their end cells on the grid, then the cells of
+            # line_cells to every (distinct) end cell, compiled (kernels.py)
+            n = obs.points.shape[0]
+            ec, er = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+            ray_end_cells(float(obs.origin[0]), float(obs.origin[1]),
+                          np.ascontiguousarray(obs.points[:, 0], dtype=float),
+                          np.ascontiguousarray(obs.points[:, 1], dtype=float),
+                          float(obs.raytrace_range), *box, float(cm.origin[0]),
+                          float(cm.origin[1]), float(cm.resolution), cm.width, cm.height,
+                          ec, er)
+            clear_lines(cm.data, int(oc), int(orow), ec, er, FREE_SPACE)
         for obs in observations:
             if not obs.marking or obs.points.size == 0:
                 continue

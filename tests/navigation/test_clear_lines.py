@@ -32,3 +32,27 @@ def test_clear_lines_frees_exactly_the_cells_of_line_cells() -> None:
                 got = data.copy()
                 clear_lines(got, c0, r0, np.clip(ec, 0, w - 1), np.clip(er, 0, h - 1), 0)
                 np.testing.assert_array_equal(got, want)
+
+
+def test_ray_end_cells_are_clip_rays_cells() -> None:
+    """The compiled end cells: clip_rays (max length, the window's box), world_to_map and the
+    clamp onto the grid, as ObstacleLayer.update computed them in numpy; ends near, on and far
+    beyond the box, along the axes (dx or dy 0) and at the origin itself."""
+    from lowerbase.navigation.kernels import ray_end_cells
+    from lowerbase.navigation.layers import Costmap2D, clip_rays
+
+    rng = np.random.default_rng(4)
+    cm = Costmap2D(100, 80, 0.05, (-2.5, -1.95), 0)
+    box = (cm.origin[0], cm.origin[1], cm.origin[0] + cm.width * cm.resolution - 1e-9,
+           cm.origin[1] + cm.height * cm.resolution - 1e-9)
+    for ox, oy in ((0.0, 0.0), (-2.49, 1.99), (1.3, -0.7)):
+        px = np.concatenate((ox + rng.uniform(-9.0, 9.0, 600), [ox, ox, ox + 1.0, ox - 0.2]))
+        py = np.concatenate((oy + rng.uniform(-9.0, 9.0, 600), [oy, oy + 2.0, oy, oy]))
+        for max_len in (3.0, 0.5, 40.0):
+            ex, ey = clip_rays(ox, oy, px, py, max_len, box)
+            wc, wr = cm.world_to_map(ex, ey)
+            cols, rows = np.empty(px.size, np.int64), np.empty(px.size, np.int64)
+            ray_end_cells(ox, oy, px, py, max_len, *box, cm.origin[0], cm.origin[1],
+                          cm.resolution, cm.width, cm.height, cols, rows)
+            np.testing.assert_array_equal(cols, np.clip(wc, 0, cm.width - 1))
+            np.testing.assert_array_equal(rows, np.clip(wr, 0, cm.height - 1))

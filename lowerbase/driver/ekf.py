@@ -66,6 +66,7 @@ from lowerbase.driver.ekf_model import (
     W,
     X,
     Y,
+    interval_mean3,
     interval_weight_list,
     interval_weights,
     motion_jacobian,
@@ -300,6 +301,11 @@ class PlanarEkf(EkfState):
         prev, self._gyro_prev = self._gyro_prev, (times[-1], rates[-1])
         if span is not None and span.start is not None:
             if prev is not None and prev[0] < times[0]:
+                if len(times) == 2:  # the usual cycle, written out (the same bits)
+                    mean, squares = interval_mean3(
+                        (prev[0], times[0], times[1]), (prev[1], rates[0], rates[1]),
+                        span.start, span.start + span.dt)
+                    return mean, self._gyro_sigma * math.sqrt(squares)
                 times.insert(0, prev[0])
                 rates.insert(0, prev[1])
             weights = interval_weight_list(times, span.start, span.start + span.dt)

@@ -236,6 +236,40 @@ def interval_weight_list(times: Sequence[float], t0: float, t1: float) -> list[f
     return [w / span for w in weights]
 
 
+def interval_mean3(times: Sequence[float], rates: Sequence[float], t0: float,
+                   t1: float) -> tuple[float, float]:
+    """``(sum w_i r_i, sum w_i^2)`` with :func:`interval_weight_list`'s weights, for three
+    samples (the driver's cycle: the last sample before and two new ones), written out: the
+    same operations in the same order, so the same bits (tests/driver/test_ekf_interval.py)."""
+    a0, a1, a2 = times
+    span = t1 - t0
+    if not span > 0:
+        w0 = w1 = w2 = 1.0 / 3
+    else:
+        w0 = w1 = w2 = 0.0
+        held = (a0 if a0 < t1 else t1) - t0
+        w0 += held if held > 0.0 else 0.0
+        held = t1 - (a2 if a2 > t0 else t0)
+        w2 += held if held > 0.0 else 0.0
+        lo, hi = (a0 if a0 > t0 else t0), (a1 if a1 < t1 else t1)
+        if not (hi <= lo or a1 <= a0):
+            w0 += (hi - lo) * (a1 - 0.5 * (lo + hi)) / (a1 - a0)
+            w1 += (hi - lo) * (0.5 * (lo + hi) - a0) / (a1 - a0)
+        lo, hi = (a1 if a1 > t0 else t0), (a2 if a2 < t1 else t1)
+        if not (hi <= lo or a2 <= a1):
+            w1 += (hi - lo) * (a2 - 0.5 * (lo + hi)) / (a2 - a1)
+            w2 += (hi - lo) * (0.5 * (lo + hi) - a1) / (a2 - a1)
+        w0, w1, w2 = w0 / span, w1 / span, w2 / span
+    r0, r1, r2 = rates
+    mean = 0.0 + w0 * r0
+    mean += w1 * r1
+    mean += w2 * r2
+    squares = 0.0 + w0 * w0
+    squares += w1 * w1
+    squares += w2 * w2
+    return mean, squares
+
+
 class Innovation(NamedTuple):
     """A measurement's innovation and the pieces of its update."""
 

@@ -133,3 +133,28 @@ def test_queued_gyro_samples_are_one_measurement_of_the_interval_mean() -> None:
     assert seen[1][0] == pytest.approx(0.25 * 0.20 + 0.5 * 0.21 + 0.25 * 0.23)
     assert seen[1][1] == pytest.approx(EkfNoise().gyro_noise * math.sqrt(0.375))
     assert ekf.statistics["gyro.accepted"] == 2
+
+
+def test_the_three_sample_mean_is_the_general_one_bit_for_bit() -> None:
+    """interval_mean3 (the driver's cycle written out) against interval_weight_list and the
+    sums _gyro_mean makes: samples inside, straddling and outside the interval, repeated
+    times, an empty interval."""
+    from lowerbase.driver.ekf_model import interval_mean3, interval_weight_list
+
+    rng = np.random.default_rng(3)
+    cases = 0
+    for _ in range(4000):
+        t0 = float(rng.uniform(0.0, 100.0))
+        t1 = t0 + float(rng.choice([0.0, 0.02, rng.uniform(-0.01, 0.05)]))
+        times = sorted(float(t0 + rng.choice([-0.03, 0.0, 0.01, 0.02, 0.04,
+                                              rng.uniform(-0.03, 0.05)])) for _ in range(3))
+        rates = [float(r) for r in rng.normal(0.0, 1.0, 3)]
+        weights = interval_weight_list(times, t0, t1)
+        mean = squares = 0.0
+        for w_i, r_i in zip(weights, rates, strict=True):
+            mean += w_i * r_i
+            squares += w_i * w_i
+        got = interval_mean3(times, rates, t0, t1)
+        assert (got[0].hex(), got[1].hex()) == (mean.hex(), squares.hex()), (times, t0, t1)
+        cases += 1
+    assert cases == 4000

@@ -123,3 +123,27 @@ def test_no_batching_while_something_else_may_send() -> None:
     tapped.run(1.0)
     tapped.drive(0.5, 0.0, 0.5)
     assert tapped.batch_stats["periods"] == 0
+
+
+def test_a_send_inside_a_batch_is_counted_and_ends_batching() -> None:
+    """The safety net: a driver that sends while handling a frame of a batch's earlier period
+    (nothing in the driver does; here a wrapped on_frame) is counted, and the loop steps from
+    then on (where the send reaches the MCU when it should)."""
+    loop = SimLoop()
+    loop.run(1.0)
+    loop.drive(0.5, 0.0, 0.2)
+    assert loop.batch_stats["mistimed"] == 0 and loop.batch_stats["periods"] > 0
+    on_frame, sent = loop.driver.on_frame, []
+
+    def sends_once(frame_id: int, data: bytes, stamp: float | None = None) -> None:
+        on_frame(frame_id, data, stamp)
+        if not sent:
+            sent.append(stamp)
+            loop.driver.control("FaultClear")
+
+    loop.driver.on_frame = sends_once  # type: ignore[method-assign]
+    loop.drive(0.5, 0.0, 0.2)
+    assert sent and loop.batch_stats["mistimed"] == 1
+    periods = loop.batch_stats["periods"]
+    loop.drive(0.5, 0.0, 0.5)
+    assert loop.batch_stats["periods"] == periods

@@ -133,7 +133,8 @@ def test_a_send_inside_a_batch_is_counted_and_ends_batching() -> None:
     loop.run(1.0)
     loop.drive(0.5, 0.0, 0.2)
     assert loop.batch_stats["mistimed"] == 0 and loop.batch_stats["periods"] > 0
-    on_frame, sent = loop.driver.on_frame, []
+    on_frame = loop.driver.on_frame
+    sent: list[float | None] = []
 
     def sends_once(frame_id: int, data: bytes, stamp: float | None = None) -> None:
         on_frame(frame_id, data, stamp)

@@ -10,21 +10,24 @@ truth (SimRig and the fleet's buses do not; the frames themselves are exact).
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, cast
-
-import numpy as np
 
 from lowerbase.clock import SimClock
 
 if TYPE_CHECKING:  # pragma: no cover
     from lowerbase.firmware_model.fastkernel import KernelLoop
+    from lowerbase.firmware_model.mcu import Mcu
 
 MAX_RUN = 32  #: periods per kernel call
 
 
-def run(kl: KernelLoop, n: int) -> int:
+def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
     """Up to ``n`` periods (each followed by ``clock.advance(dt)``); returns how many were
-    done, 0 when the next one is not for a run (the caller steps it)."""
+    done, 0 when the next one is not for a run (the caller steps it). ``fresh``: the periods
+    (from 0, ascending) before which the last MotionCommand arrives again (``Mcu.advance``
+    checked that it is the same command: only its watchdog time changes)."""
     mcu, m, lean, lb = kl.mcu, kl.m, kl.lean, kl.lb
     truth, slip, bms = mcu.truth, mcu.slip, mcu.bms
     cmd = mcu._last_cmd
@@ -56,25 +59,32 @@ def run(kl: KernelLoop, n: int) -> int:
             targets[j] = smoother.step(v, w, dt)
             wound.append((smoother.v, smoother.w))
     if noise and rows is not kl._rows:
-        kl._rows, kl._rows_arr = rows, np.array(rows)
+        kl._rows, kl._rows_arr = rows, kl.rows_array(rows)
     ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
     stuck = mcu._enc_stuck
     imu_due0 = mcu._imu_due
     fs, js = kl.fs, kl.js
     status_in, state_in = mcu.status, mcu.state  # motion_fault is 0 here
-    fs[:lb.F_IN] = (ml.omega, ml.setpoint, ml.current, ml._over_time, ml._stall_time,
-             mr.omega, mr.setpoint, mr.current, mr._over_time, mr._stall_time,
-             el._frac, er._frac, truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x,
-             truth.distance, mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge,
-             mcu._bms_elapsed, imu_due0, now, mcu.boot_time, v, w, lean.imu_cycle,
-             mcu._bms_last_answer, mcu._bms_next_poll, m.BMS_STEP, mcu._saved_odometer,
-             mcu._last_save, m.ODOMETER_SAVE_PERIOD, mcu._last_cmd_time,
-             mcu.chassis.command_timeout, mcu._standby_cmd_time)
-    js[:] = (ml.over_current, ml.stalled, mr.over_current, mr.stalled, el.total, er.total,
-             mcu._imu_same, status_in, 0, state_in,
-             len(rows) - 1 if noise else 0, mcu._imu_last is not None, 0, 0, 0, 0, 0,
-             n, mode == 1, noise, bms is not None, mcu._bms_bits, mcu.estop_command,
-             mcu._watchdog, mcu._speed_limited)
+    fs[:lb.F_IN] = (
+        ml.omega, ml.setpoint, ml.current, ml._over_time, ml._stall_time,
+        mr.omega, mr.setpoint, mr.current, mr._over_time, mr._stall_time,
+        el._frac, er._frac, truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x,
+        truth.distance, mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge,
+        mcu._bms_elapsed, imu_due0, now, mcu.boot_time, v, w, lean.imu_cycle,
+        mcu._bms_last_answer, mcu._bms_next_poll, m.BMS_STEP, mcu._saved_odometer,
+        mcu._last_save, m.ODOMETER_SAVE_PERIOD, mcu._last_cmd_time,
+        mcu.chassis.command_timeout, mcu._standby_cmd_time)
+    js[:lb.J_SIZE] = (
+        ml.over_current, ml.stalled, mr.over_current, mr.stalled, el.total, er.total,
+        mcu._imu_same, status_in, 0, state_in, len(rows) - 1 if noise else 0,
+        mcu._imu_last is not None, 0, 0, 0, 0, 0, n, mode == 1, noise, bms is not None,
+        mcu._bms_bits, mcu.estop_command,
+        False,  # the watchdog flag: _target clears it in every period of a run
+        mcu._speed_limited)
+    flags = lb.J_FRESH
+    js[flags:] = 0
+    for j in fresh:
+        js[flags + j] = 1
     kl.batch(kl.k, fs, js, targets, kl._rows_arr if noise else kl.zero_rows, kl.imu,
              kl.due, kl.per, kl.hot, kl.counters, kl.vals, kl.sig, kl.scale, kl.frames,
              kl.out, kl.ids, kl.lens, kl.pidx)
@@ -89,6 +99,9 @@ def run(kl: KernelLoop, n: int) -> int:
      el._frac, er._frac, truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x,
      truth.distance, mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge,
      mcu._bms_elapsed, mcu._imu_due) = fs[:25].tolist()
+    if fresh and fresh[0] < done:
+        mcu._last_cmd_time = float(fs[lb.F_LAST_CMD])
+        mcu.stats["rx_frames"] += sum(1 for j in fresh if j < done)
     ml.over_current, ml.stalled = oc_l != 0, st_l != 0
     mr.over_current, mr.stalled = oc_r != 0, st_r != 0
     ml._steady = mr._steady = None
@@ -119,6 +132,7 @@ def run(kl: KernelLoop, n: int) -> int:
     kl._next = float(kl.due[-1])
     final = None
     f = sent = 0
+    send, counters, send_rows = mcu._send, mcu._counters, lean.send_rows
     for j in range(done):
         if j == last:
             if final is not None:  # back to the state after the run
@@ -134,15 +148,86 @@ def run(kl: KernelLoop, n: int) -> int:
                 final = mcu.odometer, mcu.status, mcu.motion_fault, mcu.state
             mcu.odometer = float(fs[lb.F_ODO_AT + j])
             mcu.status, mcu.motion_fault, mcu.state = status_in, 0, state_in
-        end = f
-        while end < count and pidx[end] == j:
-            end += 1
-        if end > f:
-            sent += kl.send_frames(data, ids, lens, f, end)
-            f = end
+        while f < count and pidx[f] == j:  # KernelLoop.send_frames inline
+            fid = ids[f]
+            if fid >= 0:
+                send(fid, data[8 * f:8 * f + lens[f]])
+                sent += 1
+            else:
+                sent += send_rows(-1 - fid, counters, send)
+            f += 1
         if j == last and python_emit:
             kl._send(clock.now(), -1)
         clock.advance(dt)
     if sent:
         mcu.stats["tx_frames"] += sent
     return done
+
+
+Incoming = Sequence[tuple[int, int, bytes]]  #: (period offset, frame id, data), by offset
+
+
+def advance(mcu: Mcu, periods: int, incoming: Incoming) -> None:
+    """``Mcu.advance`` with frames from the upper side: each ``(k, frame_id, data)`` is
+    received (``Mcu.receive``) just before period ``k`` (0 .. periods - 1), as a loop of
+    ``receive`` and ``step()`` does it. The frames due before period k go through ``receive``;
+    of those after it, a MotionCommand equal to the last one accepted but for its Counter (the
+    same command, chassis and limits: only its watchdog time changes) is taken by the
+    compiled run itself (``run``'s ``fresh``), so runs span commands; any other frame ends the
+    run before its period."""
+    if any(k < 0 or k >= periods for k, _, _ in incoming):
+        raise ValueError(f"incoming frames must be for periods 0 .. {periods - 1}")
+    if any(a[0] > b[0] for a, b in itertools.pairwise(incoming)):
+        raise ValueError("incoming frames must be in period order")
+    clock = cast(SimClock, mcu.clock)
+    total, i, k = len(incoming), 0, 0
+    while k < periods:
+        while i < total and incoming[i][0] == k:
+            _, frame_id, data = incoming[i]
+            before = mcu._last_cmd
+            mcu.receive(frame_id, data)
+            _remember(mcu, frame_id, data, before)
+            i += 1
+        kernel = mcu._lean.kernel
+        done = 0
+        if (kernel is not None and mcu.lean and mcu._lean.compiled
+                and not (mcu.faults or mcu._delayed or mcu._imu_bias_applied
+                         or mcu.imu.frozen)):
+            n, fresh, j = min(periods - k, MAX_RUN), [], i
+            while j < total and incoming[j][0] < k + n:
+                off, frame_id, data = incoming[j]
+                if not _repeat(mcu, frame_id, data):
+                    n = off - k  # the run stops before it; Python receives it
+                    break
+                fresh.append(off - k)
+                j += 1
+            if fresh and fresh[-1] >= n:  # repeats before a frame Python takes, same period
+                fresh = [f for f in fresh if f < n]
+            done = run(kernel, n, fresh)
+            i += sum(1 for f in fresh if f < done)
+        if not done:
+            mcu.step()
+            clock.advance(mcu.dt)
+            done = 1
+        k += done
+
+
+def _remember(mcu: Mcu, frame_id: int, data: bytes, before: object) -> None:
+    """After ``receive``: a MotionCommand just accepted (a new ``_last_cmd``) is the one a
+    repeat must equal (payload but for the Counter, length, command, chassis)."""
+    cmd = mcu._last_cmd
+    if cmd is before or cmd is None:
+        return
+    msg = mcu.codec.message("MotionCommand")
+    if frame_id != msg.frame_id:
+        return
+    counter = msg.signal("Counter")
+    keep = ~(((1 << counter.length) - 1) << counter.start)
+    mcu._repeat_of = (frame_id, len(data), int.from_bytes(data, "little") & keep, keep, cmd,
+                      mcu.chassis)
+
+
+def _repeat(mcu: Mcu, frame_id: int, data: bytes) -> bool:
+    r = mcu._repeat_of
+    return (r is not None and frame_id == r[0] and len(data) == r[1] and mcu._last_cmd is r[4]
+            and mcu.chassis is r[5] and int.from_bytes(data, "little") & r[3] == r[2])

@@ -41,6 +41,9 @@ J_COUNT, J_DONE, J_PY_EMIT, J_STEPS, J_PY_FRAMES = range(12, 17)
 #: ... and what only goes in
 J_N, J_SMOOTHED, J_NOISE, J_BMS, J_BMS_BITS, J_ESTOP, J_WATCHDOG, J_LIMITED = range(17, 25)
 J_SIZE = 25
+#: then, per period j of the run, 1: the last MotionCommand again before it (its watchdog
+#: time refreshed; ``fs[F_LAST_CMD]`` comes back as the last such time)
+J_FRESH = J_SIZE
 
 
 @_jit
@@ -80,10 +83,12 @@ def batch(k: np.ndarray, fs: np.ndarray, js: np.ndarray, targets: np.ndarray,
     for j in range(n):
         if bms and now >= next_poll:
             break
-        if now - last_cmd_time > timeout:
-            break
         imu_due = now >= imu_due_t
         if imu_due and noise and row < 0:
+            break
+        if js[J_FRESH + j]:  # the last MotionCommand again, received before this period
+            last_cmd_time = now
+        if now - last_cmd_time > timeout:
             break
         z = rows[row] if imu_due and noise else rows[0]
         t_v = targets[j, 0] if smoothed else target_v
@@ -136,6 +141,7 @@ def batch(k: np.ndarray, fs: np.ndarray, js: np.ndarray, targets: np.ndarray,
     fs[10], fs[11], fs[12], fs[13], fs[14] = fr_l, fr_r, x, y, yaw
     fs[15], fs[16], fs[17], fs[18], fs[19] = tv, tw, accel_x, distance, odometer
     fs[20], fs[21], fs[22], fs[23], fs[24] = stuck_l, stuck_r, charge, elapsed, imu_due_t
+    fs[F_LAST_CMD] = last_cmd_time
     js[J_OC_L], js[J_ST_L], js[J_OC_R], js[J_ST_R] = oc_l, st_l, oc_r, st_r
     js[J_TOT_L], js[J_TOT_R], js[J_IMU_SAME] = tot_l, tot_r, imu_same
     js[J_STATUS], js[J_FAULT], js[J_STATE] = status, motion_fault, state

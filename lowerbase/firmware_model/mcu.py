@@ -167,6 +167,8 @@ class Mcu(McuCommands, McuStatus, McuFrames):
         #: the last command's limit_twist (linear, angular, chassis) -> result
         self._limited_key: tuple[float, float, ChassisParams] | None = None
         self._limited = kinematics.LimitedTwist(0.0, 0.0, clipped=False)
+        #: the last MotionCommand accepted through advance(incoming=...) (fastbatch._remember)
+        self._repeat_of: tuple[Any, ...] | None = None
         # when each periodic message is due next, in catalog order (self._periodic)
         self._due = [now + (m.cycle_time or 0.0) for m in self._periodic]
         # like a CANopen boot-up message: the first frame after a boot is the Heartbeat with
@@ -315,11 +317,17 @@ class Mcu(McuCommands, McuStatus, McuFrames):
         self._emit_due(now)
         self._release_delayed(now)
 
-    def advance(self, periods: int) -> None:
+    def advance(self, periods: int, incoming: fastbatch.Incoming = ()) -> None:
         """``periods`` control periods on a SimClock, each followed by ``clock.advance(dt)``:
         what a loop of ``step()`` and ``clock.advance(dt)`` does, frame for frame, with runs of
         lean periods in one compiled call (fastbatch.py; the send callback must then not read
-        this Mcu or its truth: a run's state comes back once, its frames after it)."""
+        this Mcu or its truth: a run's state comes back once, its frames after it).
+        ``incoming``: frames from the upper side, ``(k, frame_id, data)`` received just before
+        period k (in period order): a run then spans repeated MotionCommands
+        (:func:`.fastbatch.advance`)."""
+        if incoming:
+            fastbatch.advance(self, periods, incoming)
+            return
         clock = self.clock
         while periods > 0:
             kernel = self._lean.kernel

@@ -201,3 +201,101 @@ def test_bms_polls_run_in_the_kernel_unless_the_pack_steps_in_the_same_period(
     assert got == general
     # only a poll in a period that also steps the pack leaves the kernel (shift 19: some do)
     assert seen["python"] == both and (both > 0) == (shift == 19)
+
+
+def _schedule(rig: TraceRig) -> list[tuple[int, int, bytes]]:
+    """1400 periods of frames from the upper side: MotionCommand every 4 periods (repeats,
+    changes, Smoothed, a malformed one, a gap beyond the watchdog), Standby and Enable, and a
+    LedCommand."""
+    codec, out, counter = rig.codec, [], 0
+
+    def frame(k: int, name: str, **values: Any) -> None:
+        nonlocal counter
+        msg = codec.message(name)
+        if msg.has_counter:
+            values["Counter"] = counter
+            counter = (counter + 1) & 0xF
+        out.append((k, msg.frame_id, msg.encode(values)))
+
+    for k in range(0, 1400, 4):
+        if 900 <= k < 1100:
+            continue  # commands stop: the watchdog brakes
+        v = 0.6 if k < 300 else 0.4 if k < 600 else 2.5  # 2.5: SPEED_LIMITED
+        frame(k, "MotionCommand", Linear=v, Angular=0.2,
+              Mode="Smoothed" if 400 <= k < 500 else "Raw")
+        if k == 200:  # one byte short: malformed, COMMAND_REJECTED
+            out[-1] = (k, out[-1][1], out[-1][2][:-1])
+        if k == 520:
+            frame(k, "ControlCommand", Command="Standby")
+        if k == 560:
+            frame(k + 1, "ControlCommand", Command="EnableCanControl")
+        if k == 700:
+            frame(k + 2, "LedCommand", Strip=0, Submodule=3, Urgency=0, Abnormal=0, Normal=0xA3,
+                  Color=0xFF0000)
+    return out
+
+
+def _drive_scheduled(in_advance: bool) -> tuple[Any, ...]:
+    p = load_profile()
+    rig = TraceRig(profile=p, bms=McuBmsAdapter.from_battery_table(p.battery), keep=False)
+    rig.enable()
+    frames, m = _schedule(rig), rig.mcu
+    if in_advance:
+        m.advance(700, [f for f in frames if f[0] < 700])
+        m.advance(700, [(k - 700, i, d) for k, i, d in frames if k >= 700])
+    else:
+        for k in range(1400):
+            for _, frame_id, data in (f for f in frames if f[0] == k):
+                m.receive(frame_id, data)
+            m.advance(1)
+    m._lean.release()
+    tr = m.truth
+    return (rig.trace, tr.x, tr.y, tr.yaw, tr.v, m.odometer, m.encoder_counts(), m.status,
+            int(m.state), m.imu_sample, m._last_cmd, m._last_cmd_time, m.leds[(0, 3)],
+            dict(m.stats), m._bms_charge)
+
+
+def test_runs_span_repeated_motion_commands(monkeypatch: pytest.MonkeyPatch) -> None:
+    runs: list[int] = []
+    run = fastbatch.run
+
+    def counted(kl: KernelLoop, n: int, fresh: Any = ()) -> int:
+        done = run(kl, n, fresh)
+        runs.append(done)
+        return done
+
+    monkeypatch.setattr(fastbatch, "run", counted)
+    got = _drive_scheduled(True)
+    done = [d for d in runs if d]
+    assert sum(done) > 1000 and sum(done) / len(done) > 12  # runs span commands
+    runs.clear()
+    assert got == _drive_scheduled(False)  # receive, then one period, each period
+    assert max(runs) == 1
+    monkeypatch.setattr(Mcu, "lean", False)
+    assert got == _drive_scheduled(True)  # the general loop
+
+
+def test_incoming_frames_out_of_the_periods_are_refused() -> None:
+    rig = TraceRig(profile=load_profile(), keep=False)
+    with pytest.raises(ValueError, match=r"periods 0 \.\. 3"):
+        rig.mcu.advance(4, [(4, 0x100, b"")])
+    with pytest.raises(ValueError, match="period order"):
+        rig.mcu.advance(4, [(2, 0x100, b""), (1, 0x100, b"")])
+
+
+@pytest.mark.parametrize("runs", [True, False])
+def test_a_run_after_a_watchdog_stop_clears_the_watchdog_bit(runs: bool) -> None:
+    """The first command after a watchdog stop: the periods of a run report no WATCHDOG_STOP
+    (``_target`` clears the flag in each; the run once kept the flag it started with)."""
+    rig = TraceRig(profile=load_profile(), keep=False)
+    rig.enable()
+    rig.drive(0.5, 0.1, 0.5)
+    rig.run(1.0)  # commands stop: the watchdog brakes
+    assert rig.mcu.status & int(StatusBit.WATCHDOG_STOP)
+    rig.send("MotionCommand", Linear=0.3, Angular=0.0, Mode="Raw")
+    if runs:
+        rig.mcu.advance(8)
+    else:
+        for _ in range(8):
+            rig.step()
+    assert not rig.mcu.status & int(StatusBit.WATCHDOG_STOP)

@@ -26,7 +26,9 @@ event is scheduled or a wheel's limits change. The robot's path, contacts and fr
 same bits either way (tests/world/test_contact_gate.py); only who computes the period changes.
 
 The world must be stepped through :meth:`WorldSim.step` (which calls :meth:`ContactGate.check`
-first), as it is for its sensors.
+first), as it is for its sensors, or :meth:`WorldSim.run_periods`, which runs a batch of
+periods only after :meth:`ContactGate.clear_run` found the free space covering all of them
+(the run's reach is the periods times one period's).
 """
 
 from __future__ import annotations
@@ -138,6 +140,26 @@ class ContactGate:
         else:
             self._free = None
         truth.surroundings = self.surroundings
+
+    def clear_run(self, periods: int) -> bool:
+        """Take the surroundings out for the next ``periods`` periods at once if the free space
+        measured covers them all (the run's last period ends at most ``periods`` reaches from
+        the robot's pose now, and the people walk at most until then), as :meth:`check` before
+        each of them would have: True and out, else False and nothing changed."""
+        loop = self.loop
+        mcu = loop.mcu
+        f = self._free
+        if not self.enabled or mcu.slip.events or f is None or f.inputs != self._inputs():
+            return False
+        truth = mcu.truth
+        d = math.hypot(truth.x - f.x, truth.y - f.y) + f.arm * abs(truth.yaw - f.yaw) \
+            + periods * f.reach
+        t_end = loop.now + periods * mcu.dt * (1.0 + 1e-9)
+        if not (d < f.static and d + f.speed * (t_end - f.t) < f.moving):
+            return False
+        truth.surroundings = None
+        self.skipped += periods
+        return True
 
     def _measure(self) -> FreeSpace | None:
         """The free space around the robot now: the circle's, else (standing, e.g. docked

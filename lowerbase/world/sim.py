@@ -15,6 +15,12 @@ amcl's ``update_min_d`` / ``update_min_a`` of /odom motion, or after a control t
 gets it with /odom at the scan's stamp (:meth:`WorldSim.odom_at`, interpolated between the
 /odom samples around it, as amcl's tf lookup does), once /odom has reached that stamp.
 
+:meth:`WorldSim.run_periods` (what :class:`~lowerbase.navigation.sim.NavSim` runs between two
+control ticks) hands runs of periods in which the world does nothing to the emulator and driver
+at once (:meth:`SimLoop.advance`): up to the next scan tick, while no scan waits for /odom, the
+camera is off and the contact gate's free space covers the run; the same bits as stepping
+(tests/world/test_world_advance.py).
+
 It reads the robot's truth only through :class:`~lowerbase.world.truth.LoopTruth`; the
 emulator's frame is placed on the map at the start pose (``map_from_truth``). What a ROS node
 would publish is read off it: :attr:`WorldSim.scan`, :attr:`WorldSim.frame`,
@@ -220,6 +226,9 @@ class WorldSim(SteppedLoop):
         """One control period of the emulator and driver, then the sensors that are due."""
         self.gate.check()
         self.loop.step()
+        self._after_step()
+
+    def _after_step(self) -> None:
         now = self.loop.now
         self._record_odom()
         if now + 1e-9 >= self._next_scan:
@@ -230,6 +239,42 @@ class WorldSim(SteppedLoop):
             assert self.camera is not None
             self.frame = self.camera.render(self.scene_at(now), self.true_pose(), now)
             self.frames += 1
+
+    def advance(self, periods: int) -> None:
+        """``periods`` of :meth:`step` (see :meth:`run_periods`)."""
+        self.run_periods(periods)
+
+    def run_periods(self, periods: int) -> int:
+        """``periods`` of :meth:`step`, run by the emulator and driver in batches
+        (:meth:`SimLoop.advance`) where nothing of the world's happens in between: no scan
+        waiting for /odom, no camera, the contact gate's free space covering the whole run
+        (:meth:`ContactGate.clear_run`), which ends at the next scan tick. /odom is recorded
+        after the run: a scan tick reads only the last sample up to its stamp and the next
+        one (see :meth:`odom_at`). Returns the periods with a contact."""
+        contacts = 0
+        while periods > 0:
+            k = self._runnable(periods)
+            if k > 1 and self.gate.clear_run(k):
+                self.loop.advance(k)
+                self._after_step()
+            else:
+                k = 1
+                self.step()
+                contacts += self.contact is not None
+            periods -= k
+        return contacts
+
+    def _runnable(self, periods: int) -> int:
+        """Periods from now up to and including the next scan tick, at most ``periods``; 1
+        when a scan waits for /odom or the camera renders."""
+        if periods < 2 or self._pending is not None or self.camera is not None:
+            return 1
+        t, dt = self.loop.now, self.control_dt
+        for k in range(1, periods + 1):
+            t += dt  # as the loop's clock advances
+            if t + 1e-9 >= self._next_scan:
+                return k
+        return periods
 
     @property
     def scan(self) -> LaserScan | None:

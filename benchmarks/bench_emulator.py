@@ -22,23 +22,50 @@ from lowerbase.transport import free_loopback_port, open_bus
 GROUP = "239.74.163.98"
 
 
-def sim_speed(seconds: float, lean: bool = True, compiled: bool = True) -> float:
-    """Chassis seconds per wall second: one MCU with its BMS, driving, every frame encoded
-    (SimRig plays the upper computer: a MotionCommand encoded and decoded every 20 ms).
+def sim_speed(seconds: float, lean: bool = True, compiled: bool = True, scheduled: bool = True,
+              repeat: int = 3) -> float:
+    """Chassis seconds per CPU second (best of ``repeat``): one MCU with its BMS, driving,
+    every frame encoded. The harness plays the upper computer: a MotionCommand encoded every
+    20 ms with its rolling Counter; ``scheduled``: a second of them at a time handed to
+    ``Mcu.advance(n, incoming)`` with their periods (runs of compiled periods span repeated
+    commands), else ``SimRig.drive`` (each command received, then ``advance(4)``).
     ``lean=False`` sends every step through the general, fault-aware loop; ``compiled=False``
     keeps the lean loop in Python (no numba kernel)."""
-    p = load_profile()
-    saved = LeanLoop.compiled
-    LeanLoop.compiled = compiled
-    try:
-        rig = SimRig(p, bms=McuBmsAdapter.from_battery_table(p.battery), keep=False)
-    finally:
-        LeanLoop.compiled = saved
-    rig.mcu.lean = lean
-    rig.enable()
-    t0 = time.perf_counter()
-    rig.drive(0.6, 0.2, seconds)
-    return seconds / (time.perf_counter() - t0)
+    best = 0.0
+    for _ in range(repeat):
+        p = load_profile()
+        saved = LeanLoop.compiled
+        LeanLoop.compiled = compiled
+        try:
+            rig = SimRig(p, bms=McuBmsAdapter.from_battery_table(p.battery), keep=False)
+        finally:
+            LeanLoop.compiled = saved
+        rig.mcu.lean = lean
+        rig.enable()
+        t0 = time.process_time()
+        if scheduled:
+            _drive_scheduled(rig, 0.6, 0.2, seconds)
+        else:
+            rig.drive(0.6, 0.2, seconds)
+        best = max(best, seconds / (time.process_time() - t0))
+    return best
+
+
+def _drive_scheduled(rig: SimRig, linear: float, angular: float, seconds: float) -> None:
+    """What ``rig.drive(linear, angular, seconds)`` does, the commands handed to the Mcu a
+    second at a time with the period each arrives before."""
+    mcu, msg = rig.mcu, rig.codec.message("MotionCommand")
+    every, block = round(0.02 / mcu.dt), round(1.0 / mcu.dt)
+    total = round(seconds / mcu.dt)
+    counter = 0
+    for start in range(0, total, block):
+        n = min(block, total - start)
+        frames = []
+        for k in range(0, n, every):
+            frames.append((k, msg.frame_id, msg.encode(
+                {"Linear": linear, "Angular": angular, "Mode": "Raw", "Counter": counter})))
+            counter = (counter + 1) & 0xF
+        mcu.advance(n, frames)
 
 
 def chassis_per_core(seconds: float) -> tuple[float, float]:
@@ -137,13 +164,19 @@ def deviations(codec: Codec, stamps: dict[str, list[float]]
 
 def run(quick: bool = False) -> list[Row]:
     speed = sim_speed(20.0 if quick else 120.0)
-    python = sim_speed(20.0 if quick else 120.0, compiled=False)
-    general = sim_speed(20.0 if quick else 120.0, lean=False)
+    per_call = sim_speed(20.0 if quick else 120.0, scheduled=False)
+    python = sim_speed(20.0 if quick else 120.0, compiled=False, repeat=1)
+    general = sim_speed(20.0 if quick else 120.0, lean=False, repeat=1)
     per_core, fps = chassis_per_core(10.0 if quick else 60.0)
     rows = [
         Row("emulator", "simulated clock, one chassis", speed, "x real time",
-            "target >= 1000x; MCU + BMS at 200 Hz, all frames encoded, no bus; the lean "
-            "period compiled (numba; about 8 s CPU to compile once, then cached)"),
+            "target >= 1000x; by CPU, best of 3; MCU + BMS at 200 Hz, all frames encoded, no "
+            "bus, a MotionCommand encoded every 20 ms and handed to Mcu.advance with its "
+            "period a second ahead; the lean period compiled (numba; about 8 s CPU to compile "
+            "once, then cached)"),
+        Row("emulator", "simulated clock, one chassis, a command per advance call", per_call,
+            "x real time", "the same driven by SimRig.drive (receive, then advance(4): a "
+            "compiled run per command)"),
         Row("emulator", "simulated clock, one chassis, Python lean loop", python, "x real time",
             "the same without the compiled period (no numba; docs/emulator.md)"),
         Row("emulator", "simulated clock, one chassis, general loop", general, "x real time",

@@ -20,7 +20,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from lowerbase.firmware_model.fastkernel import KernelLoop
     from lowerbase.firmware_model.mcu import Mcu
 
-MAX_RUN = 32  #: periods per kernel call
+MAX_RUN = 60  #: periods per kernel call (at most 62: lean_batch keeps a bit per period in an int64)
 
 
 def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:

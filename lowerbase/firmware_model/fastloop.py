@@ -29,6 +29,11 @@ if TYPE_CHECKING:  # pragma: no cover
 
 Rows = list[dict[str, Any]]
 log = logging.getLogger(__name__)
+#: periodic messages whose values mostly repeat (16 LED submodules, the status word, the
+#: system status between BMS polls): their payloads are kept by values (Counter included;
+#: integers and the clipped voltage, so equal values encode to the same bytes)
+MEMO = frozenset({"LedState", "StatusCode", "SystemStatus"})
+MEMO_SIZE = 512  #: payloads kept per message before the memo starts again
 
 
 class LeanLoop:
@@ -57,6 +62,9 @@ class LeanLoop:
         # the compiled encoder itself (what MessageCodec.encode calls when strict)
         self.tx = [(msg._encode, msg.name, msg.frame_id, msg.has_counter, msg.cycle_time or 0.0,
                     msg.name in m.SHARED_COUNTER) for msg in mcu._periodic]
+        #: per periodic message whose values repeat (MEMO), its last payloads by values
+        self.memo: list[dict[tuple[Any, ...], bytes] | None] = [
+            {} if msg.name in MEMO else None for msg in mcu._periodic]
         self.kernel: KernelLoop | None = None
         # on a SimClock only: there the period's cost is the run's speed; in real time a period
         # costs 20 us of its 5 ms, and loading numba and the kernel (1-2 s) would delay the boot
@@ -241,11 +249,22 @@ class LeanLoop:
             counters[name] = (counter + 1) & 0xF
             for values in rows:
                 values["Counter"] = counter
+        memo = self.memo[i]
         for values in rows:
             if has_counter and "Counter" not in values:
                 values["Counter"] = counters[name]
                 counters[name] = (counters[name] + 1) & 0xF
-            send(frame_id, encode(values))
+            if memo is None:
+                send(frame_id, encode(values))
+                continue
+            key = tuple(values.values())  # a builder always gives its keys in one order
+            data = memo.get(key)
+            if data is None:
+                data = encode(values)
+                if len(memo) >= MEMO_SIZE:
+                    memo.clear()
+                memo[key] = data
+            send(frame_id, data)
         return len(rows)
 
     def _builder(self, name: str) -> Callable[[], Rows]:

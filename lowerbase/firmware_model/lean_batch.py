@@ -130,7 +130,8 @@ def batch(k: np.ndarray, fs: np.ndarray, js: np.ndarray, targets: np.ndarray,
             has_last = True
             if noise:
                 row -= 1
-        stop = (steps == MAX_STEPS
+        # room left in ``out`` for one more period with every message due, else stop
+        stop = (count + frames.shape[0] + due.size > out.shape[0] or steps == MAX_STEPS
                 or (odometer != saved_odometer and now - last_save >= save_period)
                 or status != status0 or motion_fault != fault0 or state != state0)
         now += dt

@@ -21,6 +21,8 @@ from lowerbase.world.localization import AmclParams, Localizer, PoseEstimate
 from lowerbase.world.localization.likelihood import LikelihoodField
 from lowerbase.world.localization.motion import odom_delta, sample_diff
 from lowerbase.world.localization.particles import (
+    cluster_labels,
+    cluster_labels_ndimage,
     kld_count,
     kld_count_numpy,
     kld_limit,
@@ -124,6 +126,38 @@ def test_kld_count_is_the_numpy_count() -> None:
             perm = rng.permutation(n)
             assert kld_count(poses, params) == kld_count_numpy(poses, params)
             assert kld_count(poses, params, perm) == kld_count_numpy(poses[perm], params)
+
+
+def test_cluster_labels_are_the_ndimage_clusters_in_the_same_order() -> None:
+    """The compiled clusters (pf_kernel.cluster_ids) against ndimage.label's with the heading
+    wrapped: the same partition, and the ids in the same order (the heaviest cluster's ties go
+    the same way): one cloud, two and three modes, clouds across the +-pi heading seam and
+    along a bin edge, a single particle."""
+    rng = np.random.default_rng(12)
+    params = AmclParams()
+    clouds = []
+    for _ in range(30):
+        modes = int(rng.integers(1, 4))
+        parts = []
+        for _ in range(modes):
+            m = int(rng.integers(1, 400))
+            centre = rng.uniform(-5.0, 5.0, 3)
+            spread = rng.uniform(0.01, 1.0)
+            parts.append(np.column_stack((rng.normal(centre[0], spread, m),
+                                          rng.normal(centre[1], spread, m),
+                                          rng.normal(centre[2], 3.0 * spread, m))))
+        poses = np.concatenate(parts)
+        poses[:, 2] = np.mod(poses[:, 2] + math.pi, 2 * math.pi) - math.pi
+        clouds.append(poses)
+    seam = np.column_stack((rng.normal(1.0, 0.2, 300), rng.normal(1.0, 0.2, 300),
+                            rng.choice([-1.0, 1.0], 300) * rng.uniform(3.05, math.pi, 300)))
+    clouds += [seam, np.array([[0.3, -0.2, 0.1]])]
+    for poses in clouds:
+        got = cluster_labels(poses, params)
+        want = cluster_labels_ndimage(poses, params)
+        assert np.array_equal(np.sign(got[:, None] - got[None, :]),
+                              np.sign(want[:, None] - want[None, :]))
+    assert len(set(cluster_labels(seam, params))) == 1  # one cloud across the seam
 
 
 def test_systematic_resampling_keeps_each_particle_in_proportion() -> None:

@@ -127,7 +127,23 @@ def kld_count_numpy(poses: np.ndarray, params: AmclParams) -> int:
 
 
 def cluster_labels(poses: np.ndarray, params: AmclParams) -> np.ndarray:
-    """Cluster id per particle: connected occupied histogram bins, heading wrapping round."""
+    """Cluster id per particle: connected occupied histogram bins, heading wrapping round
+    (compiled, :func:`pf_kernel.cluster_ids`: the partition of :func:`cluster_labels_ndimage`,
+    its ids in the same order, numbered from 0)."""
+    from lowerbase.world.localization.pf_kernel import cluster_ids
+
+    ix, iy, ia = bin_keys(poses, params)
+    ix, iy = ix - ix.min(), iy - iy.min()
+    na = math.ceil(2 * math.pi / params.kld_bin_yaw)
+    ny = int(iy.max()) + 1
+    if (int(ix.max()) + 1) * ny * (na + 1) > _MAX_CLUSTER_CELLS:
+        return np.zeros(poses.shape[0], dtype=np.int64)
+    return np.asarray(cluster_ids(ix, iy, ia, ny, na))
+
+
+def cluster_labels_ndimage(poses: np.ndarray, params: AmclParams) -> np.ndarray:
+    """:func:`cluster_labels` by scipy's ``ndimage.label`` and a union of the wrapped heading
+    bins (the reference)."""
     ix, iy, ia = bin_keys(poses, params)
     ix, iy = ix - ix.min(), iy - iy.min()
     na = math.ceil(2 * math.pi / params.kld_bin_yaw)

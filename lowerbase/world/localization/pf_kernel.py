@@ -55,3 +55,67 @@ def kld_count_poses(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, order: np.nda
         if m > limit[k] and m >= min_particles:
             return m
     return order.size
+
+
+@_jit
+def _root(parent: np.ndarray, a: int) -> int:
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
+@_jit
+def cluster_ids(ix: np.ndarray, iy: np.ndarray, ia: np.ndarray, ny: int, na: int
+                ) -> np.ndarray:
+    """Cluster id per particle from its histogram bin (ix, iy >= 0, ia in [0, na)): bins
+    connected through any of their 26 neighbours, the heading wrapping round (na - 1 touches
+    0), as ``particles.cluster_labels_ndimage`` connects them; the ids ordered as its labels
+    are (by each cluster's first bin in (ix, iy, ia) order), numbered from 0."""
+    n = ix.size
+    cell_of = {np.int64(0): np.int64(0)}
+    del cell_of[np.int64(0)]  # a typed empty dict of int64 -> int64
+    keys = np.empty(n, dtype=np.int64)
+    cells = np.empty(n, dtype=np.int64)
+    count = 0
+    for i in range(n):
+        key = (ix[i] * ny + iy[i]) * na + ia[i]
+        if key in cell_of:
+            cells[i] = cell_of[key]
+        else:
+            cell_of[key] = count
+            keys[count] = key
+            cells[i] = count
+            count += 1
+    parent = np.arange(count)
+    for c in range(count):
+        key = keys[c]
+        a = key % na
+        y = (key // na) % ny
+        x = key // (na * ny)
+        for dx in range(-1, 2):
+            xx = x + dx
+            if xx < 0:
+                continue
+            for dy in range(-1, 2):
+                yy = y + dy
+                if yy < 0 or yy >= ny:
+                    continue
+                for da in range(-1, 2):
+                    near = (xx * ny + yy) * na + (a + da) % na
+                    if near in cell_of:
+                        ra, rb = _root(parent, c), _root(parent, cell_of[near])
+                        if ra != rb:
+                            parent[max(ra, rb)] = min(ra, rb)
+    first = np.full(count, np.iinfo(np.int64).max)  # each cluster's smallest key
+    for c in range(count):
+        r = _root(parent, c)
+        first[r] = min(first[r], keys[c])
+    order = np.argsort(first)  # roots first (the others keep the maximum), by first key
+    rank = np.empty(count, dtype=np.int64)
+    for k in range(count):
+        rank[order[k]] = k
+    out = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        out[i] = rank[_root(parent, cells[i])]
+    return out

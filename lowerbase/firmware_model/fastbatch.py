@@ -39,8 +39,10 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
     imu = mcu.imu
     noise = imu.params.noise
     rows = imu._rows
-    if noise and not rows:
-        return 0  # the next sample refills the noise block: a single step does it
+    if noise and not rows:  # the next sample's noise block, drawn now: the same numbers, as
+        # only the IMU draws from its generator (a boot makes a new one)
+        imu._block(lean.imu_cycle if lean.imu_cycle > 0.0 else 1.0 / imu.params.rate_hz)
+        rows = imu._rows
     if bms is not None and now >= mcu._bms_next_poll and not kl.poll_ahead(now):
         return 0
     if not kl.owned:

@@ -10,8 +10,8 @@ computes each ray's rounds independently of the other rays, so the two agree bit
 (tests/world/test_raycast_kernel.py). The one liberty taken: the y crossings of a window are
 walked only up to the x hit's distance (a later one would lose to it: ``ux <= uy`` picks x).
 
-Compiled on first use and cached next to this file (``__pycache__``), else in numba's user-wide
-cache or ``NUMBA_CACHE_DIR``; where no cache location is writable it is compiled in memory.
+Compiled on first use and cached as :mod:`lowerbase.jit` says; where no cache location is
+writable it is compiled in memory.
 """
 
 from __future__ import annotations

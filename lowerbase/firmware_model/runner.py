@@ -27,7 +27,7 @@ import dataclasses
 import logging
 import selectors
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -53,25 +53,30 @@ SIM_BLOCK_FLEET = 100
 def bus_sender(
     bus: can.BusABC, mcu_stats: Callable[[str], None] | None = None,
     on_sent: Callable[[int, bytes], None] | None = None,
+    sent_ids: Collection[int] | None = None,
 ) -> Callable[[int, bytes], None]:
     """An Mcu ``send`` callback writing to ``bus``; transmit errors are counted, not raised.
 
-    ``on_sent`` sees every frame that went out (e.g. a PeerMonitor's ``on_sent``)."""
-
-    send_frame = getattr(bus, "send_frame", None)  # udp_multicast: no can.Message per frame
+    ``on_sent`` sees every frame that went out (e.g. a PeerMonitor's ``on_sent``), or only
+    those with an ID in ``sent_ids`` (a PeerMonitor reads only Heartbeats). On udp_multicast
+    a frame is one call into the bus' ``frame_writer`` (no ``can.Message``)."""
+    writer = getattr(bus, "frame_writer", None)
+    if writer is not None:
+        write: Callable[[int, bytes], None] = writer()
+    else:
+        def write(frame_id: int, data: bytes) -> None:
+            bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False))
+    watched = None if sent_ids is None else frozenset(sent_ids)
 
     def send(frame_id: int, data: bytes) -> None:
         try:
-            if send_frame is not None:
-                send_frame(frame_id, data)
-            else:
-                bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False))
+            write(frame_id, data)
         except can.CanError as exc:
             if mcu_stats is not None:
                 mcu_stats("tx_errors")
             log.debug("transmit failed: %s", exc)
             return
-        if on_sent is not None:
+        if on_sent is not None and (watched is None or frame_id in watched):
             on_sent(frame_id, data)
 
     return send
@@ -367,7 +372,8 @@ def open_fleet(
         chassis = Chassis(None, bus, peers)  # type: ignore[arg-type]  # the MCU just below
         send = bus_sender(bus, lambda key: chassis.mcu.stats.update([key]),
                           on_sent=lambda fid, data: peers.on_sent(fid, data,
-                                                                 chassis.mcu.clock.now()))
+                                                                 chassis.mcu.clock.now()),
+                          sent_ids=(peers.heartbeat_id,))
         pack = McuBmsAdapter.from_profile(p, soc=soc, charger=charger) if bms else None
         chassis.mcu = Mcu(p, clock, send, bms=pack, faults=faults, codec=codec)
         return chassis

@@ -26,6 +26,7 @@ import select
 import socket
 import struct
 import time
+from collections.abc import Callable
 from typing import Any
 
 import can
@@ -130,6 +131,7 @@ class GroupOnlyMulticastBus(UdpMulticastBus):
         self._poll.register(group._socket, select.POLLIN)
         self.rx_malformed = 0  #: datagrams on the group that are not frames (dropped)
         self._rx = group._socket
+        self._send_datagram = self._connect_sender()
         can.BusABC.__init__(self, channel, **kwargs)  # can_filters: attached to the socket
 
     # -- receive ------------------------------------------------------------------------------
@@ -198,6 +200,46 @@ class GroupOnlyMulticastBus(UdpMulticastBus):
         """Send a classic data frame with an 11-bit ID: what ``send(can.Message(
         arbitration_id=frame_id, data=data, is_extended_id=False))`` sends, faster."""
         self._sendto(udp_wire.pack_classic(frame_id, data))
+
+    def frame_writer(self) -> Callable[[int, bytes], None]:
+        """``send_frame`` as one function: the datagram is a prefix from the process' table
+        (:func:`udp_wire.classic_prefixes`), the data and the tail, handed to the socket in
+        one call (no ``can.Message``, no method layers); the same bytes as ``send_frame``.
+        Raises ``can.CanError`` as ``send`` does."""
+        prefixes, tail, put = udp_wire.PREFIXES, udp_wire.CLASSIC_TAIL, self._send_datagram
+        send_frame = self.send_frame
+
+        def write(frame_id: int, data: bytes) -> None:
+            try:
+                datagram = prefixes[frame_id][len(data)] + data + tail
+            except (KeyError, IndexError):  # first frame of an ID, or not a fast one
+                if not 0 <= frame_id <= 0x7FF or len(data) > udp_wire.MAX_FAST_DLC:
+                    send_frame(frame_id, data)
+                    return
+                datagram = udp_wire.classic_prefixes(frame_id)[len(data)] + data + tail
+            try:
+                sent = put(datagram)
+            except TimeoutError:
+                raise can.CanTimeoutError() from None
+            except OSError as error:
+                raise can.CanOperationError(f"failed to send via socket: {error}") from error
+            if sent < len(datagram):
+                raise can.CanTimeoutError()
+
+        return write
+
+    def _connect_sender(self) -> Callable[[bytes], int]:
+        """What hands a datagram to the group: the own sending socket connected to the group
+        (the kernel keeps the route and the address, no address to parse per frame), or,
+        when the socket also receives (hop limit > 0, IPv6), ``sendto``."""
+        tx, dest = self._tx, self._dest
+        if tx is not self._rx:
+            try:
+                tx.connect(dest)
+                return tx.send
+            except OSError as error:  # pragma: no cover - loopback multicast connects
+                log.debug("sending socket not connected: %s", error)
+        return lambda datagram: tx.sendto(datagram, dest)
 
     def _sendto(self, datagram: bytes) -> None:
         try:

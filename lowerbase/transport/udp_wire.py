@@ -56,6 +56,23 @@ def _head(frame_id: int) -> bytes:
 
 
 _DLC_DATA = [bytes((n,)) + _DATA_KEY + bytes((n,)) for n in range(MAX_FAST_DLC + 1)]
+#: what follows the data in every :func:`pack_classic` datagram
+CLASSIC_TAIL = _TAIL
+#: frame ID -> :func:`classic_prefixes` (one table for every bus of the process)
+PREFIXES: dict[int, list[bytes]] = {}
+
+
+def classic_prefixes(frame_id: int) -> list[bytes]:
+    """The datagram of a classic frame with the 11-bit ``frame_id`` up to its data, for every
+    DLC: ``pack_classic(frame_id, d) == classic_prefixes(frame_id)[len(d)] + d + CLASSIC_TAIL``
+    for ``len(d) <= MAX_FAST_DLC``; kept in :data:`PREFIXES`."""
+    if not 0 <= frame_id <= 0x7FF:
+        raise ValueError(f"not an 11-bit frame ID: {frame_id}")
+    prefixes = PREFIXES.get(frame_id)
+    if prefixes is None:
+        head = _head(frame_id)
+        prefixes = PREFIXES[frame_id] = [head + dlc_data for dlc_data in _DLC_DATA]
+    return prefixes
 
 
 def pack_classic(frame_id: int, data: bytes) -> bytes:

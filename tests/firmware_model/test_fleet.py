@@ -220,3 +220,57 @@ def test_a_fleet_stepped_in_blocks_is_bit_identical_to_period_by_period() -> Non
     assert in_blocks == by_period
     assert end == pytest.approx(2.03) and all(len(frames) > 700 for frames in heard)
     assert rx == [82, 82, 82] and poses[2][2] > 0.2  # driven: enabled, commands, turning
+
+
+def test_bus_sender_reports_the_watched_ids_and_counts_refusals(
+        udp_bus_config: dict[str, Any]) -> None:
+    """``sent_ids``: on_sent sees only those frames (a PeerMonitor reads Heartbeats); every
+    frame still reaches the bus; a refused frame is counted and not reported as sent."""
+    bus, upper = open_bus(udp_bus_config), open_bus(udp_bus_config)
+    seen: list[int] = []
+    errors: list[str] = []
+    send = bus_sender(bus, errors.append, on_sent=lambda fid, _: seen.append(fid),
+                      sent_ids=(0x700,))
+    try:
+        send(0x700, b"\x01")
+        send(0x123, b"\x02")
+        heard = [upper.recv(2.0) for _ in range(2)]
+        assert [(m.arbitration_id, bytes(m.data)) for m in heard if m is not None] == [
+            (0x700, b"\x01"), (0x123, b"\x02")]
+        assert seen == [0x700] and errors == []
+    finally:
+        bus.shutdown()
+        upper.shutdown()
+    send(0x700, b"\x03")  # the bus is closed: refused
+    assert errors == ["tx_errors"] and seen == [0x700]
+
+
+def test_a_second_lower_computer_on_one_chassis_bus_is_noticed(
+        udp_bus_config: dict[str, Any]) -> None:
+    """The fleet's PeerMonitors learn their own Heartbeats from what is sent (only Heartbeats
+    are handed to them): a lower computer joining chassis 1's bus, and only it, is a second
+    lower computer there (it is the only stream that bus hears: without the chassis' own
+    Heartbeats it would look like the one lower computer on the bus)."""
+    clock = SimClock()
+    fleet = open_fleet(load_profile(), clock, udp_bus_config, 3, bms=False)
+    intruder_bus = open_bus(fleet_bus_configs(udp_bus_config, 3)[1])
+    beats: list[int] = []
+    intruder = Mcu(fleet_profile(load_profile(), 7), clock, bus_sender(
+        intruder_bus, on_sent=lambda fid, _: beats.append(fid),
+        sent_ids=(CODEC.message("Heartbeat").frame_id,)))
+
+    def on_step() -> None:
+        intruder.step()
+        if beats:  # a Heartbeat went out: let it arrive
+            _wait_readable(fleet[1].bus)
+            beats.clear()
+
+    try:
+        run_fleet(fleet, clock, duration=4.0, on_step=on_step)
+        flagged = [c.mcu.stats["two_lower_computers"] for c in fleet]
+        peers = [c.peers for c in fleet]
+    finally:
+        close_fleet(fleet)
+        intruder_bus.shutdown()
+    assert flagged == [0, 1, 0]
+    assert peers[1] is not None and "this one and one with" in peers[1].warning

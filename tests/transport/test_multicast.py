@@ -177,3 +177,60 @@ def test_datagrams_on_the_group_that_are_not_frames_are_counted(
         assert bus.rx_malformed == 1  # type: ignore[attr-defined]
     finally:
         bus.shutdown()
+
+
+def _raw_listener(group: str, port: int) -> socket.socket:
+    """A plain socket on the group and port (loopback): the datagrams as they are."""
+    raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    raw.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    raw.bind((group, port))
+    raw.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
+                   socket.inet_aton(group) + socket.inet_aton("127.0.0.1"))
+    raw.settimeout(2.0)
+    return raw
+
+
+def test_frame_writer_sends_what_python_can_sends(udp_bus_config: dict[str, Any]) -> None:
+    """The lean per-frame writer (a prefix from a table, the data, the tail; one socket call)
+    puts python-can's own datagram on the wire for every 11-bit ID width and DLC, the first
+    and the repeated frame of an ID alike; python-can's UdpMulticastBus decodes them all.
+    Longer data and a wider ID (which python-can's receiver refuses as classic frames) are
+    its bytes as well."""
+    group, port = udp_bus_config["channel"], udp_bus_config["port"]
+    ours = open_bus(udp_bus_config)
+    theirs = UdpMulticastBus(channel=group, port=port, hop_limit=0)
+    raw = _raw_listener(group, port)
+    frames = [(i, bytes(range(n))) for i in (0x000, 0x07F, 0x080, 0x0FF, 0x100, 0x7FF)
+              for n in (0, 1, 8, 8, 3)]
+    odd = [(0x7FF, bytes(12)), (0x123, bytes(64)), (0x800, b"\x01\x02")]
+    try:
+        write = ours.frame_writer()  # type: ignore[attr-defined]
+        for frame_id, data in frames + odd:
+            write(frame_id, data)
+        for frame_id, data in frames + odd:
+            expected = pack_message(can.Message(arbitration_id=frame_id, data=data,
+                                                is_extended_id=False))
+            assert raw.recv(4096) == expected, (hex(frame_id), data)
+        for frame_id, data in frames:
+            msg = theirs.recv(2.0)
+            assert msg is not None
+            assert (msg.arbitration_id, bytes(msg.data), msg.dlc, msg.is_extended_id,
+                    msg.is_remote_frame, msg.is_fd) == (frame_id, data, len(data), False,
+                                                        False, False)
+        assert ours.recv(0.0) is None  # it does not hear itself
+    finally:
+        raw.close()
+        theirs.shutdown()
+        ours.shutdown()
+
+
+def test_frame_writer_refusals_are_can_errors(udp_bus_config: dict[str, Any]) -> None:
+    bus = open_bus(udp_bus_config)
+    write = bus.frame_writer()  # type: ignore[attr-defined]
+    bus.shutdown()  # its sockets closed: sending fails
+    try:
+        write(0x10, b"\x01")
+    except can.CanError as exc:
+        assert "failed to send" in str(exc)
+    else:
+        raise AssertionError("a frame on a closed bus was not refused")

@@ -240,9 +240,11 @@ class SimLoop(SteppedLoop):
                 or self.tap is not None or mcu.faults or mcu._delayed
                 or mcu.state is not RobotState.ACTIVE or driver.heard_until is not None
                 or driver._reboot_suspect is not None or self.batch_stats["mistimed"]
-                or type(self).step is not SimLoop.step
-                or any(frame_id != self._motion_id for frame_id, _ in self._to_mcu)):
+                or type(self).step is not SimLoop.step):
             return 1
+        for frame_id, _ in self._to_mcu:
+            if frame_id != self._motion_id:
+                return 1
         return driver.idle_ticks(self.clock.now(), mcu.dt, min(periods, MAX_BATCH) - 1) + 1
 
     def _batch(self, k: int) -> None:

@@ -38,11 +38,9 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
     now = mcu.clock.now()
     imu = mcu.imu
     noise = imu.params.noise
-    rows = imu._rows
-    if noise and not rows:  # the next sample's noise block, drawn now: the same numbers, as
-        # only the IMU draws from its generator (a boot makes a new one)
+    if noise and not imu._left:  # the next sample's noise block, drawn now: the same numbers,
+        # as only the IMU draws from its generator (a boot makes a new one)
         imu._block(lean.imu_cycle if lean.imu_cycle > 0.0 else 1.0 / imu.params.rate_hz)
-        rows = imu._rows
     if bms is not None and now >= mcu._bms_next_poll and not kl.poll_ahead(now):
         return 0
     if not kl.owned:
@@ -60,8 +58,6 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
         for j in range(n):
             targets[j] = smoother.step(v, w, dt)
             wound.append((smoother.v, smoother.w))
-    if noise and rows is not kl._rows:
-        kl._rows, kl._rows_arr = rows, kl.rows_array(rows)
     ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
     stuck = mcu._enc_stuck
     imu_due0 = mcu._imu_due
@@ -78,7 +74,7 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
         mcu.chassis.command_timeout, mcu._standby_cmd_time)
     js[:lb.J_SIZE] = (
         ml.over_current, ml.stalled, mr.over_current, mr.stalled, el.total, er.total,
-        mcu._imu_same, status_in, 0, state_in, len(rows) - 1 if noise else 0,
+        mcu._imu_same, status_in, 0, state_in, imu._left - 1 if noise else 0,
         mcu._imu_last is not None, 0, 0, 0, 0, 0, n, mode == 1, noise, bms is not None,
         mcu._bms_bits, mcu.estop_command,
         False,  # the watchdog flag: _target clears it in every period of a run
@@ -87,7 +83,7 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
     js[flags:] = 0
     for j in fresh:
         js[flags + j] = 1
-    kl.batch(kl.k, fs, js, targets, kl._rows_arr if noise else kl.zero_rows, kl.imu,
+    kl.batch(kl.k, fs, js, targets, imu._arr if noise else kl.zero_rows, kl.imu,
              kl.due, kl.per, kl.hot, kl.counters, kl.vals, kl.sig, kl.scale, kl.frames,
              kl.out, kl.ids, kl.lens, kl.pidx)
     (oc_l, st_l, oc_r, st_r, el.total, er.total, mcu._imu_same, mcu.status, mcu.motion_fault,
@@ -115,12 +111,12 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
     if mcu._imu_due != imu_due0:  # sampled
         s = kl.imu[6:].tolist()
         sample = ((s[0], s[1], s[2]), (s[3], s[4], s[5]))
-        if noise and row + 1 < len(rows):
-            zl = kl._rows_arr[row + 1].tolist()
+        if noise and row + 1 < imu._left:
+            zl = imu._arr[row + 1].tolist()
             gt, at, gb, ab = imu.gyro_turn_on, imu.accel_turn_on, imu.gyro_bias, imu.accel_bias
             gb[0], gb[1], gb[2] = gt[0] + zl[0], gt[1] + zl[1], gt[2] + zl[2]
             ab[0], ab[1], ab[2] = at[0] + zl[3], at[1] + zl[4], at[2] + zl[5]
-            del rows[row + 1:]
+            imu._left = row + 1
         imu._last = mcu._imu_last = mcu.imu_sample = sample
     clock = cast(SimClock, mcu.clock)  # the compiled loop runs on a SimClock only
     if steps:

@@ -22,7 +22,6 @@ scaling) keeps the Python loop. Without numba, or when compilation fails, it is 
 from __future__ import annotations
 
 import importlib
-import itertools
 import logging
 from typing import TYPE_CHECKING, Any
 
@@ -156,8 +155,6 @@ class KernelLoop:
         self.k = np.zeros(lk.C_SIZE + lk.R_SIZE)
         self.owned = False
         self._key: tuple[Any, ...] = ()
-        self._rows: list[list[float]] | None = None
-        self._rows_arr = np.zeros((0, 12))
 
     # -- ownership of the due times, hot counters and IMU sample -----------------------------------
 
@@ -253,14 +250,10 @@ class KernelLoop:
         imu_due = now >= mcu._imu_due
         z = self.zero_row
         if imu_due and imu.params.noise:
-            rows = imu._rows
-            if not rows:
+            if not imu._left:
                 imu._block(lean.imu_cycle if lean.imu_cycle > 0.0 else 1.0 / imu.params.rate_hz)
-                rows = imu._rows
-            if rows is not self._rows:
-                self._rows, self._rows_arr = rows, self.rows_array(rows)
-            z = self._rows_arr[len(rows) - 1]
-            rows.pop()
+            imu._left -= 1
+            z = imu._arr[imu._left]
         ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
         stuck = mcu._enc_stuck
         emit_now = now + 1e-9 >= self._next
@@ -291,7 +284,7 @@ class KernelLoop:
             s = self.imu[6:].tolist()
             sample = ((s[0], s[1], s[2]), (s[3], s[4], s[5]))
             if imu.params.noise:
-                zl = self._rows_arr[len(imu._rows)].tolist()
+                zl = imu._arr[imu._left].tolist()
                 gt, at, gb, ab = imu.gyro_turn_on, imu.accel_turn_on, imu.gyro_bias, imu.accel_bias
                 gb[0], gb[1], gb[2] = gt[0] + zl[0], gt[1] + zl[1], gt[2] + zl[2]
                 ab[0], ab[1], ab[2] = at[0] + zl[3], at[1] + zl[4], at[2] + zl[5]
@@ -318,13 +311,6 @@ class KernelLoop:
             mcu._bms_bits = int(bms.status_bits(snapshot))
             mcu._bms_last_answer = now
         return True
-
-    @staticmethod
-    def rows_array(rows: list[list[float]]) -> np.ndarray:
-        """The IMU's noise block (rows of 12) as an array: np.array(rows), the same values,
-        in about 60 % of its time."""
-        return np.fromiter(itertools.chain.from_iterable(rows), np.float64,
-                           len(rows) * 12).reshape(-1, 12)
 
     def store_state(self, r: tuple[Any, ...]) -> tuple[Any, ...]:
         """Put the state a kernel call returned (``period``'s or ``batch``'s, the same leading

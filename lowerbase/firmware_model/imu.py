@@ -158,7 +158,21 @@ class ImuModel:
         self._lower_k: np.ndarray = np.zeros(0)
         self._decay_k: np.ndarray = np.zeros(0)
         self._limits = (p.gyro_full_scale * DEG, p.accel_full_scale * STANDARD_GRAVITY)
-        self._rows: list[list[float]] = []  # pending samples: 6 biases + 6 white noises
+        # the noise block: _BLOCK rows of 6 biases + 6 white noises, the LAST row first (row
+        # ``_left - 1`` is the next sample's; the compiled loop reads the array as it is)
+        self._arr: np.ndarray = np.zeros((0, 12))
+        self._left = 0  # rows of _arr not yet used
+        self._list: list[list[float]] | None = None  # _arr.tolist(), made when Python samples
+        self._walk_dt: np.ndarray = np.zeros(6)
+        self._fold_b: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        if bool(np.all(self._bound > 0.0)):  # _fold's constants (every axis bounded)
+            self._fold_b = (self._bound, 4.0 * self._bound, 2.0 * self._bound)
+        n_terms = len(FLICKER_TAUS)
+        self._z = np.empty((n_terms, _BLOCK, 6))  # buffers _block draws and works into
+        self._tmp = np.empty((n_terms, _BLOCK // _CHUNK, _CHUNK, 6))
+        self._local = np.empty((n_terms, _BLOCK // _CHUNK, _CHUNK, 6))
+        self._free = np.empty((_BLOCK, 6))
+        self._white_z = np.empty((_BLOCK, 6))
 
     def bias_step(self, gyro: Vec3 = (0.0, 0.0, 0.0), accel: Vec3 = (0.0, 0.0, 0.0)) -> None:
         """Fault: add a bias step [rad/s] to the gyro and [m/s^2] to the accelerometer."""
@@ -179,7 +193,9 @@ class ImuModel:
         back into each chunk. That is the one-matrix form's arithmetic up to rounding, at a
         sixteenth of its cost (the one 256 x 256 product per term was 9 % of a control loop).
         The reflected walk is the free walk folded into +-bound (reflection at both walls is
-        that fold of the free path)."""
+        that fold of the free path). The draws and float operations are those of the plain
+        numpy form (tests/firmware_model/test_imu_block.py keeps it): the work goes into
+        preallocated buffers and the rows straight into the array the compiled loop reads."""
         n, taus, k = _BLOCK, np.array(FLICKER_TAUS), _BLOCK // _CHUNK
         if self._filter_dt != dt:
             phi = np.exp(-dt / taus)
@@ -189,21 +205,48 @@ class ImuModel:
             self._lower_k = _ar1_matrix(phi_chunk, k)
             self._decay_k = phi_chunk[:, None] ** np.arange(1, k + 1)[None, :]
             self._drive = np.sqrt(-np.expm1(-2.0 * dt / taus))[:, None] * self._flicker
+            self._walk_dt = self._walk * math.sqrt(dt)
             self._filter_dt = dt
-        z = self.rng.standard_normal((len(taus), n, 6)) * self._drive[:, None, :]
-        local = np.matmul(self._lower, z.reshape(len(taus), k, _CHUNK, 6))
+        z, local, tmp = self._z, self._local, self._tmp
+        self.rng.standard_normal(out=z)  # the draws of standard_normal((terms, n, 6))
+        np.multiply(z, self._drive[:, None, :], out=z)
+        np.matmul(self._lower, z.reshape(len(taus), k, _CHUNK, 6), out=local)
         ends = np.matmul(self._lower_k, local[:, :, -1, :]) + (
             self._decay_k[:, :, None] * self._gm[:, None, :])  # state at each chunk's end
         before = np.concatenate([self._gm[:, None, :], ends[:, :-1, :]], axis=1)
-        gm = (local + self._decay * before[:, :, None, :]).reshape(len(taus), n, 6)
+        np.multiply(self._decay, before[:, :, None, :], out=tmp)
+        np.add(local, tmp, out=local)
         self._gm = ends[:, -1, :]
-        free = self._rw + np.cumsum(self.rng.standard_normal((n, 6)), axis=0) * (
-            self._walk * math.sqrt(dt))
-        self._rw = free[-1]
-        white = self.rng.standard_normal((n, 6)) * self._white
-        rows = np.hstack([gm.sum(axis=0) + _fold(free, self._bound), white]).tolist()
-        rows.reverse()
-        self._rows = rows
+        free = self._free
+        self.rng.standard_normal(out=free)
+        np.cumsum(free, axis=0, out=free)
+        np.multiply(free, self._walk_dt, out=free)
+        np.add(self._rw, free, out=free)
+        self._rw = free[-1].copy()
+        rows = np.empty((n, 12))
+        rev = rows[::-1]
+        if self._fold_b is not None:  # _fold(free, bound), every bound > 0
+            b, b4, b2 = self._fold_b
+            np.add(free, b, out=free)
+            np.mod(free, b4, out=free)
+            np.subtract(np.where(free < b2, free, b4 - free), b, out=free)
+        else:
+            free = _fold(free, self._bound)
+        np.add(local.reshape(len(taus), n, 6).sum(axis=0), free, out=rev[:, :6])
+        white = self._white_z
+        self.rng.standard_normal(out=white)
+        np.multiply(white, self._white, out=rev[:, 6:])
+        self._arr, self._left, self._list = rows, n, None
+
+    def next_row(self, dt: float) -> list[float]:
+        """The next sample's 6 biases and 6 white noises (a new block when this one is used)."""
+        if not self._left:
+            self._block(dt)
+        self._left -= 1
+        rows = self._list
+        if rows is None:
+            rows = self._list = self._arr.tolist()
+        return rows[self._left]
 
     def at_rest(self, n: int, dt: float) -> np.ndarray:
         """``n`` samples of a base at rest, shape (n, 6): gyro xyz, accel xyz; the same values
@@ -213,14 +256,16 @@ class ImuModel:
         true = np.array([0.0, 0.0, 0.0, 0.0, 0.0, p.gravity]) * gain
         if not p.noise:
             return np.tile(true, (n, 1))
-        rows: list[list[float]] = []
-        while len(rows) < n:
-            if not self._rows:
+        parts: list[np.ndarray] = []
+        got = 0
+        while got < n:
+            if not self._left:
                 self._block(dt)
-            take = min(n - len(rows), len(self._rows))
-            rows.extend(reversed(self._rows[-take:]))
-            del self._rows[-take:]
-        z = np.array(rows)
+            take = min(n - got, self._left)
+            parts.append(self._arr[self._left - take:self._left][::-1])
+            self._left -= take
+            got += take
+        z = np.concatenate(parts) if parts else np.zeros((0, 12))
         turn_on = np.array(self.gyro_turn_on + self.accel_turn_on)
         return true + turn_on + z[:, :6] + z[:, 6:]
 
@@ -235,9 +280,7 @@ class ImuModel:
         f0, f1 = float(accel_body[0]), float(accel_body[1])
         f2 = float(accel_body[2]) + p.gravity
         if p.noise:
-            if not self._rows:
-                self._block(dt if dt > 0.0 else 1.0 / p.rate_hz)
-            z = self._rows.pop()
+            z = self.next_row(dt if dt > 0.0 else 1.0 / p.rate_hz)
             gs, as_ = 1.0 + p.gyro_scale_error, 1.0 + p.accel_scale_error
             gt, at, gb, ab = self.gyro_turn_on, self.accel_turn_on, self.gyro_bias, self.accel_bias
             gb[0], gb[1], gb[2] = gt[0] + z[0], gt[1] + z[1], gt[2] + z[2]

@@ -116,7 +116,7 @@ def test_bias_blocks_are_the_gauss_markov_recursion_sample_by_sample() -> None:
         mirror = np.random.default_rng()
         mirror.bit_generator.state = imu.rng.bit_generator.state
         imu._block(dt)
-        rows = np.array(imu._rows[::-1])
+        rows = imu._arr[::-1]
         z = mirror.standard_normal((len(taus), len(rows), 6)) * drive[:, None, :]
         walk = rw + np.cumsum(mirror.standard_normal((len(rows), 6)), axis=0) * (
             imu._walk * math.sqrt(dt))

@@ -236,6 +236,22 @@ class LayeredCostmap:
             self.obstacle_layer.reset()
         self._dirty = True
 
+    def clear_outside(self, x: float, y: float, size: float) -> int:
+        """clear_costmap_recovery's reset: forget the marks outside the ``size`` x ``size`` m
+        square centred on (x, y) [m] (the cells whose centre lies outside it); the number of
+        marked cells forgotten."""
+        if self.obstacle_layer is None:
+            return 0
+        m = self.obstacle_layer.map
+        cols = m.origin[0] + (np.arange(m.width) + 0.5) * m.resolution
+        rows = m.origin[1] + (np.arange(m.height) + 0.5) * m.resolution
+        outside = (np.abs(rows - y)[:, None] > 0.5 * size) | \
+            (np.abs(cols - x)[None, :] > 0.5 * size)
+        forget = outside & (m.data != m.default)
+        m.data[forget] = m.default
+        self._dirty = True
+        return int(forget.sum())
+
     # -- updates ------------------------------------------------------------------------
     def update(self, pose: Sequence[float], scan: LaserScan | None = None,
                cloud: tuple[np.ndarray, Sequence[float]] | None = None) -> None:

@@ -64,13 +64,10 @@ from lowerbase.navigation.planner import (
     Plan,
 )
 from lowerbase.navigation.planning import GoalPlanner, drive_reversed
-from lowerbase.navigation.recovery import BackOff
+from lowerbase.navigation.recovery import Recoveries
 from lowerbase.world.footprint import DEFAULT_POINTS, Footprint
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lidar import LaserScan
-
-#: the reason while a recovery (backing off) runs
-RECOVERY = "recovery: backing off the way the robot came, then replanning"
 
 __all__ = ["GoalResult", "GoalState", "Mode", "NavCommand", "NavigationError",
            "NavigationModeGoal", "Navigator", "NavigatorConfig", "Pose"]
@@ -112,7 +109,7 @@ class Navigator:
         self.early_replans = 0  #: replans because the local costmap blocked the path ahead
         self.planning = GoalPlanner(cfg, self.global_costmap, self.combined, grid.resolution)
         self.path: list[Pose] = []  #: the plan being followed (map frame)
-        self._backoff = BackOff(self.config.back_off)
+        self._recovery = Recoveries(self.config.back_off)
         self._reset_goal_state()
 
     @property
@@ -145,8 +142,8 @@ class Navigator:
         self._last_early = -math.inf
         self._seen_version = -1
         self._reverse = False
-        if hasattr(self, "_backoff"):
-            self._backoff.cancel()
+        if hasattr(self, "_recovery"):
+            self._recovery.cancel()
 
     def set_limits(self, limits: Limits) -> None:
         """maxLinear/maxAngular and the acceleration limits (driver_base's /parameter)."""
@@ -253,7 +250,7 @@ class Navigator:
         self.state = state
         self.reason = reason
         self.results.append(GoalResult(self.goal_id, state, reason, now))
-        self._backoff.cancel()
+        self._recovery.cancel()
         self.controller.set_plan([])
         self.controller.v = self.controller.w = 0.0
         self.path = []
@@ -305,12 +302,12 @@ class Navigator:
             if why:
                 return self._finish(GoalState.ABORTED, f"no path: {why}", now)
             self._progress.restart(now, p)
-        if self._backoff.active:
-            v = self._backoff.step(p, now, self.combined.costs, self.combined.origin,
-                                   self._fp_forward)
-            if v is not None:
+        if self._recovery.active:
+            twist = self._recovery.step(p, now, self.combined.costs, self.combined.origin,
+                                        self._fp_forward)
+            if twist is not None:
                 self._progress.restart(now, p)  # recovering is not being stuck
-                return NavCommand(v, 0.0, GoalState.ACTIVE, Status.BLOCKED, RECOVERY)
+                return NavCommand(*twist, GoalState.ACTIVE, Status.BLOCKED, self.reason)
             self.controller.v = self.controller.w = 0.0
             why = self._replan(p, now)
             if why:
@@ -372,14 +369,17 @@ class Navigator:
             if self.replans > self.config.max_replans:
                 return self._finish(GoalState.ABORTED, f"blocked: still no way after "
                                                        f"{self.config.max_replans} replans", now)
-            # wedged (the footprint on a lethal cell) or a replan that did not help: recovery
-            # first (back off the way the robot came), then the replan (in tick)
+            # wedged (the footprint on a lethal cell) or a replan that did not help: a
+            # recovery first (recovery.ORDER), then the replan (in tick, after a move)
             here = self._fp_forward.max_cost(self.combined.costs, self.combined.origin, *p)[0]
-            if here >= LETHAL or self.replans > 1:
-                self._backoff.begin(p, now, self._reverse)
-                self._blocked_since = None
-                self.reason = RECOVERY
-                return NavCommand(0.0, 0.0, GoalState.ACTIVE, Status.BLOCKED, self.reason)
+            step = self._recovery.choose(self.replans, here >= LETHAL)
+            if step:
+                moving = self._recovery.begin(step, p, now, self._reverse, self.local_costmap)
+                if moving:  # backing off or turning first
+                    self._blocked_since = None
+                    self.reason = moving
+                    return NavCommand(0.0, 0.0, GoalState.ACTIVE, Status.BLOCKED, self.reason)
+                self.combined.refresh()  # a costmap reset: at once, then the replan
             why = self._replan(p, now)
             if why:
                 return self._finish(GoalState.ABORTED, f"no path around the obstacle: {why}",

@@ -1,15 +1,23 @@
-"""The back-off recovery on a hand-made cost grid: it backs off the way the robot came while
+"""The recoveries on hand-made cost grids: the back-off backs off the way the robot came while
 that stays clear, also when the footprint already touches a lethal cell ahead, and stops at its
-distance or when the way back is blocked too."""
+distance or when the way back is blocked too; the turn in place turns a full turn, stopping
+before its sweep touches a lethal cell; the conservative costmap reset forgets only the marks
+beyond its square; a navigator runs them in move_base's order between blocked replans."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
 
+from lowerbase.navigation.controller import Command, Status
+from lowerbase.navigation.costmap import local_costmap
+from lowerbase.navigation.navigator import GoalState, Navigator, NavigatorConfig
 from lowerbase.navigation.planner import LETHAL, FootprintCells
-from lowerbase.navigation.recovery import BackOff, BackOffConfig
+from lowerbase.navigation.recovery import BackOff, BackOffConfig, Rotate, RotateConfig
 from lowerbase.world.footprint import DEFAULT_POINTS
+from lowerbase.world.grid import OccupancyGrid
 
 RES = 0.05
 
@@ -22,6 +30,13 @@ def grid(wall_x: list[float]) -> np.ndarray:
 
 
 FP = FootprintCells([tuple(map(float, p)) for p in DEFAULT_POINTS], RES)
+
+
+def room_grid() -> OccupancyGrid:
+    """An empty 10 x 10 m room with walls round it."""
+    data = np.zeros((200, 200), np.int8)
+    data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100
+    return OccupancyGrid(data, RES, (0.0, 0.0, 0.0))
 
 
 def test_backs_off_from_a_wall_it_touches_and_stops_after_the_distance() -> None:
@@ -49,3 +64,89 @@ def test_drives_forward_when_the_robot_was_reversing_and_gives_up_on_timeout() -
     b.begin((2.5, 2.5, 0.0), 10.0, reversed_driving=True)
     assert b.step((2.5, 2.5, 0.0), 10.05, costs, (0.0, 0.0), FP) == pytest.approx(0.1)
     assert b.step((2.5, 2.5, 0.0), 12.0, costs, (0.0, 0.0), FP) is None  # wheels slipping
+
+
+def test_rotate_turns_a_full_turn_in_open_space() -> None:
+    costs = grid([])
+    r = Rotate(RotateConfig(speed=0.5))
+    r.begin((2.5, 2.5, 3.0), 0.0)
+    yaw, t, commands = 3.0, 0.0, 0
+    while True:
+        w = r.step((2.5, 2.5, yaw), t, costs, (0.0, 0.0), FP)
+        if w is None:
+            break
+        assert w == pytest.approx(0.5)
+        commands += 1
+        yaw = (yaw + w * 0.05 + math.pi) % (2 * math.pi) - math.pi  # across the +-pi seam
+        t += 0.05
+    assert 2 * math.pi - 0.05 <= commands * 0.5 * 0.05 <= 2 * math.pi + 0.05
+    assert r.count == 1 and not r.active
+
+
+def test_rotate_stops_before_its_sweep_touches_a_lethal_cell() -> None:
+    costs = grid([])
+    costs[:, :] = 0
+    costs[54:56, 52:57] = LETHAL  # a post just clear of the footprint's left side
+    pose = (2.5, 2.3, 0.0)
+    assert FP.max_cost(costs, (0.0, 0.0), *pose)[0] < LETHAL  # clear where it stands
+    r = Rotate()
+    r.begin(pose, 0.0)
+    yaw, stopped = 0.0, None
+    for k in range(400):
+        w = r.step((2.5, 2.3, yaw), 0.05 * k, costs, (0.0, 0.0), FP)
+        if w is None:
+            stopped = yaw
+            break
+        yaw += w * 0.05
+    assert stopped is not None and stopped < math.pi  # it did not turn into the post
+    assert FP.max_cost(costs, (0.0, 0.0), 2.5, 2.3, stopped)[0] < LETHAL
+
+
+def test_clear_outside_forgets_marks_beyond_the_square_only() -> None:
+    cm = local_costmap(None, (0.0, 0.0, 0.0))
+    layer = cm.obstacle_layer
+    assert layer is not None
+    m = layer.map
+    near = m.world_to_map(np.array([0.5]), np.array([-0.6]))
+    far = m.world_to_map(np.array([2.2]), np.array([1.9]))
+    for c, r in (near, far):
+        m.data[r, c] = 254
+    assert cm.clear_outside(0.0, 0.0, 3.0) == 1
+    assert m.data[near[1], near[0]][0] == 254 and m.data[far[1], far[0]][0] == m.default
+    assert cm.costs[near[1], near[0]][0] == 254  # the master grid rebuilt
+
+
+def test_recoveries_run_in_move_base_s_order_between_blocked_replans() -> None:
+    """A navigator whose controller never gets through: the first blocked replan at once, then
+    back off, the conservative reset (a far mark forgotten, a near one kept), a full turn, the
+    aggressive reset (every mark forgotten), then ABORTED after max_replans."""
+    nav = Navigator(room_grid(), NavigatorConfig())
+    blocked = Command(0.0, 0.0, Status.BLOCKED, "test: an obstacle ahead")
+    nav.controller.compute = lambda pose: blocked  # type: ignore[method-assign]
+    pose = (2.0, 2.0, 0.0)
+    nav.update_sensors(pose)
+    layer = nav.local_costmap.obstacle_layer
+    assert layer is not None
+    m = layer.map
+    near = m.world_to_map(np.array([2.6]), np.array([2.0]))
+    far = m.world_to_map(np.array([4.2]), np.array([3.9]))
+    for c, r in (near, far):
+        m.data[r, c] = 254
+    nav.send_goal((7.0, 7.0, 0.0), now=0.0)
+    seen: list[tuple[str, bool, bool]] = []
+    t, state = 0.0, None
+    while t < 400.0:
+        cmd = nav.tick(t, pose)
+        state = cmd.state
+        if cmd.state.terminal:
+            break
+        if len(seen) < len(nav._recovery.log):
+            seen.append((nav._recovery.log[-1], bool(m.data[near[1], near[0]][0] == 254),
+                         bool(m.data[far[1], far[0]][0] == 254)))
+        if cmd.reason.startswith("recovery"):
+            assert cmd.status is Status.BLOCKED
+        t += 0.05
+    assert state is GoalState.ABORTED and "replans" in nav.reason
+    assert seen == [("back_off", True, True), ("clear_conservative", True, False),
+                    ("rotate", True, False), ("clear_aggressive", False, False)]
+    assert nav._recovery.rotate.count == 1 and nav._recovery.back_off.count == 1

@@ -29,7 +29,7 @@ def grid(wall_x: list[float]) -> np.ndarray:
     return costs
 
 
-FP = FootprintCells([tuple(map(float, p)) for p in DEFAULT_POINTS], RES)
+FP = FootprintCells([(float(x), float(y)) for x, y in DEFAULT_POINTS], RES)
 
 
 def room_grid() -> OccupancyGrid:

@@ -142,7 +142,7 @@ class WorldTopics:
 class WorldFeed:
     """Writes a ``WorldSim``'s topics after each of its steps (see the module docstring).
     Made by :meth:`RunPublisher.attach_world`; ``close()`` writes the last tick's scan and
-    gives the world its own ``step`` back."""
+    gives the world its own ``_after_step`` back."""
 
     def __init__(self, topics: WorldTopics, world: Any) -> None:
         from lowerbase.world.lidar import LidarRig
@@ -158,12 +158,14 @@ class WorldFeed:
         self._frame = world.frame
         self._closed = False
         topics.map(world.now, world.grid)
-        self._world_step = world.step
-        world.step = self.step
+        # after every step and every batch of periods (WorldSim.run_periods), which both end
+        # in the world's _after_step; a batch never runs past a scan tick
+        self._world_after = world._after_step
+        world._after_step = self.after_step
 
-    def step(self) -> None:
-        """The world's step, then what it made."""
-        self._world_step()
+    def after_step(self) -> None:
+        """The world's own bookkeeping after a step or a batch, then what it made."""
+        self._world_after()
         self._after()
 
     def _after(self) -> None:
@@ -207,5 +209,5 @@ class WorldFeed:
             return
         self._closed = True
         self._finish()
-        if self.world.step == self.step:
-            del self.world.step  # the class's method again
+        if self.world._after_step == self.after_step:
+            del self.world._after_step  # the class's method again

@@ -33,6 +33,8 @@ OCV_TABLES: dict[Chemistry, tuple[float, ...]] = {
     ),
 }
 
+_LFP = OCV_TABLES[Chemistry.LFP]
+
 
 def interpolate(x: float, xs: Sequence[float], ys: Sequence[float]) -> float:
     """Piecewise-linear interpolation of ``ys(xs)`` at ``x``, clamped at both ends."""
@@ -48,7 +50,8 @@ def interpolate(x: float, xs: Sequence[float], ys: Sequence[float]) -> float:
 
 def cell_ocv(chemistry: Chemistry, soc_percent: float) -> float:
     """Open-circuit voltage of one cell [V] at ``soc_percent`` [%] (clamped to 0-100)."""
-    return interpolate(soc_percent, SOC_GRID, OCV_TABLES[chemistry])
+    table = _LFP if chemistry is Chemistry.LFP else OCV_TABLES[chemistry]  # no Enum hash
+    return interpolate(soc_percent, SOC_GRID, table)
 
 
 def soc_from_ocv(chemistry: Chemistry, ocv_v: float) -> float:

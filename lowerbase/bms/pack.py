@@ -15,11 +15,7 @@ import math
 
 from lowerbase.bms.config import BatteryConfig, ProtectionConfig
 from lowerbase.bms.ocv import cell_ocv
-from lowerbase.bms.protection import (
-    Measurements,
-    ProtectionState,
-    step_protections,
-)
+from lowerbase.bms.protection import ProtectionState, step_protection_values
 from lowerbase.bms.snapshot import TIME_REMAIN_NOT_DISCHARGING, BmsSnapshot
 from lowerbase.bms.status import BmsStatus, ChargeMode, ChargeStatus, SwitchStatus
 from lowerbase.errors import ConfigError
@@ -28,6 +24,9 @@ from lowerbase.errors import ConfigError
 MAX_SUBSTEP_S = 1.0
 #: average discharge current below which time-remaining reports "not discharging" [A]
 MIN_DISCHARGE_A = 0.05
+_SOC_LOW, _CHARGER_CONNECTED = int(BmsStatus.SOC_LOW), int(BmsStatus.CHARGER_CONNECTED)
+_FULLY_CHARGED, _CHARGING = int(BmsStatus.FULLY_CHARGED), int(BmsStatus.CHARGING)
+_CHARGING_STATUS, _DISCHARGE_STATUS = int(ChargeStatus.CHARGING), int(ChargeStatus.DISCHARGE)
 
 
 def coulomb_step(charge_ah: float, current_a: float, dt_s: float, capacity_ah: float) -> float:
@@ -156,15 +155,19 @@ class BatteryPack:
     @property
     def status(self) -> BmsStatus:
         """The full status word."""
-        bits = self._protection.status
+        return BmsStatus(self._status_word())
+
+    def _status_word(self) -> int:
+        """:attr:`status` as an int (flag arithmetic on ints: the same bits)."""
+        bits = int(self._protection.status)
         if self.soc < self.config.protection.soc_low_percent:
-            bits |= BmsStatus.SOC_LOW
+            bits |= _SOC_LOW
         if self._charger_connected:
-            bits |= BmsStatus.CHARGER_CONNECTED
+            bits |= _CHARGER_CONNECTED
             if self._charge_complete:
-                bits |= BmsStatus.FULLY_CHARGED
+                bits |= _FULLY_CHARGED
         if self._current_a > 0:
-            bits |= BmsStatus.CHARGING
+            bits |= _CHARGING
         return bits
 
     @property
@@ -252,8 +255,8 @@ class BatteryPack:
         self._avg_current_a = average_step(self._avg_current_a, current, dt, c.current_average_s)
         vmax, vmin = self.cell_voltages()
         tmax, tmin = self.temperatures()
-        self._protection = step_protections(
-            self._protection, Measurements(vmax, vmin, current, tmax, tmin), c.protection, dt
+        self._protection = step_protection_values(
+            self._protection, vmax, vmin, current, tmax, tmin, c.protection, dt
         )
         self.time_s += dt
 
@@ -275,14 +278,12 @@ class BatteryPack:
             capacity_remain=self._charge_ah,
             capacity_full=c.capacity_ah,
             capacity_design=c.design_capacity_ah,
-            bms_status=int(self.status),
+            bms_status=self._status_word(),
             charge_cycle=min(self.charge_cycles, 65535),
             battery_cycle=c.cycle_life,
             time_remain=time_remaining_min(self._charge_ah, self._avg_current_a),
-            switch_status=int(self.switches),
-            charge_status=int(
-                ChargeStatus.CHARGING if self._current_a > 0 else ChargeStatus.DISCHARGE
-            ),
+            switch_status=int(self._protection.switches),
+            charge_status=_CHARGING_STATUS if self._current_a > 0 else _DISCHARGE_STATUS,
             charge_mode=int(self._charge_mode),
             submodule=c.submodule,
         )

@@ -7,6 +7,7 @@ protection, :func:`step_protections` all of them and says which switches must be
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 from lowerbase.bms.config import PROTECTION_DIRECTIONS, ProtectionConfig, ProtectionLimit
 from lowerbase.bms.status import BmsStatus, SwitchStatus
@@ -90,13 +91,13 @@ def measured_value(name: str, m: Measurements) -> float:
 
 @dataclass(frozen=True)
 class ProtectionState:
-    """State of every protection, by name."""
+    """State of every protection, by name (not to be mutated: its status is kept once read)."""
 
     limits: dict[str, LimitState] = field(
         default_factory=lambda: {name: LimitState() for name in PROTECTION_DIRECTIONS}
     )
 
-    @property
+    @cached_property
     def status(self) -> BmsStatus:
         """Protection bits of the tripped protections."""
         bits = BmsStatus.NONE
@@ -105,7 +106,12 @@ class ProtectionState:
                 bits |= PROTECTION_ACTIONS[name][0]
         return bits
 
-    @property
+    @cached_property
+    def idle(self) -> bool:
+        """No protection tripped, no timer running."""
+        return all(not st.tripped and st.timer_s == 0.0 for st in self.limits.values())
+
+    @cached_property
     def switches(self) -> SwitchStatus:
         """Switches left closed by the tripped protections."""
         closed = SwitchStatus.CHARGE | SwitchStatus.DISCHARGE
@@ -115,15 +121,54 @@ class ProtectionState:
         return closed
 
 
+#: the protections in PROTECTION_DIRECTIONS order, with their direction
+_DIRECTIONS: tuple[tuple[str, bool], ...] = tuple(PROTECTION_DIRECTIONS.items())
+assert tuple(name for name, _ in _DIRECTIONS) == (
+    "cell_ov", "cell_uv", "charge_oc", "discharge_oc", "charge_ot", "charge_ut", "discharge_ot",
+    "discharge_ut"), "step_protection_values lists the measured values in this order"
+
+
+_last_trips: tuple[ProtectionConfig | None, tuple[float, ...]] = (None, ())
+
+
+def _trips(config: ProtectionConfig) -> tuple[float, ...]:
+    """The trip points of ``config`` in _DIRECTIONS order (the last config's kept)."""
+    global _last_trips
+    if _last_trips[0] is not config:
+        _last_trips = (config, tuple(getattr(config, name).trip for name, _ in _DIRECTIONS))
+    return _last_trips[1]
+
+
 def step_protections(
     state: ProtectionState, m: Measurements, config: ProtectionConfig, dt: float
 ) -> ProtectionState:
     """Advance every protection by ``dt`` [s]."""
-    return ProtectionState(
-        {
-            name: step_limit(
-                state.limits[name], measured_value(name, m), getattr(config, name), over, dt
-            )
-            for name, over in PROTECTION_DIRECTIONS.items()
-        }
-    )
+    return step_protection_values(state, m.cell_voltage_max, m.cell_voltage_min, m.current,
+                                  m.temp_max, m.temp_min, config, dt)
+
+
+def step_protection_values(
+    state: ProtectionState, vmax: float, vmin: float, current: float, tmax: float,
+    tmin: float, config: ProtectionConfig, dt: float,
+) -> ProtectionState:
+    """:func:`step_protections` with the :class:`Measurements` as values. A protection that is
+    clear, with no timer running and no trip condition, stays as it is without a step (what
+    :func:`step_limit` would give); ``state`` itself comes back when every one did."""
+    values = (vmax, vmin, max(current, 0.0), max(-current, 0.0), tmax, tmin, tmax, tmin)
+    if state.idle:  # the usual case: every value on the safe side of its trip
+        t = _trips(config)
+        if (vmax < t[0] and vmin > t[1] and values[2] < t[2] and values[3] < t[3]
+                and tmax < t[4] and tmin > t[5] and tmax < t[6] and tmin > t[7]):
+            return state
+    limits = state.limits
+    changed: dict[str, LimitState] | None = None
+    for (name, over), value in zip(_DIRECTIONS, values, strict=True):  # measured_value each
+        old = limits[name]
+        limit: ProtectionLimit = getattr(config, name)
+        if not old.tripped and old.timer_s == 0.0 and not (
+                value >= limit.trip if over else value <= limit.trip):
+            continue
+        if changed is None:
+            changed = dict(limits)
+        changed[name] = step_limit(old, value, limit, over, dt)
+    return state if changed is None else ProtectionState(changed)

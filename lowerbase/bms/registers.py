@@ -170,23 +170,60 @@ assert tuple(r.name for r in INPUT_REGISTERS) == SNAPSHOT_FIELDS, "one register 
 # -- measurements ---------------------------------------------------------------------------
 
 
-def encode_snapshot(snapshot: BmsSnapshot) -> list[int]:
-    """The input-register image (``INPUT_COUNT`` words from address 0) of ``snapshot``."""
-    words: list[int] = []
+def _input_codec() -> tuple[tuple[str, float, int, int, bool, int, int, float | None], ...]:
+    """Per input register, what :meth:`Register.to_words` / :meth:`Register.from_words` look
+    up on every call: (name, scale, lo, hi, two words, offset, kind 0 u16 / 1 i16 / 2 u32,
+    the exact inverse of the scale or None)."""
+    rows = []
     for reg in INPUT_REGISTERS:
-        words += reg.to_words(getattr(snapshot, reg.name))
+        lo, hi = {"u16": (0, 0xFFFF), "i16": (-0x8000, 0x7FFF), "u32": (0, 0xFFFFFFFF)}[reg.type]
+        inverse: float | None = None
+        if reg.scale != 1:
+            inv = round(1 / reg.scale)
+            if abs(inv * reg.scale - 1) < 1e-12:
+                inverse = inv
+        rows.append((reg.name, reg.scale, lo, hi, reg.words == 2, reg.address - INPUT_BASE,
+                     ("u16", "i16", "u32").index(reg.type), inverse))
+    return tuple(rows)
+
+
+_INPUT_CODEC = _input_codec()
+
+
+def encode_snapshot(snapshot: BmsSnapshot) -> list[int]:
+    """The input-register image (``INPUT_COUNT`` words from address 0) of ``snapshot``:
+    each register's :meth:`Register.to_words`, written out."""
+    words: list[int] = []
+    append = words.append
+    for name, scale, lo, hi, wide, _, _, _ in _INPUT_CODEC:
+        raw = min(max(round(getattr(snapshot, name) / scale), lo), hi)
+        if wide:
+            append((raw >> 16) & 0xFFFF)
+        append(raw & 0xFFFF)
     return words
 
 
 def decode_snapshot(words: Sequence[int]) -> BmsSnapshot:
-    """Inverse of :func:`encode_snapshot` (at the registers' resolution)."""
+    """Inverse of :func:`encode_snapshot` (at the registers' resolution): each register's
+    :meth:`Register.from_words`, written out."""
     if len(words) != INPUT_COUNT:
         raise ModbusDeviceError(f"expected {INPUT_COUNT} input registers, got {len(words)}")
-    values: dict[str, float] = {}
-    for reg in INPUT_REGISTERS:
-        i = reg.address - INPUT_BASE
-        values[reg.name] = reg.from_words(words[i : i + reg.words])
-    return BmsSnapshot(**values)  # type: ignore[arg-type]
+    values: list[float] = []
+    append = values.append
+    for _, scale, _, _, _, i, kind, inverse in _INPUT_CODEC:
+        if kind == 2:
+            raw = (words[i] << 16) | words[i + 1]
+        elif kind == 1:
+            raw = words[i] - 0x10000 if words[i] & 0x8000 else words[i]
+        else:
+            raw = words[i]
+        if scale == 1:
+            append(raw)
+        elif inverse is not None:
+            append(raw / inverse)  # 3880 / 100 is 38.8 exactly; 3880 * 0.01 is not
+        else:
+            append(raw * scale)
+    return BmsSnapshot(*values)  # type: ignore[arg-type]
 
 
 # -- thresholds -----------------------------------------------------------------------------

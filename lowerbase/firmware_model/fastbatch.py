@@ -40,7 +40,8 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
     noise = imu.params.noise
     if noise and not imu._left:  # the next sample's noise block, drawn now: the same numbers,
         # as only the IMU draws from its generator (a boot makes a new one)
-        imu._block(lean.imu_cycle if lean.imu_cycle > 0.0 else 1.0 / imu.params.rate_hz)
+        imu._block(lean.imu_cycle if lean.imu_cycle > 0.0 else 1.0 / imu.params.rate_hz,
+                   compiled=True)
     if bms is not None and now >= mcu._bms_next_poll and not kl.poll_ahead(now):
         return 0
     if not kl.owned:

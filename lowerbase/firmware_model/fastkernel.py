@@ -251,7 +251,8 @@ class KernelLoop:
         z = self.zero_row
         if imu_due and imu.params.noise:
             if not imu._left:
-                imu._block(lean.imu_cycle if lean.imu_cycle > 0.0 else 1.0 / imu.params.rate_hz)
+                imu._block(lean.imu_cycle if lean.imu_cycle > 0.0 else 1.0 / imu.params.rate_hz,
+                           compiled=True)
             imu._left -= 1
             z = imu._arr[imu._left]
         ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er

@@ -20,6 +20,7 @@ hooks (:meth:`ImuModel.bias_step`, :meth:`ImuModel.freeze`) work either way.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -112,6 +113,12 @@ def _fold(x: np.ndarray, bound: np.ndarray) -> np.ndarray:
     return np.where(bound > 0.0, np.where(y < 2.0 * b, y, 4.0 * b - y) - b, 0.0)
 
 
+def _compiled_finish() -> Any:
+    """:func:`.imu_kernel.finish_block` compiled, or None (imported only when asked for)."""
+    from lowerbase.firmware_model.imu_kernel import finish
+    return finish()
+
+
 class ImuModel:
     """Stateful IMU: call :meth:`sample` once per output sample (nominally at ``rate_hz``).
 
@@ -164,6 +171,7 @@ class ImuModel:
         self._left = 0  # rows of _arr not yet used
         self._list: list[list[float]] | None = None  # _arr.tolist(), made when Python samples
         self._walk_dt: np.ndarray = np.zeros(6)
+        self._decay_flat: np.ndarray = np.zeros(0)
         self._fold_b: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         if bool(np.all(self._bound > 0.0)):  # _fold's constants (every axis bounded)
             self._fold_b = (self._bound, 4.0 * self._bound, 2.0 * self._bound)
@@ -184,7 +192,7 @@ class ImuModel:
         """Fault: while frozen, every sample repeats the last one (the model keeps running)."""
         self.frozen = on
 
-    def _block(self, dt: float) -> None:
+    def _block(self, dt: float, compiled: bool = False) -> None:
         """The next _BLOCK samples of bias (flicker + walk) and white noise, all six axes.
 
         Each Gauss-Markov term is the exact AR(1) recursion, evaluated in two levels of
@@ -195,7 +203,9 @@ class ImuModel:
         The reflected walk is the free walk folded into +-bound (reflection at both walls is
         that fold of the free path). The draws and float operations are those of the plain
         numpy form (tests/firmware_model/test_imu_block.py keeps it): the work goes into
-        preallocated buffers and the rows straight into the array the compiled loop reads."""
+        preallocated buffers and the rows straight into the array the compiled loop reads.
+        ``compiled`` (the compiled control loop's calls): the element-wise end in
+        :mod:`.imu_kernel` (same bits) when every axis is bounded and numba compiles it."""
         n, taus, k = _BLOCK, np.array(FLICKER_TAUS), _BLOCK // _CHUNK
         if self._filter_dt != dt:
             phi = np.exp(-dt / taus)
@@ -206,6 +216,7 @@ class ImuModel:
             self._decay_k = phi_chunk[:, None] ** np.arange(1, k + 1)[None, :]
             self._drive = np.sqrt(-np.expm1(-2.0 * dt / taus))[:, None] * self._flicker
             self._walk_dt = self._walk * math.sqrt(dt)
+            self._decay_flat = np.ascontiguousarray(self._decay.reshape(len(taus), _CHUNK))
             self._filter_dt = dt
         z, local, tmp = self._z, self._local, self._tmp
         self.rng.standard_normal(out=z)  # the draws of standard_normal((terms, n, 6))
@@ -214,9 +225,21 @@ class ImuModel:
         ends = np.matmul(self._lower_k, local[:, :, -1, :]) + (
             self._decay_k[:, :, None] * self._gm[:, None, :])  # state at each chunk's end
         before = np.concatenate([self._gm[:, None, :], ends[:, :-1, :]], axis=1)
+        self._gm = ends[:, -1, :]
+        fold_b = self._fold_b
+        fin = _compiled_finish() if compiled and fold_b is not None else None
+        if fin is not None and fold_b is not None:
+            free, white, rows, rw = self._free, self._white_z, np.empty((n, 12)), self._rw.copy()
+            self.rng.standard_normal(out=free)
+            self.rng.standard_normal(out=white)
+            b, b4, b2 = fold_b
+            fin(local, self._decay_flat, before, free, self._walk_dt, rw, b, b4, b2, white,
+                self._white, rows)
+            self._rw = rw
+            self._arr, self._left, self._list = rows, n, None
+            return
         np.multiply(self._decay, before[:, :, None, :], out=tmp)
         np.add(local, tmp, out=local)
-        self._gm = ends[:, -1, :]
         free = self._free
         self.rng.standard_normal(out=free)
         np.cumsum(free, axis=0, out=free)

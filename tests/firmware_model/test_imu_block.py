@@ -48,13 +48,19 @@ def bits(a: np.ndarray) -> np.ndarray:
     dataclasses.replace(ImuParams(), bias_walk_bound=0.1, seed=9),  # the walk folds often
     dataclasses.replace(ImuParams(), gyro_random_walk=0.0, seed=5),  # bound 0: _fold's path
 ])
-def test_blocks_bit_identical_to_the_numpy_form(params: ImuParams) -> None:
+@pytest.mark.parametrize("compiled", [False, True])
+def test_blocks_bit_identical_to_the_numpy_form(params: ImuParams, compiled: bool) -> None:
+    """Both forms: numpy in buffers, and the compiled end (where every axis is bounded)."""
+    if compiled:
+        pytest.importorskip("numba")
+        from lowerbase.firmware_model.imu_kernel import finish
+        assert finish() is not None
     imu = ImuModel(params, np.random.default_rng(params.seed))
     for dt in (0.01, 0.01, 0.01, 0.005, 0.005, 0.01):  # a dt change rebuilds the filters
         mirror = np.random.default_rng()
         mirror.bit_generator.state = imu.rng.bit_generator.state
         rows, gm, rw = reference_block(imu, dt, mirror)
-        imu._block(dt)
+        imu._block(dt, compiled=compiled)
         assert imu._arr.flags.c_contiguous and imu._left == _BLOCK
         assert np.array_equal(bits(imu._arr), bits(np.array(rows)))
         assert np.array_equal(bits(imu._gm), bits(gm))

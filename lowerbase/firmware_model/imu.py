@@ -19,6 +19,7 @@ hooks (:meth:`ImuModel.bias_step`, :meth:`ImuModel.freeze`) work either way.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -64,10 +65,12 @@ def model_avar(tau: np.ndarray, density: float, flicker: float, walk: float) -> 
     return density**2 / tau + flicker**2 * gm + walk**2 * tau / 3.0
 
 
+@functools.lru_cache(maxsize=64)
 def flicker_sigma(density: float, instability: float, walk: float, what: str = "imu") -> float:
     """Sigma of each Gauss-Markov term such that the Allan deviation's minimum is
     ``ALLAN_FLOOR * instability`` (SI units; 0 gives no flicker). ConfigError when white
-    noise and random walk alone already lie above that floor."""
+    noise and random walk alone already lie above that floor. Kept per arguments (the
+    bisection is ~30 ms, and every boot of every chassis makes an ImuModel)."""
     if instability <= 0.0:
         return 0.0
     target = (ALLAN_FLOOR * instability) ** 2

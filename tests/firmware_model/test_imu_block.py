@@ -95,3 +95,20 @@ def test_samples_and_at_rest_read_the_rows_in_order() -> None:
     gyro, _ = imu.sample((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), dt)
     z0 = expected[3 * _BLOCK + 100]
     assert gyro[0] == (gt[0] + z0[0]) + z0[6]
+
+
+def test_flicker_sigma_is_computed_once_per_parameters() -> None:
+    """A boot makes a new ImuModel: the flicker bisection (~30 ms) is kept per arguments,
+    and the kept value is the computed one."""
+    from lowerbase.firmware_model.imu import DEG, DEG_PER_HOUR, flicker_sigma
+
+    p = dataclasses.replace(ImuParams(), gyro_bias_instability=4.25)
+    first = ImuModel(p, np.random.default_rng(1))
+    hits = flicker_sigma.cache_info().hits
+    second = ImuModel(p, np.random.default_rng(1))
+    assert flicker_sigma.cache_info().hits == hits + 2  # gyro and accel
+    assert np.array_equal(bits(first._flicker), bits(second._flicker))
+    fresh = flicker_sigma.__wrapped__(p.gyro_noise_density * DEG,
+                                      p.gyro_bias_instability * DEG_PER_HOUR,
+                                      p.gyro_random_walk, "imu.gyro_bias_instability")
+    assert first._flicker[0] == fresh

@@ -213,7 +213,7 @@ class GroupOnlyMulticastBus(UdpMulticastBus):
             try:
                 datagram = prefixes[frame_id][len(data)] + data + tail
             except (KeyError, IndexError):  # first frame of an ID, or not a fast one
-                if not 0 <= frame_id <= 0x7FF or len(data) > udp_wire.MAX_FAST_DLC:
+                if not 0 <= frame_id <= 0x7FF or len(data) > 8:
                     send_frame(frame_id, data)
                     return
                 datagram = udp_wire.classic_prefixes(frame_id)[len(data)] + data + tail

@@ -63,15 +63,15 @@ PREFIXES: dict[int, list[bytes]] = {}
 
 
 def classic_prefixes(frame_id: int) -> list[bytes]:
-    """The datagram of a classic frame with the 11-bit ``frame_id`` up to its data, for every
-    DLC: ``pack_classic(frame_id, d) == classic_prefixes(frame_id)[len(d)] + d + CLASSIC_TAIL``
-    for ``len(d) <= MAX_FAST_DLC``; kept in :data:`PREFIXES`."""
+    """The datagram of a classic frame with the 11-bit ``frame_id`` up to its data, for DLC 0
+    to 8: ``pack_classic(frame_id, d) == classic_prefixes(frame_id)[len(d)] + d +
+    CLASSIC_TAIL``; kept in :data:`PREFIXES` (at most 2048 IDs x 9 prefixes)."""
     if not 0 <= frame_id <= 0x7FF:
         raise ValueError(f"not an 11-bit frame ID: {frame_id}")
     prefixes = PREFIXES.get(frame_id)
     if prefixes is None:
         head = _head(frame_id)
-        prefixes = PREFIXES[frame_id] = [head + dlc_data for dlc_data in _DLC_DATA]
+        prefixes = PREFIXES[frame_id] = [head + dlc_data for dlc_data in _DLC_DATA[:9]]
     return prefixes
 
 

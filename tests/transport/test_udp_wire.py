@@ -29,6 +29,19 @@ def test_pack_classic_is_python_cans_datagram() -> None:
         assert udp_wire.pack(msg) == want
 
 
+def test_classic_prefixes_make_python_cans_datagram() -> None:
+    """The frame writer's pieces: prefix + data + tail is python-can's datagram (3000 random
+    classic frames, DLC 0-8); only 11-bit IDs have prefixes."""
+    for msg in _messages(2, 3000):
+        prefix = udp_wire.classic_prefixes(msg.arbitration_id)[msg.dlc]
+        assert prefix + bytes(msg.data) + udp_wire.CLASSIC_TAIL == pack_message(msg)
+    assert udp_wire.classic_prefixes(0x7FF) is udp_wire.classic_prefixes(0x7FF)  # one table
+    assert len(udp_wire.classic_prefixes(0x10)) == 9
+    for frame_id in (-1, 0x800):
+        with pytest.raises(ValueError):
+            udp_wire.classic_prefixes(frame_id)
+
+
 @pytest.mark.parametrize("msg", [
     can.Message(arbitration_id=0x1ABCDEF, data=b"\x01", is_extended_id=True),
     can.Message(arbitration_id=0x10, is_remote_frame=True, dlc=4, is_extended_id=False),

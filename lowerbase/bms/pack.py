@@ -27,6 +27,7 @@ MIN_DISCHARGE_A = 0.05
 _SOC_LOW, _CHARGER_CONNECTED = int(BmsStatus.SOC_LOW), int(BmsStatus.CHARGER_CONNECTED)
 _FULLY_CHARGED, _CHARGING = int(BmsStatus.FULLY_CHARGED), int(BmsStatus.CHARGING)
 _CHARGING_STATUS, _DISCHARGE_STATUS = int(ChargeStatus.CHARGING), int(ChargeStatus.DISCHARGE)
+_CHARGE_SWITCH, _DISCHARGE_SWITCH = int(SwitchStatus.CHARGE), int(SwitchStatus.DISCHARGE)
 
 
 def coulomb_step(charge_ah: float, current_a: float, dt_s: float, capacity_ah: float) -> float:
@@ -205,10 +206,10 @@ class BatteryPack:
     def _battery_current(self, load_a: float) -> float:
         """Current into the pack [A] for this step, given the switches and the charger."""
         c = self.config
-        switches = self._protection.switches
+        switches = self._protection.switch_bits
         if self._charger_connected:
             # the charger carries the robot's load; the pack gets the CC-CV current
-            if self._charge_complete or not switches & SwitchStatus.CHARGE:
+            if self._charge_complete or not switches & _CHARGE_SWITCH:
                 return 0.0
             cc = c.charge_current_a if self._temp_c >= 15.0 else c.cold_charge_current_a
             current = cc_cv_current(
@@ -222,7 +223,7 @@ class BatteryPack:
                 self._charge_ah = c.capacity_ah
                 return 0.0
             return current
-        if not switches & SwitchStatus.DISCHARGE:
+        if not switches & _DISCHARGE_SWITCH:
             return 0.0
         return -(max(load_a, 0.0) + c.idle_current_a)
 
@@ -282,7 +283,7 @@ class BatteryPack:
             charge_cycle=min(self.charge_cycles, 65535),
             battery_cycle=c.cycle_life,
             time_remain=time_remaining_min(self._charge_ah, self._avg_current_a),
-            switch_status=int(self._protection.switches),
+            switch_status=self._protection.switch_bits,
             charge_status=_CHARGING_STATUS if self._current_a > 0 else _DISCHARGE_STATUS,
             charge_mode=int(self._charge_mode),
             submodule=c.submodule,

@@ -112,6 +112,11 @@ class ProtectionState:
         return all(not st.tripped and st.timer_s == 0.0 for st in self.limits.values())
 
     @cached_property
+    def switch_bits(self) -> int:
+        """:attr:`switches` as an int."""
+        return int(self.switches)
+
+    @cached_property
     def switches(self) -> SwitchStatus:
         """Switches left closed by the tripped protections."""
         closed = SwitchStatus.CHARGE | SwitchStatus.DISCHARGE

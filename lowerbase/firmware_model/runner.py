@@ -43,8 +43,9 @@ from lowerbase.transport.peers import PeerMonitor
 
 log = logging.getLogger(__name__)
 
-#: periods a chassis of a fleet steps at a time on the simulated clock (see :func:`run_fleet`)
-SIM_BLOCK = 20
+#: periods a chassis of a fleet steps at a time on the simulated clock (see :func:`run_fleet`;
+#: 0.2 s at 200 Hz, under half the default command timeout)
+SIM_BLOCK = 40
 #: fleets from this size up run in blocks by default (smaller ones stay in the CPU's caches
 #: period by period; measured in benchmarks/bench_fleet.py)
 SIM_BLOCK_FLEET = 100

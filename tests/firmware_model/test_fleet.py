@@ -15,6 +15,7 @@ from lowerbase.errors import ConfigError
 from lowerbase.firmware_model.mcu import Mcu
 from lowerbase.firmware_model.profile import load_profile
 from lowerbase.firmware_model.runner import (
+    SIM_BLOCK,
     bus_sender,
     close_fleet,
     fleet_bus_configs,
@@ -215,7 +216,8 @@ def test_a_fleet_stepped_in_blocks_is_bit_identical_to_period_by_period() -> Non
     each chassis the same frames at the same step as the period-by-period loop; also when the
     duration is not a whole number of blocks."""
     by_period = _blocked_run(1, 2.03, "test_fleet_blk1")
-    in_blocks = _blocked_run(20, 2.03, "test_fleet_blk20")
+    in_blocks = _blocked_run(SIM_BLOCK, 2.03, "test_fleet_blk")  # the default block
+    assert round(2.03 / 0.005) % SIM_BLOCK != 0  # 2.03 s is not a whole number of blocks
     heard, poses, rx, end = by_period
     assert in_blocks == by_period
     assert end == pytest.approx(2.03) and all(len(frames) > 700 for frames in heard)

@@ -139,9 +139,11 @@ _last_trips: tuple[ProtectionConfig | None, tuple[float, ...]] = (None, ())
 def _trips(config: ProtectionConfig) -> tuple[float, ...]:
     """The trip points of ``config`` in _DIRECTIONS order (the last config's kept)."""
     global _last_trips
-    if _last_trips[0] is not config:
-        _last_trips = (config, tuple(getattr(config, name).trip for name, _ in _DIRECTIONS))
-    return _last_trips[1]
+    last = _last_trips  # one read: another thread's pack may replace it meanwhile
+    if last[0] is not config:
+        last = (config, tuple(getattr(config, name).trip for name, _ in _DIRECTIONS))
+        _last_trips = last
+    return last[1]
 
 
 def step_protections(

@@ -17,6 +17,7 @@ from lowerbase.bms.device import BmsDevice
 from lowerbase.bms.frames import snapshot_to_frames
 from lowerbase.bms.pack import BatteryPack
 from lowerbase.bms.registers import decode_snapshot, encode_snapshot
+from lowerbase.bms.snapshot import BmsSnapshot
 from lowerbase.bms.status import BmsStatus, ChargeMode
 
 #: SHA-256 of the trace of each pack below, recorded with the code before the fast paths
@@ -102,3 +103,25 @@ def test_the_trace_covers_every_protection() -> None:
         seen |= trace(name, config)[1]
     assert seen & 0xFF == 0xFF, BmsStatus(0xFF & ~seen)
     assert seen & BmsStatus.FULLY_CHARGED and seen & BmsStatus.SOC_LOW
+
+
+def test_packs_with_other_thresholds_stepped_in_turn() -> None:
+    """The protections' trip points are kept for the last config only: two packs with
+    different thresholds, stepped in turn, each read as when stepped alone."""
+    base = default_battery_config("LFP")
+    low = dataclasses.replace(base.protection, discharge_oc=ProtectionLimit(20.0, 10.0, 0.5, 3.0))
+    configs = (base, dataclasses.replace(base, protection=low))
+
+    def run(packs: list[BatteryPack], order: list[int]) -> list[list[tuple[BmsSnapshot, int]]]:
+        out: list[list[tuple[BmsSnapshot, int]]] = [[] for _ in packs]
+        for step in range(200):
+            for i in order:
+                packs[i].step(0.1, 30.0 if step < 100 else 1.0)
+                out[i].append((packs[i].snapshot(), int(packs[i].status)))
+        return out
+
+    together = run([BatteryPack(c, soc=70.0) for c in configs], [0, 1])
+    alone = [run([BatteryPack(c, soc=70.0)], [0])[0] for c in configs]
+    assert together == alone
+    assert any(s & BmsStatus.DISCHARGE_OVER_CURRENT for _, s in together[1])
+    assert not any(s & BmsStatus.DISCHARGE_OVER_CURRENT for _, s in together[0])

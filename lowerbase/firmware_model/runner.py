@@ -54,16 +54,17 @@ SIM_BLOCK_FLEET = 100
 def bus_sender(
     bus: can.BusABC, mcu_stats: Callable[[str], None] | None = None,
     on_sent: Callable[[int, bytes], None] | None = None,
-    sent_ids: Collection[int] | None = None,
+    sent_ids: Collection[int] | None = None, held: list[bytes] | None = None,
 ) -> Callable[[int, bytes], None]:
     """An Mcu ``send`` callback writing to ``bus``; transmit errors are counted, not raised.
 
     ``on_sent`` sees every frame that went out (e.g. a PeerMonitor's ``on_sent``), or only
     those with an ID in ``sent_ids`` (a PeerMonitor reads only Heartbeats). On udp_multicast
-    a frame is one call into the bus' ``frame_writer`` (no ``can.Message``)."""
+    a frame is one call into the bus' ``frame_writer`` (no ``can.Message``); with ``held``
+    its datagrams wait there for :func:`send_held` (a fleet sends each chassis' in one go)."""
     writer = getattr(bus, "frame_writer", None)
     if writer is not None:
-        write: Callable[[int, bytes], None] = writer()
+        write: Callable[[int, bytes], None] = writer(held)
     else:
         def write(frame_id: int, data: bytes) -> None:
             bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False))
@@ -175,6 +176,15 @@ class Chassis:
     mcu: Mcu
     bus: can.BusABC
     peers: PeerMonitor | None = None
+    held: list[bytes] | None = None  #: frames written, not yet sent (:func:`send_held`)
+
+
+def send_held(chassis: Chassis) -> None:
+    """Send what ``chassis`` holds, in order; the refused are counted as ``tx_errors``."""
+    if chassis.held:
+        refused = chassis.bus.send_held(chassis.held)  # type: ignore[attr-defined]
+        if refused:
+            chassis.mcu.stats["tx_errors"] += refused
 
 
 def fleet_bus_configs(config: dict[str, Any], n: int) -> list[dict[str, Any]]:
@@ -288,6 +298,7 @@ def run_fleet(
                 receive(0.0)
             for k, chassis in enumerate(fleet):
                 chassis.mcu.step()
+                send_held(chassis)
                 if on_chassis_step is not None:
                     on_chassis_step(k, chassis)
             if sim is not None:
@@ -297,6 +308,8 @@ def run_fleet(
             if on_step is not None:
                 on_step()
     finally:
+        for chassis in fleet:
+            send_held(chassis)
         selector.close()
 
 
@@ -339,6 +352,7 @@ def _run_blocks(
                         on_chassis_step(k, chassis)
             finally:
                 mcu.clock = sim
+                send_held(chassis)  # the block's frames in one burst of system calls
         for _ in range(n):
             sim.advance(dt)
         done += n
@@ -371,10 +385,12 @@ def open_fleet(
         p = fleet_profile(profile, k)
         peers = PeerMonitor(codec)
         chassis = Chassis(None, bus, peers)  # type: ignore[arg-type]  # the MCU just below
+        if hasattr(bus, "send_held"):
+            chassis.held = []
         send = bus_sender(bus, lambda key: chassis.mcu.stats.update([key]),
                           on_sent=lambda fid, data: peers.on_sent(fid, data,
                                                                  chassis.mcu.clock.now()),
-                          sent_ids=(peers.heartbeat_id,))
+                          sent_ids=(peers.heartbeat_id,), held=chassis.held)
         pack = McuBmsAdapter.from_profile(p, soc=soc, charger=charger) if bms else None
         chassis.mcu = Mcu(p, clock, send, bms=pack, faults=faults, codec=codec)
         return chassis

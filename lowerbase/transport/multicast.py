@@ -201,13 +201,26 @@ class GroupOnlyMulticastBus(UdpMulticastBus):
         arbitration_id=frame_id, data=data, is_extended_id=False))`` sends, faster."""
         self._sendto(udp_wire.pack_classic(frame_id, data))
 
-    def frame_writer(self) -> Callable[[int, bytes], None]:
+    def frame_writer(self, held: list[bytes] | None = None) -> Callable[[int, bytes], None]:
         """``send_frame`` as one function: the datagram is a prefix from the process' table
         (:func:`udp_wire.classic_prefixes`), the data and the tail, handed to the socket in
         one call (no ``can.Message``, no method layers); the same bytes as ``send_frame``.
-        Raises ``can.CanError`` as ``send`` does."""
+        Raises ``can.CanError`` as ``send`` does. ``held``: the datagrams are appended there
+        instead, for :meth:`send_held` to send in order later (one burst of system calls)."""
         prefixes, tail, put = udp_wire.PREFIXES, udp_wire.CLASSIC_TAIL, self._send_datagram
         send_frame = self.send_frame
+        if held is not None:
+            hold = held.append
+
+            def write_later(frame_id: int, data: bytes) -> None:
+                try:
+                    hold(prefixes[frame_id][len(data)] + data + tail)
+                except (KeyError, IndexError):
+                    fast = 0 <= frame_id <= 0x7FF and len(data) <= 8
+                    hold(udp_wire.classic_prefixes(frame_id)[len(data)] + data + tail if fast
+                         else udp_wire.pack_classic(frame_id, data))
+
+            return write_later
 
         def write(frame_id: int, data: bytes) -> None:
             try:
@@ -227,6 +240,20 @@ class GroupOnlyMulticastBus(UdpMulticastBus):
                 raise can.CanTimeoutError()
 
         return write
+
+    def send_held(self, held: list[bytes]) -> int:
+        """Send the datagrams a ``frame_writer(held)`` held, in order, and empty ``held``;
+        returns how many the socket refused (each logged at debug level)."""
+        put, refused = self._send_datagram, 0
+        for datagram in held:
+            try:
+                if put(datagram) < len(datagram):
+                    refused += 1
+            except OSError as error:
+                refused += 1
+                log.debug("transmit failed: %s", error)
+        held.clear()
+        return refused
 
     def _connect_sender(self) -> Callable[[bytes], int]:
         """What hands a datagram to the group: the own sending socket connected to the group

@@ -12,10 +12,11 @@ import pytest
 
 from lowerbase.clock import SimClock
 from lowerbase.errors import ConfigError
-from lowerbase.firmware_model.mcu import Mcu
+from lowerbase.firmware_model.mcu import Command, Mcu
 from lowerbase.firmware_model.profile import load_profile
 from lowerbase.firmware_model.runner import (
     SIM_BLOCK,
+    Chassis,
     bus_sender,
     close_fleet,
     fleet_bus_configs,
@@ -25,7 +26,7 @@ from lowerbase.firmware_model.runner import (
     run_fleet,
 )
 from lowerbase.protocol.codec import default_codec
-from lowerbase.transport import open_bus
+from lowerbase.transport import free_loopback_port, open_bus
 
 CODEC = default_codec()
 
@@ -276,3 +277,47 @@ def test_a_second_lower_computer_on_one_chassis_bus_is_noticed(
         intruder_bus.shutdown()
     assert flagged == [0, 1, 0]
     assert peers[1] is not None and "this one and one with" in peers[1].warning
+
+
+def _udp_fleet_frames(config: dict[str, Any], block: int) -> tuple[list[list[tuple[int, bytes]]],
+                                                                   list[int]]:
+    """A fleet of 2 on udp_multicast driven by direct commands, 1.03 s in ``block``-period
+    blocks: (what each chassis' upper side heard, each chassis' tx_frames)."""
+    clock = SimClock()
+    fleet = open_fleet(load_profile(), clock, config, 2, bms=False)
+    uppers = [open_bus(cfg) for cfg in fleet_bus_configs(config, 2)]
+
+    steps = [0, 0]
+
+    def drive(k: int, chassis: Chassis) -> None:  # after each step of chassis k
+        steps[k] += 1
+        if steps[k] == 70:
+            chassis.mcu.control(Command.ENABLE_CAN_CONTROL)
+        elif steps[k] % 4 == 0:
+            chassis.mcu.command(0.3 + 0.2 * k, 0.1)
+
+    try:
+        run_fleet(fleet, clock, duration=1.03, block=block, on_chassis_step=drive)
+        heard = []
+        for bus in uppers:
+            frames = []
+            while (msg := bus.recv(0.2)) is not None:
+                frames.append((msg.arbitration_id, bytes(msg.data)))
+            heard.append(frames)
+        return heard, [c.mcu.stats["tx_frames"] - c.mcu.stats["tx_errors"] for c in fleet]
+    finally:
+        close_fleet(fleet)
+        for bus in uppers:
+            bus.shutdown()
+
+
+def test_a_udp_fleet_sends_a_blocks_frames_in_one_go_all_in_order(
+        udp_bus_config: dict[str, Any]) -> None:
+    """On udp_multicast a chassis' frames are held while it runs a block and sent after it:
+    each upper side hears every frame of its chassis, the same ones in the same order as
+    when the fleet steps period by period."""
+    by_period, sent = _udp_fleet_frames(udp_bus_config, 1)
+    in_blocks, sent_blocks = _udp_fleet_frames(
+        {**udp_bus_config, "port": free_loopback_port()}, SIM_BLOCK)
+    assert in_blocks == by_period and sent == sent_blocks
+    assert [len(frames) for frames in by_period] == sent and min(sent) > 300

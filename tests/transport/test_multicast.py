@@ -234,3 +234,35 @@ def test_frame_writer_refusals_are_can_errors(udp_bus_config: dict[str, Any]) ->
         assert "failed to send" in str(exc)
     else:
         raise AssertionError("a frame on a closed bus was not refused")
+
+
+def test_held_frames_are_sent_in_order_later_and_refusals_counted(
+        udp_bus_config: dict[str, Any]) -> None:
+    """``frame_writer(held)`` only holds the datagrams (python-can's bytes); ``send_held``
+    sends them in order and empties the list; on a closed bus it counts each as refused."""
+    group, port = udp_bus_config["channel"], udp_bus_config["port"]
+    ours = open_bus(udp_bus_config)
+    raw = _raw_listener(group, port)
+    held: list[bytes] = []
+    frames = [(0x10, b"\x01"), (0x7FF, bytes(8)), (0x123, b""), (0x800, b"\x02"),
+              (0x10, b"\x03")]
+    try:
+        write = ours.frame_writer(held)  # type: ignore[attr-defined]
+        for frame_id, data in frames:
+            write(frame_id, data)
+        raw.settimeout(0.0)
+        try:
+            raw.recv(4096)
+            raise AssertionError("a held frame was sent at once")
+        except BlockingIOError:
+            pass
+        assert ours.send_held(held) == 0 and held == []  # type: ignore[attr-defined]
+        raw.settimeout(2.0)
+        assert [raw.recv(4096) for _ in frames] == [pack_message(can.Message(
+            arbitration_id=i, data=d, is_extended_id=False)) for i, d in frames]
+        write(0x10, b"\x04")
+        write(0x11, b"\x05")
+    finally:
+        raw.close()
+        ours.shutdown()
+    assert ours.send_held(held) == 2 and held == []  # type: ignore[attr-defined]

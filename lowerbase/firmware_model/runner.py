@@ -1,24 +1,19 @@
 """Run an :class:`~lowerbase.firmware_model.mcu.Mcu` against a python-can bus.
 
 Real time: frames are handled as they arrive and the control loop keeps its period (the
-deadline advances by exactly one period per step, so periodic frames keep their cycle).
+deadline advances by exactly one period per step, so periodic frames keep their cycle; on a
+:class:`~lowerbase.clock.ScaledClock`, ``emulate --speed K``, the waits are K times shorter).
 Simulated time: each step drains what the bus holds, then the clock jumps one period.
-On a :class:`~lowerbase.clock.ScaledClock` (``emulate --speed K``) the real-time loop keeps the
-period in the clock's time: the bus waits are that span in wall seconds (K times shorter).
+:func:`run_fleet` steps N chassis on one clock in one process, each on its own bus
+(:func:`fleet_bus_configs`): one ``epoll`` wait per period for all, then one step each.
 
-:func:`run_fleet` steps N chassis on one clock in one process, each on its own bus (a
-udp_multicast port each, :func:`fleet_bus_configs`): one ``epoll`` wait per control period for
-all of them, then one step each.
-
-Given a :class:`~lowerbase.transport.peers.PeerMonitor` (fed with what the MCU sends through
-``bus_sender(..., on_sent=...)``), the runner warns once, and counts ``two_lower_computers`` in
-the MCU's stats, when another lower computer's Heartbeats share the bus.
-
-Both runners listen only to what a lower computer reads (:func:`listen_to_upper`: the upper
-side's IDs, and Heartbeats for the PeerMonitor) unless the bus has filters of its own: on
-udp_multicast (and SocketCAN) other devices' frames are then dropped in the kernel and never
-wake the emulator, however full the bus is. A frame on a listened ID that is not a classic
-frame (extended, remote) still arrives and is counted as ``rx_not_classic``.
+Given a :class:`~lowerbase.transport.peers.PeerMonitor` (fed with the Heartbeats the MCU
+sends, ``bus_sender(..., on_sent=...)``), the runner warns once, and counts
+``two_lower_computers``, when another lower computer's Heartbeats share the bus. Both runners
+listen only to what a lower computer reads (:func:`listen_to_upper`) unless the bus has
+filters of its own: on udp_multicast (and SocketCAN) other devices' frames are dropped in the
+kernel, however full the bus is. A frame on a listened ID that is not a classic frame
+(extended, remote) still arrives and is counted as ``rx_not_classic``.
 """
 
 from __future__ import annotations
@@ -125,15 +120,9 @@ def _receive(mcu: Mcu, msg: can.Message, peers: PeerMonitor | None) -> None:
 
 
 def run(
-    mcu: Mcu,
-    bus: can.BusABC,
-    clock: Clock,
-    *,
-    duration: float | None = None,
-    stop: threading.Event | None = None,
-    on_step: Callable[[Mcu], None] | None = None,
-    peers: PeerMonitor | None = None,
-    catalog_filter: bool = True,
+    mcu: Mcu, bus: can.BusABC, clock: Clock, *, duration: float | None = None,
+    stop: threading.Event | None = None, on_step: Callable[[Mcu], None] | None = None,
+    peers: PeerMonitor | None = None, catalog_filter: bool = True,
 ) -> None:
     """Run until ``duration`` [s] of (simulated or real) time has passed or ``stop`` is set.
 
@@ -217,32 +206,24 @@ def fleet_profile(profile: Profile, k: int) -> Profile:
 
 
 def run_fleet(
-    fleet: Sequence[Chassis],
-    clock: Clock,
-    *,
-    duration: float | None = None,
-    stop: threading.Event | None = None,
-    on_step: Callable[[], None] | None = None,
-    catalog_filter: bool = True,
-    on_chassis_step: Callable[[int, Chassis], None] | None = None,
+    fleet: Sequence[Chassis], clock: Clock, *, duration: float | None = None,
+    stop: threading.Event | None = None, on_step: Callable[[], None] | None = None,
+    catalog_filter: bool = True, on_chassis_step: Callable[[int, Chassis], None] | None = None,
     block: int | None = None,
 ) -> None:
     """Run every chassis until ``duration`` [s] has passed or ``stop`` is set.
 
-    Each control period: the frames waiting on any chassis' bus go to that chassis (one
-    ``epoll`` wait tells which buses have any; buses without a file descriptor are polled),
-    then every MCU steps once and ``on_step()`` is called. In real time the wait lasts until
-    the period's deadline, as :func:`run` does for one chassis. ``catalog_filter``: as
-    :func:`run`'s, on every chassis' bus. ``on_chassis_step(k, chassis)`` is called after
-    each step of chassis k.
+    Each period: the frames waiting on any chassis' bus go to that chassis (one ``epoll``
+    wait; buses without a file descriptor are polled), every MCU steps (then
+    ``on_chassis_step(k, chassis)``) and ``on_step()`` is called; in real time the wait lasts
+    until the period's deadline. ``catalog_filter``: as :func:`run`'s. A chassis' frames on
+    udp_multicast are held while it steps and sent right after (:func:`send_held`).
 
     On a :class:`SimClock` without ``on_step`` the fleet runs in blocks of ``block`` periods
-    (default: :data:`SIM_BLOCK` for :data:`SIM_BLOCK_FLEET` chassis or more, else 1), chassis
-    by chassis (:func:`_run_blocks`): each chassis' state stays in the CPU's caches for its
-    block, which a period-by-period round through hundreds of chassis does not
-    (docs/emulator.md, "A fleet in one process"). Every chassis computes, sends and sees what
-    it would period by period; a bus with a file descriptor is read at the start of each of
-    its blocks (buses without one every period)."""
+    (default: :data:`SIM_BLOCK` from :data:`SIM_BLOCK_FLEET` chassis up, else 1), chassis by
+    chassis (:func:`_run_blocks`), so each one's state stays in the CPU's caches for its block
+    (docs/emulator.md, "A fleet in one process"): the same frames and state as period by
+    period; a bus with a file descriptor is read at the start of each block."""
     if block is None:
         block = SIM_BLOCK if len(fleet) >= SIM_BLOCK_FLEET else 1
     if not fleet:
@@ -318,12 +299,10 @@ def _run_blocks(
     drain: Callable[[Chassis], None], duration: float | None, stop: threading.Event,
     on_chassis_step: Callable[[int, Chassis], None] | None, block: int,
 ) -> None:
-    """run_fleet on the simulated clock, ``block`` periods per chassis at a time.
-
-    Each chassis steps on a clock of its own that starts at the block's time and advances by
-    the period as the fleet's clock does (the same floats), then the fleet's clock catches up
-    by as many periods. Buses with a file descriptor that have frames waiting at a block's
-    start are drained then; buses without one before every period."""
+    """run_fleet on the simulated clock, ``block`` periods per chassis at a time, each on a
+    clock of its own that advances as the fleet's does (the same floats); then the fleet's
+    clock catches up. Buses with a file descriptor are drained at a block's start, buses
+    without one before every period."""
     dt = fleet[0].mcu.dt
     has_fd = {id(key.data) for key in selector.get_map().values()}
     done = 0  # periods run
@@ -373,7 +352,8 @@ def open_fleet(
     soc: float = 80.0, charger: bool = False, faults: Sequence[Any] = (),
 ) -> list[Chassis]:
     """``n`` chassis, each with its own pack and BMS (unless ``bms`` is False), its own bus
-    (:func:`fleet_bus_configs`) and its own seeds (:func:`fleet_profile`)."""
+    (:func:`fleet_bus_configs`) and its own seeds (:func:`fleet_profile`). On udp_multicast
+    a chassis' frames are held until :func:`send_held` (run_fleet, close_fleet) sends them."""
     from lowerbase.bms.adapter import McuBmsAdapter
     from lowerbase.protocol.codec import default_codec
     from lowerbase.transport import open_bus
@@ -416,6 +396,7 @@ def close_fleet(fleet: Sequence[Chassis]) -> None:
             chassis.mcu.shutdown()
             if chassis.mcu.bms is not None:
                 chassis.mcu.bms.close()
+            send_held(chassis)
         try:
             chassis.bus.shutdown()
         except can.CanError as exc:  # closing must not stop the others from closing

@@ -321,3 +321,23 @@ def test_a_udp_fleet_sends_a_blocks_frames_in_one_go_all_in_order(
         {**udp_bus_config, "port": free_loopback_port()}, SIM_BLOCK)
     assert in_blocks == by_period and sent == sent_blocks
     assert [len(frames) for frames in by_period] == sent and min(sent) > 300
+
+
+@pytest.mark.parametrize("block", [1, SIM_BLOCK])
+def test_on_chassis_step_sees_the_clock_of_the_period_it_ran(block: int) -> None:
+    """Period by period or in blocks, ``on_chassis_step`` runs after the chassis' step and
+    before the clock moves on: it reads the time of the period just stepped."""
+    clock = SimClock()
+    config = {"interface": "virtual", "channel": f"c2-clock-{block}"}
+    fleet = open_fleet(load_profile(), clock, config, 2, bms=False)
+    seen: list[tuple[int, float]] = []
+    try:
+        run_fleet(fleet, clock, duration=0.5, block=block,
+                  on_chassis_step=lambda k, c: seen.append((k, c.mcu.clock.now())))
+    finally:
+        close_fleet(fleet)
+    expected, t = [], 0.0
+    for _ in range(100):
+        expected += [(0, t), (1, t)]
+        t += fleet[0].mcu.dt
+    assert sorted(seen) == sorted(expected)

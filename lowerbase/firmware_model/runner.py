@@ -50,16 +50,22 @@ SIM_BLOCK = 40
 SIM_BLOCK_FLEET = 100
 
 
-def _receive(mcu: Mcu, msg: can.Message, peers: PeerMonitor | None) -> None:
-    if is_catalog_frame(msg):
-        data = bytes(msg.data)
-        if peers is not None and peers.on_frame(msg.arbitration_id, data, mcu.clock.now()):
-            mcu.stats["two_lower_computers"] += 1
-            log.warning("%s", peers.warning)
-        mcu.receive(msg.arbitration_id, data)
+def _receive(mcu: Mcu, msg: can.Message | tuple[int, bytes], peers: PeerMonitor | None
+             ) -> None:
+    """A received frame to ``mcu``: a ``can.Message`` or ``(frame_id, data)`` of a classic
+    frame (``GroupOnlyMulticastBus.recv_frame``)."""
+    if isinstance(msg, tuple):
+        frame_id, data = msg
+    elif is_catalog_frame(msg):
+        frame_id, data = msg.arbitration_id, bytes(msg.data)
     else:  # counted like any frame the catalog does not know, and ignored
         mcu.stats["rx_frames"] += 1
         mcu.stats["rx_not_classic"] += 1
+        return
+    if peers is not None and peers.on_frame(frame_id, data, mcu.clock.now()):
+        mcu.stats["two_lower_computers"] += 1
+        log.warning("%s", peers.warning)
+    mcu.receive(frame_id, data)
 
 
 def run(
@@ -193,8 +199,13 @@ def run_fleet(
             polled.append(chassis)
 
     def drain(chassis: Chassis) -> None:
-        while (msg := chassis.bus.recv(0.0)) is not None:
-            _receive(chassis.mcu, msg, chassis.peers)
+        read = getattr(chassis.bus, "recv_frame", None)  # udp_multicast: no can.Message
+        if read is None:
+            while (msg := chassis.bus.recv(0.0)) is not None:
+                _receive(chassis.mcu, msg, chassis.peers)
+            return
+        while (frame := read()) is not None:
+            _receive(chassis.mcu, frame, chassis.peers)
 
     def receive(timeout: float) -> None:
         for key, _ in selector.select(timeout):

@@ -112,6 +112,7 @@ class GroupOnlyMulticastBus(UdpMulticastBus):
             raise can.CanInterfaceNotImplementedError(
                 "receiving own messages is not yet implemented")
         self._kernel_masks: list[tuple[int, int]] | None = None
+        self._accepts: dict[int, bool] = {}  #: classic 11-bit ID -> passes the filters
         self._rx: socket.socket | None = None
         self._multicast = group = _GroupSocket(channel, port, hop_limit)
         self._can_protocol = CanProtocol.CAN_FD if fd else CanProtocol.CAN_20
@@ -136,6 +137,7 @@ class GroupOnlyMulticastBus(UdpMulticastBus):
 
     # -- receive ------------------------------------------------------------------------------
     def _apply_filters(self, filters: CanFilters | None) -> None:
+        self._accepts = {}
         self._kernel_masks = None if not filters else [
             (int(f["can_id"]), int(f["can_mask"])) for f in filters]
         if self._rx is not None:
@@ -186,6 +188,42 @@ class GroupOnlyMulticastBus(UdpMulticastBus):
         if self._can_protocol is not CanProtocol.CAN_FD and msg.is_fd:
             return None, False
         return msg, False  # python-can applies the filters exactly (the kernel's are a superset)
+
+    def recv_frame(self) -> tuple[int, bytes] | can.Message | None:
+        """The next frame waiting that passes the filters, without waiting: ``(frame_id,
+        data)`` for a classic data frame with an 11-bit ID (no ``can.Message``, no timestamp),
+        a ``can.Message`` for any other frame, None when nothing is waiting. What ``recv(0)``
+        returns, filtered exactly as python-can filters, but it reads past the datagrams it
+        drops (not frames: ``rx_malformed``; filtered out; FD on a classic bus)."""
+        assert self._rx is not None
+        recv, size, accepts = self._rx.recv, self._multicast.max_buffer, self._accepts
+        while True:
+            try:
+                datagram = recv(size, socket.MSG_DONTWAIT)
+            except BlockingIOError:
+                return None
+            except OSError as exc:
+                raise can.CanOperationError(f"failed to receive from the socket: {exc}") \
+                    from exc
+            frame = udp_wire.classic(datagram)
+            if frame is not None:
+                ok = accepts.get(frame[0])
+                if ok is None:
+                    ok = accepts[frame[0]] = self._matches_filters(can.Message(
+                        arbitration_id=frame[0], is_extended_id=False, check=False))
+                if ok:
+                    return frame
+                continue
+            try:
+                msg = udp_wire.unpack(datagram, time.time())
+            except Exception as exc:  # anything on the group that is not a frame
+                self.rx_malformed += 1
+                log.debug("dropped a datagram that is not a frame (%d bytes): %s",
+                          len(datagram), exc)
+                continue
+            if (self._can_protocol is CanProtocol.CAN_FD or not msg.is_fd) \
+                    and self._matches_filters(msg):
+                return msg
 
     # -- send ---------------------------------------------------------------------------------
     def send(self, msg: can.Message, timeout: float | None = None) -> None:

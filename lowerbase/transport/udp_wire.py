@@ -94,9 +94,10 @@ def pack(msg: can.Message) -> bytes:
     return pack_message(msg)
 
 
-def unpack(datagram: bytes, timestamp: float) -> can.Message:
-    """The frame in ``datagram``, stamped ``timestamp``. Raises ``ValueError`` (or what msgpack
-    raises) for a datagram that is not a valid python-can frame."""
+def classic(datagram: bytes) -> tuple[int, bytes] | None:
+    """``(frame_id, data)`` when ``datagram`` is a classic data frame with an 11-bit ID and
+    DLC 0-8 in python-can's layout (what :func:`pack_classic` sends, any timestamp); None for
+    anything else (another kind of frame, or not a frame: :func:`unpack` tells them apart)."""
     n = len(datagram)
     if n > ID_OFFSET + 1 and datagram.startswith(_TS) and datagram.startswith(
             _ID_KEY, ID_OFFSET - len(_ID_KEY)):
@@ -109,7 +110,7 @@ def unpack(datagram: bytes, timestamp: float) -> can.Message:
             frame_id, pos = int.from_bytes(datagram[ID_OFFSET + 1:ID_OFFSET + 3], "big"), \
                 ID_OFFSET + 3
         else:
-            frame_id, pos = 0x800, 0  # not a standard ID: python-can's path
+            return None  # not a standard ID
         if frame_id <= 0x7FF and datagram.startswith(_MIDDLE, pos):
             pos += len(_MIDDLE)
             dlc = datagram[pos] if pos < n else 0xFF
@@ -117,9 +118,18 @@ def unpack(datagram: bytes, timestamp: float) -> can.Message:
                     and n == pos + len(_DLC_DATA[dlc]) + dlc + len(_TAIL) \
                     and datagram.endswith(_TAIL):
                 start = pos + len(_DLC_DATA[dlc])
-                return can.Message(timestamp=timestamp, arbitration_id=frame_id,
-                                   is_extended_id=False, dlc=dlc,
-                                   data=datagram[start:start + dlc], check=False)
+                return frame_id, datagram[start:start + dlc]
+    return None
+
+
+def unpack(datagram: bytes, timestamp: float) -> can.Message:
+    """The frame in ``datagram``, stamped ``timestamp``. Raises ``ValueError`` (or what msgpack
+    raises) for a datagram that is not a valid python-can frame."""
+    frame = classic(datagram)
+    if frame is not None:
+        frame_id, data = frame
+        return can.Message(timestamp=timestamp, arbitration_id=frame_id, is_extended_id=False,
+                           dlc=len(data), data=data, check=False)
     return unpack_message(datagram, replace={"timestamp": timestamp}, check=True)
 
 

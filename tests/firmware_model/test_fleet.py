@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import select
+import socket
 import subprocess
 import sys
 from typing import Any
@@ -27,6 +28,7 @@ from lowerbase.firmware_model.runner import (
 )
 from lowerbase.protocol.codec import default_codec
 from lowerbase.transport import free_loopback_port, open_bus
+from lowerbase.transport.udp_wire import pack_classic
 
 CODEC = default_codec()
 
@@ -341,3 +343,28 @@ def test_on_chassis_step_sees_the_clock_of_the_period_it_ran(block: int) -> None
         expected += [(0, t), (1, t)]
         t += fleet[0].mcu.dt
     assert sorted(seen) == sorted(expected)
+
+
+def test_a_fleet_reads_the_frames_behind_a_datagram_that_is_no_frame(
+        udp_bus_config: dict[str, Any]) -> None:
+    """A datagram on the group that is not a frame is dropped and counted; the command right
+    behind it reaches the chassis in the same period (the drain reads past it)."""
+    clock = SimClock()
+    fleet = open_fleet(load_profile(), clock, udp_bus_config, 1, bms=False)
+    chassis = fleet[0]
+    control = CODEC.message("ControlCommand")
+    enable = pack_classic(control.frame_id, control.encode({"Command": "EnableCanControl"}))
+    try:
+        run_fleet(fleet, clock, duration=0.4)  # boot
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as upper:
+            upper.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+            upper.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF,
+                             socket.inet_aton("127.0.0.1"))
+            for datagram in (b"not msgpack \xc1", enable):
+                upper.sendto(datagram, (udp_bus_config["channel"], udp_bus_config["port"]))
+        assert select.select([chassis.bus], [], [], 2.0)[0]
+        run_fleet(fleet, clock, duration=chassis.mcu.dt)  # one period
+        assert chassis.mcu.stats["control_enable_can_control"] == 1
+        assert chassis.bus.rx_malformed == 1  # type: ignore[attr-defined]
+    finally:
+        close_fleet(fleet)

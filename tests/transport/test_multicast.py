@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import select
 import socket
 from typing import Any
 
@@ -266,3 +267,61 @@ def test_held_frames_are_sent_in_order_later_and_refusals_counted(
         raw.close()
         ours.shutdown()
     assert ours.send_held(held) == 2 and held == []  # type: ignore[attr-defined]
+
+
+def _recv_frames(bus: can.BusABC, marker: int) -> list[tuple[int, bytes] | can.Message]:
+    """What ``bus.recv_frame()`` returns up to the ID ``marker`` (sent last)."""
+    got: list[tuple[int, bytes] | can.Message] = []
+    poll = select.poll()
+    poll.register(bus.fileno(), select.POLLIN)
+    while poll.poll(2000):
+        while (frame := bus.recv_frame()) is not None:  # type: ignore[attr-defined]
+            got.append(frame)
+            if isinstance(frame, tuple) and frame[0] == marker:
+                return got
+    raise AssertionError(f"marker {marker:#x} never arrived")
+
+
+def test_recv_frame_reads_what_recv_reads_without_messages(
+        udp_bus_config: dict[str, Any]) -> None:
+    """python-can's own bus sends classic, extended and FD frames, a foreign ID and a datagram
+    that is no frame: recv_frame gives the classic ones as (ID, data), the others as
+    Messages, filtered exactly as recv filters (the extended 0x10 passes the kernel, not the
+    filter), and reads past what it drops."""
+    wanted: list[can.typechecking.CanFilter] = [
+        {"can_id": 0x10, "can_mask": 0x7FF, "extended": False},
+        {"can_id": 0x200, "can_mask": 0x700}, {"can_id": 0x1ABCDEF, "can_mask": 0x1FFFFFFF}]
+    plain, lean = (open_bus(udp_bus_config, can_filters=wanted) for _ in range(2))
+    theirs = UdpMulticastBus(channel=udp_bus_config["channel"], port=udp_bus_config["port"],
+                             hop_limit=0)
+    theirs._multicast._socket.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF,
+                                         socket.inet_aton("127.0.0.1"))
+    sent = [can.Message(arbitration_id=0x10, data=b"", is_extended_id=True),
+            can.Message(arbitration_id=0x10, data=bytes(range(8)), is_extended_id=False),
+            can.Message(arbitration_id=0x300, data=b"\x01", is_extended_id=False),
+            can.Message(arbitration_id=0x1ABCDEF, data=b"\x09", is_extended_id=True),
+            can.Message(arbitration_id=0x2AB, data=bytes(range(12)), is_fd=True,
+                        is_extended_id=False),
+            can.Message(arbitration_id=0x201, data=b"\x02\x03", is_extended_id=False)]
+    try:
+        theirs._multicast._socket.sendto(b"not msgpack \xc1", (udp_bus_config["channel"],
+                                                                udp_bus_config["port"]))
+        for msg in sent:
+            theirs.send(msg)
+        by_recv = [(m.arbitration_id, bytes(m.data), m.is_extended_id, m.is_fd)
+                   for m in _settle(plain, 0x201)]
+        frames = _recv_frames(lean, 0x201)
+        assert [(f[0], f[1], False, False) if isinstance(f, tuple) else
+                (f.arbitration_id, bytes(f.data), f.is_extended_id, f.is_fd)
+                for f in frames] == by_recv
+        assert by_recv == [(0x10, bytes(range(8)), False, False),
+                           (0x1ABCDEF, b"\x09", True, False),
+                           (0x2AB, bytes(range(12)), False, True), (0x201, b"\x02\x03", False,
+                                                                    False)]
+        assert [type(f) for f in frames] == [tuple, can.Message, can.Message, tuple]
+        assert lean.rx_malformed == 1  # type: ignore[attr-defined]
+        assert lean.recv_frame() is None  # type: ignore[attr-defined]
+    finally:
+        theirs.shutdown()
+        plain.shutdown()
+        lean.shutdown()

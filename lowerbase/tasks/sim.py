@@ -24,7 +24,7 @@ from lowerbase.navigation.controller import Status as CtrlStatus
 from lowerbase.navigation.navigator import GoalState, NavCommand
 from lowerbase.navigation.sim import NavSim
 from lowerbase.protocol.status_codes import StatusBit
-from lowerbase.tasks.inputs import faults_of
+from lowerbase.tasks.inputs import FAULT_BITS, faults_of
 from lowerbase.tasks.machine import TaskMachine
 from lowerbase.tasks.model import Pose, Status, TaskRequest, TaskResponse
 from lowerbase.tasks.plan import TaskConfig
@@ -34,26 +34,45 @@ from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.places import Places, load_places
 from lowerbase.world.sim import WorldSim
 
+#: the status code's bits as ints (IntFlag arithmetic costs microseconds a tick)
+_LOW, _CRITICAL = int(StatusBit.LOW_BATTERY), int(StatusBit.CRITICAL_BATTERY)
+_FAULT_MASK = 0
+for _bit in FAULT_BITS:
+    _FAULT_MASK |= int(_bit)
+_CHARGER = int(BmsStatus.CHARGER_CONNECTED)
+_faults: dict[int, str] = {}  #: faults_of by the code's fault bits
+
 
 def chassis_from_driver(driver: DriverCore, pose: Pose | None, localized: bool = True
                         ) -> Chassis:
-    """The chassis as driver_base's core shows it (``pose``: the localization estimate)."""
-    code = driver.status_code
-    snap = driver.bms.snapshot()
+    """The chassis as driver_base's core shows it (``pose``: the localization estimate). The
+    BMS's state of charge and status word are read off its frames as ``snapshot()`` reads them
+    (``float(Soc)``, ``int(Status)``), without building the whole snapshot every tick."""
+    code = int(driver.status_code)
+    bms = driver.bms
+    soc, charging = None, False
+    if bms.complete:
+        soc = float(bms.frames["BmsPack"]["Soc"])
+        charging = bool(int(bms.frames["BmsStatus"]["Status"]) & _CHARGER)
     odom = None
     if driver.odometry is not None:
         x, y, yaw = driver.ekf.pose
         odom = (float(x), float(y), float(yaw))
+    fault_bits = code & _FAULT_MASK
+    fault = _faults.get(fault_bits)
+    if fault is None:
+        fault = _faults.setdefault(fault_bits, faults_of(fault_bits))
+    state = driver.state
     return Chassis(
-        initialized=driver.state in (LinkState.READY, LinkState.STANDBY)
-        or (driver.state == LinkState.LOST and odom is not None),
-        link_lost=driver.state == LinkState.LOST,
+        initialized=state in (LinkState.READY, LinkState.STANDBY)
+        or (state == LinkState.LOST and odom is not None),
+        link_lost=state == LinkState.LOST,
         e_stopped=driver.e_stopped,
-        fault=faults_of(code),
-        soc=snap.soc if snap is not None else None,
-        low_battery=bool(code & StatusBit.LOW_BATTERY),
-        critical_battery=bool(code & StatusBit.CRITICAL_BATTERY),
-        charging=snap is not None and bool(snap.bms_status & BmsStatus.CHARGER_CONNECTED),
+        fault=fault,
+        soc=soc,
+        low_battery=bool(code & _LOW),
+        critical_battery=bool(code & _CRITICAL),
+        charging=charging,
         localized=localized and pose is not None,
         pose=pose, odom=odom)
 

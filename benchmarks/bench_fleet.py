@@ -5,9 +5,9 @@ is an MCU with its own pack and BMS on its own udp_multicast bus (hop limit 0, p
 its upper side enables it after boot and then sends a MotionCommand every 20 ms of simulated
 time over that bus (python-can's wire format, from this process: a block's 10 commands before
 each 0.2 s slice, which the chassis reads at the slice's start, as run_fleet reads a bus).
-``runner.run_fleet`` runs the fleet on its normal path (no per-step hook: from
-``SIM_BLOCK_FLEET`` chassis up in blocks of ``SIM_BLOCK`` periods, in compiled runs where they
-apply; the 300-chassis fleet is also run period by period, block 1). CPU time per simulated
+``runner.run_fleet`` runs the fleet on its normal path (no per-step hook: in blocks of
+``SIM_BLOCK`` periods per chassis, in compiled runs where they apply; the 300-chassis fleet is
+also run period by period, block 1, where every period is a Python step). CPU time per simulated
 second gives the real-time capacity (the host is shared: wall time also counts other jobs):
 chassis per core = N / (this process' CPU seconds per simulated second, the upper sides'
 sending excluded: in use they are other processes); the wall figure and the load are noted.
@@ -131,8 +131,8 @@ def run(quick: bool = False) -> list[Row]:
     rows.append(Row("fleet", f"{n} chassis period by period: wall per simulated second",
                     wall * 1e3, "ms",
                     f"{wall * 1e3 / n:.2f} ms per chassis; CPU {cpu * 1e3:.0f} ms ({n / cpu:.0f} "
-                    f"per core); run_fleet block=1 (all chassis each period: their state "
-                    f"falls out of the CPU caches), against block={SIM_BLOCK} above"))
+                    f"per core); run_fleet block=1 (all chassis each period, each a Python "
+                    f"step), against block={SIM_BLOCK} above"))
     rows.append(Row("fleet", f"chassis per core in real time ({n}-chassis fleet)", n / cpu_n,
                     "chassis",
                     f"target >= 300; by this process' CPU time per simulated second (by wall "

@@ -45,9 +45,9 @@ log = logging.getLogger(__name__)
 #: periods a chassis of a fleet steps at a time on the simulated clock (see :func:`run_fleet`;
 #: 0.2 s at 200 Hz, under half the default command timeout)
 SIM_BLOCK = 40
-#: fleets from this size up run in blocks by default (smaller ones stay in the CPU's caches
-#: period by period; measured in benchmarks/bench_fleet.py)
-SIM_BLOCK_FLEET = 100
+#: fleets from this size up run in blocks by default: every fleet, since a block runs through
+#: ``Mcu.advance``'s compiled runs (benchmarks/bench_fleet.py: about 2x at 1, 10 and 300 chassis)
+SIM_BLOCK_FLEET = 1
 
 
 def _receive(mcu: Mcu, msg: can.Message | tuple[int, bytes], peers: PeerMonitor | None

@@ -17,12 +17,14 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
+import time
 from collections import defaultdict
 from typing import Any
 
 from benchmarks.bench_emulator import deviations, periodic_key
 from benchmarks.common import Row, percentile
-from lowerbase.bench.busload_proc import cpu_seconds
+from lowerbase.bench.busload_proc import cpu_seconds, run_queue_wait
 from lowerbase.protocol.busload import mean_frame_bits
 from lowerbase.protocol.codec import Codec, default_codec
 from lowerbase.transport import free_loopback_port
@@ -58,6 +60,51 @@ def _emulator_stats(stderr: str) -> dict[str, int]:
     return out
 
 
+class RunQueueSampler:
+    """Every ``period`` s, a process' run and run-queue wait times [ns] summed over its threads
+    (/proc/<pid>/task/*/schedstat), with the wall time (``time.time``, the clock of the kernel's
+    receive stamps): what the process did while its frames were late."""
+
+    def __init__(self, pid: int, period: float = 0.002) -> None:
+        self.pid, self.period = pid, period
+        self.samples: list[tuple[float, int, int]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.period):
+            run = wait = 0
+            try:
+                for task in os.listdir(f"/proc/{self.pid}/task"):
+                    with open(f"/proc/{self.pid}/task/{task}/schedstat", encoding="ascii") as f:
+                        r, w, _ = f.read().split()
+                    run, wait = run + int(r), wait + int(w)
+            except (OSError, ValueError):  # the process (or a thread) is gone
+                continue
+            self.samples.append((time.time(), run, wait))
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def between(self, t0: float, t1: float) -> tuple[float, float, float]:
+        return usage_between(self.samples, t0, t1)
+
+
+def usage_between(samples: list[tuple[float, int, int]], t0: float, t1: float
+                  ) -> tuple[float, float, float]:
+    """(run, run-queue wait, span) [s] between the last of ``samples`` (time, run ns, wait ns;
+    in time order) at or before ``t0`` and the first at or after ``t1``; NaNs if the samples do
+    not cover both."""
+    before = [s for s in samples if s[0] <= t0]
+    after = [s for s in samples if s[0] >= t1]
+    if not before or not after:
+        return (float("nan"),) * 3
+    a, b = before[-1], after[0]
+    return (b[1] - a[1]) / 1e9, (b[2] - a[2]) / 1e9, b[0] - a[0]
+
+
 def _stop(proc: subprocess.Popen[str]) -> tuple[str, str]:
     if proc.poll() is None:
         proc.send_signal(signal.SIGTERM)
@@ -91,8 +138,16 @@ def trial(seconds: float, foreign_rate: float, catalog_filter: bool = True) -> d
             procs.append(drv)
             _line(drv, "measuring")
             cpu0 = {p.pid: cpu_seconds(p.pid) for p in (emu, gen) if p is not None}
+            wait0 = run_queue_wait(emu.pid)
+            sampler = RunQueueSampler(emu.pid)
+            drv_sampler = RunQueueSampler(drv.pid)
             driver = json.loads(_line(drv, "{"))
             cpu = {pid: cpu_seconds(pid) - c for pid, c in cpu0.items()}
+            wait_emu = run_queue_wait(emu.pid) - wait0
+            sampler.stop()
+            drv_sampler.stop()
+            in_gap = sampler.between(*driver["odom_max_gap_rx"])
+            drv_in_gap = drv_sampler.between(*driver["odom_max_gap_wall"])
             drv.wait(timeout=15)
             foreign = json.loads(_stop(gen)[0]) if gen is not None else None
             emu_stats = _emulator_stats(_stop(emu)[1])
@@ -104,7 +159,8 @@ def trial(seconds: float, foreign_rate: float, catalog_filter: bool = True) -> d
                     p.kill()
                     p.wait()
     return {"driver": driver, "frames": frames, "emulator": emu_stats, "foreign": foreign,
-            "cpu_emulator": cpu[emu.pid] / seconds,
+            "cpu_emulator": cpu[emu.pid] / seconds, "wait_emulator": wait_emu,
+            "emulator_in_gap": in_gap, "driver_in_gap": drv_in_gap, "load": os.getloadavg()[0],
             "cpu_foreign": cpu[gen.pid] / seconds if gen is not None else float("nan")}
 
 
@@ -142,6 +198,22 @@ def jitter(codec: Codec, frames: list[list[Any]]) -> dict[str, tuple[float, list
     return {key: (cycle, dev) for key, cycle, dev in deviations(codec, stamps)}
 
 
+def _gap_note(r: dict[str, Any]) -> str:
+    """The longest /odom gap, where it came from: the wheel frames' arrival (the emulator's send
+    times; what the emulator process did meanwhile), the driver's handling (what it did
+    between the two updates) and both processes' run-queue waits."""
+    d = r["driver"]
+    rx0, rx1 = d["odom_max_gap_rx"]
+    run, wait, _ = r["emulator_in_gap"]
+    drun, dwait, _ = r["driver_in_gap"]
+    return (f"{d['odom_max_gap'] * 1e3:.1f} ms at {d['odom_max_gap_at']:.1f} s (its frames arrived "
+            f"{(rx1 - rx0) * 1e3:.1f} ms apart, the emulator meanwhile ran {run * 1e3:.1f} / "
+            f"waited runnable {wait * 1e3:.1f} ms; the driver between the two "
+            f"updates ran {drun * 1e3:.1f} / waited {dwait * 1e3:.1f} ms; run-queue wait over "
+            f"the run: emulator {r['wait_emulator']:.1f} s, driver {d['run_queue_wait']:.1f} s; "
+            f"load {r['load']:.1f})")
+
+
 def _summary(r: dict[str, Any], codec: Codec) -> dict[str, Any]:
     d, e = r["driver"], r["emulator"]
     upper_rx = (e.get("rx_frames", 0) - e.get("rx_unknown_id", 0) - e.get("rx_not_classic", 0)
@@ -150,6 +222,7 @@ def _summary(r: dict[str, Any], codec: Codec) -> dict[str, Any]:
     return {"lost_up": by_counter, "lost_up_count": by_count, "received": received,
             "lost_down": d["sent"] - upper_rx, "sent_down": d["sent"],
             "odom_hz": d["odom"] / d["seconds"], "odom_gap": d["odom_max_gap"] * 1e3,
+            "gap_note": _gap_note(r),
             "cpu_emu": r["cpu_emulator"] * 100, "cpu_drv": d["cpu"] / d["seconds"] * 100,
             "cpu_gen": r["cpu_foreign"] * 100, "foreign_seen": d["foreign"],
             "own_rate": (len(r["frames"]) + d["sent_in_window"]) / d["seconds"],
@@ -184,8 +257,8 @@ def run(quick: bool = False) -> list[Row]:
             f"target 0; idle {idle['lost_down']}; driver sent {full['sent_down']}, counted "
             "against the emulator's rx counters"),
         Row(g, "driver /odom rate, full bus", full["odom_hz"], "Hz",
-            f"idle {idle['odom_hz']:.1f} Hz; longest gap full {full['odom_gap']:.1f} ms, "
-            f"idle {idle['odom_gap']:.1f} ms"),
+            f"idle {idle['odom_hz']:.1f} Hz; longest gap full {full['gap_note']}, idle "
+            f"{idle['gap_note']}"),
         Row(g, "CPU, emulator process, full bus", full["cpu_emu"], "% of a core",
             f"idle {idle['cpu_emu']:.1f} % (/proc/<pid>/stat utime+stime over the run)"),
         Row(g, "CPU, driver core process, full bus", full["cpu_drv"], "% of a core",

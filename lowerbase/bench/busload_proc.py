@@ -7,7 +7,10 @@ on the bus, listening as the ROS node's :class:`~lowerbase.driver.links.BusLink`
 ``measuring`` and for ``S`` seconds records every frame from the lower computer (kernel receive
 time, ID, data) into FILE as JSON; then it prints one JSON line of stats: what it sent since it
 started (for a count comparison with the lower computer's ``rx_frames``), odometry updates
-(the ROS node publishes /odom on each), its CPU time over the window (``/proc/self/stat``).
+(the ROS node publishes /odom on each) and their longest gap (when in the window, and the
+kernel receive times of the two wheel frames behind it: a gap already there when the frames
+arrived was the sender's; and the wall times they were handled at), its CPU time and
+run-queue wait over the window (``/proc/self``).
 
 ``python -m lowerbase.bench.busload_proc foreign --port P --rate R --duration S``: another
 device filling the bus: ``R`` classic 8-byte frames a second, paced, on IDs the catalog does
@@ -19,7 +22,6 @@ seconds). Both bind and send on loopback only (hop limit 0).
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import os
 import random
@@ -27,9 +29,11 @@ import signal
 import sys
 import threading
 import time
-from typing import Any
+from typing import Any, TypeVar
 
 from lowerbase.transport import DEFAULT_CHANNEL, open_bus
+
+T = TypeVar("T")
 
 DT = 0.005  #: [s] the driver core's tick (as the demo's BusHarness)
 TWIST = (0.4, 0.3)  #: [m/s, rad/s] driven for the whole run
@@ -42,6 +46,12 @@ def cpu_seconds(pid: int | str = "self") -> float:
     with open(f"/proc/{pid}/stat", encoding="ascii") as f:
         fields = f.read().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def run_queue_wait(pid: int | str = "self") -> float:
+    """Time a process' threads waited runnable on a run queue [s] (/proc/<pid>/schedstat)."""
+    with open(f"/proc/{pid}/schedstat", encoding="ascii") as f:
+        return int(f.read().split()[1]) / 1e9
 
 
 def bus_config(port: int, channel: str = DEFAULT_CHANNEL) -> dict[str, Any]:
@@ -72,15 +82,22 @@ def run_driver(port: int, duration: float, frames_path: str, *, channel: str = D
     clock = RealClock()
     core = DriverCore(send, clock)
     odom: list[float] = []
-    core.listeners.append(lambda what, _core: odom.append(clock.now())
-                          if what == "odometry" else None)
+    rx_stamp = [0.0]  # kernel receive time of the frame being handled
+    odom_rx: list[tuple[float, float]] = []  # (the frame's receive time, handled), wall clock
+
+    def on_event(what: str, _core: Any) -> None:
+        if what == "odometry":
+            odom.append(clock.now())
+            odom_rx.append((rx_stamp[0], time.time()))
+
+    core.listeners.append(on_event)
     lower = {m.frame_id for m in core.codec if "Lower" in m.senders}
     frames: list[tuple[float, int, str]] = []
     foreign = 0
     recording = False
     start = clock.now()
     window: tuple[float, float] | None = None
-    cpu0, sent0 = 0.0, 0
+    cpu0, sent0, wait0 = 0.0, 0, 0.0
     deadline = next_twist = start
     try:
         while True:
@@ -89,7 +106,9 @@ def run_driver(port: int, duration: float, frames_path: str, *, channel: str = D
                 if core.state == LinkState.READY and odom:
                     window = (now, now + duration)
                     recording, cpu0, sent0 = True, cpu_seconds(), sent[0]
+                    wait0 = run_queue_wait()
                     odom.clear()
+                    odom_rx.clear()
                     print("measuring", flush=True)
                 elif now - start > READY_TIMEOUT:
                     raise SystemExit(f"the driver core did not get ready ({core.state.value})")
@@ -109,22 +128,38 @@ def run_driver(port: int, duration: float, frames_path: str, *, channel: str = D
                     continue
                 if recording and msg.arbitration_id in lower:
                     frames.append((msg.timestamp, msg.arbitration_id, bytes(msg.data).hex()))
+                rx_stamp[0] = msg.timestamp
                 core.on_frame(msg.arbitration_id, bytes(msg.data))
             if clock.now() - deadline > 1.0:
                 deadline = clock.now()
             core.tick()
         cpu = cpu_seconds() - cpu0
+        wait = run_queue_wait() - wait0
     finally:
         bus.shutdown()
     with open(frames_path, "w", encoding="utf-8") as f:
         json.dump(frames, f)
     assert window is not None
+    gap, at, rx = longest_gap(odom, odom_rx)
     return {"sent": sent[0], "sent_in_window": sent[0] - sent0, "seconds": duration,
-            "cpu": cpu, "odom": len(odom),
-            "odom_max_gap": max((b - a for a, b in itertools.pairwise(odom)),
-                                default=float("nan")),
+            "cpu": cpu, "run_queue_wait": wait, "odom": len(odom), "odom_max_gap": gap,
+            "odom_max_gap_at": at - window[0], "odom_max_gap_rx": [rx[0][0], rx[1][0]],
+            "odom_max_gap_wall": [rx[0][1], rx[1][1]],
             "foreign": foreign, "frames": len(frames), "malformed": core.stats["malformed"],
             "state": core.state.value}
+
+
+def longest_gap(times: list[float], stamps: list[T]) -> tuple[float, float, tuple[T, T]]:
+    """(the longest gap between consecutive ``times``, the time it starts at, the ``stamps`` of
+    its two ends); NaNs for fewer than two times. ``stamps[i]`` goes with ``times[i]`` (here:
+    the kernel receive time of the frame that made update ``i``)."""
+    nan: Any = float("nan")
+    best: tuple[float, float, tuple[T, T]] = (nan, nan, (nan, nan))
+    for i in range(1, len(times)):
+        gap = times[i] - times[i - 1]
+        if not gap <= best[0]:  # also replaces the NaN start
+            best = (gap, times[i - 1], (stamps[i - 1], stamps[i]))
+    return best
 
 
 def foreign_ids(codec: Any) -> tuple[list[int], list[int]]:

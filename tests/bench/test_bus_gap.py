@@ -1,0 +1,51 @@
+"""The full-bus benchmark's attribution of the longest /odom gap (benchmarks/bench_bus.py,
+lowerbase.bench.busload_proc): which updates bound it, when their frames arrived, and what the
+sending process did (ran, waited on the run queue) in between."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import os
+
+from benchmarks.bench_bus import RunQueueSampler, usage_between
+from lowerbase.bench.busload_proc import longest_gap, run_queue_wait
+
+
+def test_the_longest_gap_names_its_updates_and_their_frames_arrival() -> None:
+    times = [10.00, 10.02, 10.04, 10.12, 10.14, 10.22]
+    stamps = [500.0, 500.1, 500.2, 500.3, 500.4, 500.5]
+    gap, start, rx = longest_gap(times, stamps)
+    assert math.isclose(gap, 0.08) and start == 10.04  # the first of the two 80 ms gaps
+    assert rx == (500.2, 500.3)
+
+
+def test_no_gap_from_fewer_than_two_updates() -> None:
+    for times in ([], [1.0]):
+        gap, start, rx = longest_gap(times, times)
+        assert math.isnan(gap) and math.isnan(start) and all(math.isnan(t) for t in rx)
+
+
+def test_usage_between_the_samples_around_the_gap() -> None:
+    samples = [(1.0, 100, 1_000), (2.0, 300, 5_000), (3.0, 600, 9_000), (4.0, 700, 30_000)]
+    # the last sample at or before 2.5 (t=2) to the first at or after 3.5 (t=4)
+    assert usage_between(samples, 2.5, 3.5) == (400e-9, 25_000e-9, 2.0)
+    assert usage_between(samples, 2.0, 3.0) == (300e-9, 4_000e-9, 1.0)  # exact hits count
+    for t0, t1 in ((0.5, 2.0), (2.0, 4.5)):  # not covered
+        assert all(math.isnan(v) for v in usage_between(samples, t0, t1))
+
+
+def test_the_sampler_reads_a_live_process_schedstat() -> None:
+    sampler = RunQueueSampler(os.getpid(), period=0.001)
+    try:
+        for _ in range(1_000_000):  # wait for samples without a sleep
+            if len(sampler.samples) >= 3:
+                break
+            sum(range(1_000))
+    finally:
+        sampler.stop()
+    assert len(sampler.samples) >= 3
+    times = [s[0] for s in sampler.samples]
+    assert times == sorted(times)
+    assert all(b[1] >= a[1] and b[2] >= a[2] for a, b in itertools.pairwise(sampler.samples))
+    assert run_queue_wait() >= 0.0

@@ -5,13 +5,14 @@ core with their send time, the driver ticks, and its frames reach the MCU. What 
 would publish (/odom_raw, /odom, /battery, ...) is read off ``loop.driver``; the ground truth
 off ``loop.mcu.truth``. Scenarios, the demo and the odometry benchmark run on this.
 
-``run`` and ``drive`` without an ``on_step`` (and :meth:`SimLoop.advance`) run the MCU ahead in
-one ``Mcu.advance(k)`` up to the next period whose driver tick may do anything (its
-MotionCommand grid, a stale twist's stop, a silent link): the frames reach the driver as the
-MCU sends them, each at its period's time, then the last period's tick runs at that period's
-time, so the frames, /odom and the commands are those of ``k`` single steps, bit for bit. Only
-while nothing else can make the driver send: the link READY, no listener, no tap, no fault in
-the MCU, nothing but MotionCommands pending for it.
+``run`` and ``drive`` without an ``on_step`` (and :meth:`SimLoop.advance`) run up to
+``MAX_BATCH`` periods at once: the driver's ticks first, each at its period's time (what they
+send, MotionCommands, depends on the twist and the command grid alone, not on the frames they
+would have seen), their sends handed to one ``Mcu.advance(k, incoming)`` (a repeated command
+stays inside its compiled run), the MCU's frames to the driver as they are sent, each at its
+period's time: the frames, /odom and the commands of ``k`` single steps, bit for bit. Only
+while nothing else can make the driver send: the link READY and not silent for any of the
+ticks, no listener, no tap, no fault in the MCU, nothing but MotionCommands pending for it.
 
 ``surroundings`` (a :class:`~lowerbase.firmware_model.truth.Surroundings`, e.g. the world's
 footprint contact) is what the robot can bump into; None (the default): open floor.
@@ -19,6 +20,7 @@ footprint contact) is what the robot can bump into; None (the default): open flo
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
@@ -31,8 +33,8 @@ from lowerbase.firmware_model.truth import Surroundings
 
 FrameTap = Callable[[float, str, int, bytes], None]
 
-#: at most this many periods per Mcu.advance call (the frames of a batch wait in a list)
-MAX_BATCH = 64
+#: at most this many periods per Mcu.advance call
+MAX_BATCH = 256
 
 
 class _DriverClock:
@@ -170,6 +172,9 @@ class SimLoop(SteppedLoop):
         #: in a batch: the driver's on_frame (frames go straight to it), the last period's time
         self._direct: Callable[[int, bytes, float], None] | None = None
         self._last_of_batch = 0.0
+        #: while the driver's ticks of a batch run ahead: their sends, (period, id, data)
+        self._ahead: list[tuple[int, int, bytes]] | None = None
+        self._ahead_period = 0
         self.control_dt = self.mcu.dt
         self.twist_driver = self.driver
         self.mcu.truth.surroundings = surroundings
@@ -194,6 +199,9 @@ class SimLoop(SteppedLoop):
             self.tap(now, "lower", frame_id, data)
 
     def _from_driver(self, frame_id: int, data: bytes) -> None:
+        if self._ahead is not None:  # a tick run ahead: the MCU takes it before that period
+            self._ahead.append((self._ahead_period, frame_id, data))
+            return
         self._to_mcu.append((frame_id, data))
         if self._direct is not None and self.clock.now() < self._last_of_batch:
             self.batch_stats["mistimed"] += 1  # in a batch, before its last period
@@ -245,34 +253,44 @@ class SimLoop(SteppedLoop):
         for frame_id, _ in self._to_mcu:
             if frame_id != self._motion_id:
                 return 1
-        return driver.idle_ticks(self.clock.now(), mcu.dt, min(periods, MAX_BATCH) - 1) + 1
+        return driver.quiet_ticks(self.clock.now(), mcu.dt, min(periods, MAX_BATCH))
 
     def _batch(self, k: int) -> None:
-        """``k`` periods: the MCU in one advance, its frames handed to the driver as they are
-        sent (each at its period's time, on the loop's clock), then the last period's tick
-        at that period's time (the ticks before it do nothing: :meth:`DriverCore.idle_ticks`).
-        A send by the driver before the last period (never expected: a frame made it
-        configure, or send itself) is counted in ``batch_stats["mistimed"]`` and ends
-        batching."""
-        mcu, clock, driver = self.mcu, self.clock, self.driver
-        for frame_id, data in self._to_mcu:
-            mcu.receive(frame_id, data)
+        """``k`` periods: the driver's ``k`` ticks first, each at its period's time, their
+        sends (MotionCommands: they read only the twist, the command grid and the link's
+        Heartbeat time, which no frame of a READY link's batch moves the wrong way) kept as
+        the MCU's ``incoming`` before the next period (the last tick's after the batch); then
+        the MCU in one advance, its frames handed to the driver as they are sent, each at its
+        period's time. A frame that would have changed what a tick sends (a reboot: the link
+        configuring, an enable wanted) or a send while a frame is handled is counted in
+        ``batch_stats["mistimed"]`` and ends batching (never expected: see _batchable)."""
+        mcu, clock, driver, pin = self.mcu, self.clock, self.driver, self._driver_clock
+        incoming = [(0, frame_id, data) for frame_id, data in self._to_mcu]
         self._to_mcu.clear()
-        last = clock.now()
-        for _ in range(k - 1):
-            last += mcu.dt  # as the clock advances
-        self._last_of_batch = last
+        ahead: list[tuple[int, int, bytes]] = []
+        self._ahead = ahead
+        now = clock.now()
+        try:
+            for j in range(1, k + 1):
+                pin.pinned = now  # as the clock advances
+                self._ahead_period = j
+                driver.tick()
+                now += mcu.dt
+        finally:
+            self._ahead = None
+            pin.pinned = None
+        for sent in ahead:
+            if sent[0] < k:
+                incoming.append(sent)
+            else:
+                self._to_mcu.append(sent[1:])
+        self._last_of_batch = math.inf  # any send from now on is out of its place
         self._direct = driver.on_frame
         try:
-            mcu.advance(k)
+            mcu.advance(k, incoming)
         finally:
             self._direct = None
-        if driver.state is LinkState.CONFIGURING or driver._enable_wanted:
-            self.batch_stats["mistimed"] += 1  # its requests would go out before the tick
-        self._driver_clock.pinned = last
-        try:
-            driver.tick()
-        finally:
-            self._driver_clock.pinned = None
+        if driver.state not in (LinkState.READY, LinkState.STANDBY) or driver._enable_wanted:
+            self.batch_stats["mistimed"] += 1  # its ticks would have sent something else
         self.batch_stats["periods"] += k
         self.batch_stats["batches"] += 1

@@ -599,30 +599,18 @@ class DriverCore:
             self._twist = None
             self.stats["twist_stale"] += 1
 
-    def idle_ticks(self, start: float, dt: float, limit: int) -> int:
-        """How many of the ticks at ``start``, ``start + dt``, ... (the times of a SimClock
-        advanced by ``dt``) do nothing at all, at most ``limit``, as far as the state now
-        tells (no frame handled in between; ``heard_until`` None): none unless READY and not
-        enabling; else up to the first that finds the link silent, or a MotionCommand slot or
-        a stale twist's stop due. SimLoop runs the MCU ahead to there."""
+    def quiet_ticks(self, start: float, dt: float, limit: int) -> int:
+        """How many of the ticks at ``start``, ``start + dt``, ... (a SimClock's times) find
+        the link up, as far as the state now tells (Heartbeats only move the link's last one
+        later), at most ``limit``: 0 unless READY and not enabling. Their sends depend on the
+        twist and the command grid alone, so SimLoop runs them ahead of the MCU's frames."""
         if self.state is not LinkState.READY or self._enable_wanted:
             return 0
-        # the comparisons tick() makes, on the same floats
         heartbeat, link_timeout = self._last_heartbeat, self.config.link_timeout
-        twist = self._twist is not None
-        slot = self._next_command - 0.5 * (1.0 / self.config.command_rate)
-        stamp, timeout, stale_sent = self._twist_stamp, self.config.command_timeout, \
-            self._stale_sent
         now = start
         for k in range(limit):
             if now - heartbeat > link_timeout:
                 return k
-            if twist:
-                if now - stamp < timeout:  # fresh
-                    if now >= slot:
-                        return k
-                elif not stale_sent:
-                    return k
             now += dt
         return limit
 

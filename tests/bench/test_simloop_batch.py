@@ -29,6 +29,7 @@ def _recording(loop: SimLoop) -> tuple[list[tuple[float, Frame]], list[Frame], l
     to_mcu: list[Frame] = []
     sent: list[Frame] = []
     on_frame, receive, send = loop.driver.on_frame, loop.mcu.receive, loop.driver._send
+    advance = loop.mcu.advance
 
     def driver_gets(frame_id: int, data: bytes, stamp: float | None = None) -> None:
         assert stamp is not None
@@ -43,8 +44,24 @@ def _recording(loop: SimLoop) -> tuple[list[tuple[float, Frame]], list[Frame], l
         sent.append((loop.driver.clock.now(), frame_id, bytes(data)))
         send(frame_id, data)
 
+    def mcu_advances(periods: int, incoming: Any = ()) -> None:
+        """Mcu.advance: the frames it is handed are taken before their periods (a compiled
+        run takes a repeated MotionCommand without ``receive``): recorded at those times."""
+        t = loop.clock.now()
+        times = []
+        for _ in range(periods):
+            times.append(t)
+            t += loop.mcu.dt  # as the clock advances
+        to_mcu.extend((times[k], frame_id, bytes(data)) for k, frame_id, data in incoming)
+        loop.mcu.receive = receive  # type: ignore[method-assign]
+        try:
+            advance(periods, incoming)
+        finally:
+            loop.mcu.receive = mcu_gets  # type: ignore[method-assign]
+
     loop.driver.on_frame = driver_gets  # type: ignore[method-assign]
     loop.mcu.receive = mcu_gets  # type: ignore[method-assign]
+    loop.mcu.advance = mcu_advances  # type: ignore[method-assign]
     loop.driver._send = driver_sends
     return to_driver, to_mcu, sent
 
@@ -145,6 +162,28 @@ def test_a_send_inside_a_batch_is_counted_and_ends_batching() -> None:
     loop.driver.on_frame = sends_once  # type: ignore[method-assign]
     loop.drive(0.5, 0.0, 0.2)
     assert sent and loop.batch_stats["mistimed"] == 1
+    periods = loop.batch_stats["periods"]
+    loop.drive(0.5, 0.0, 0.5)
+    assert loop.batch_stats["periods"] == periods
+
+
+def test_a_frame_that_changes_the_ticks_inside_a_batch_is_counted() -> None:
+    """The ticks of a batch run before its frames are handled: a frame that would have made
+    them send something else (here: an enable wanted, as after a reboot) is counted, and the
+    loop steps from then on."""
+    loop = SimLoop()
+    loop.run(1.0)
+    loop.drive(0.5, 0.0, 0.2)
+    assert loop.batch_stats["mistimed"] == 0 and loop.batch_stats["periods"] > 0
+    on_frame = loop.driver.on_frame
+
+    def wants_enable(frame_id: int, data: bytes, stamp: float | None = None) -> None:
+        on_frame(frame_id, data, stamp)
+        loop.driver._enable_wanted = True
+
+    loop.driver.on_frame = wants_enable  # type: ignore[method-assign]
+    loop.drive(0.5, 0.0, 0.2)
+    assert loop.batch_stats["mistimed"] == 1
     periods = loop.batch_stats["periods"]
     loop.drive(0.5, 0.0, 0.5)
     assert loop.batch_stats["periods"] == periods

@@ -68,6 +68,18 @@ def _receive(mcu: Mcu, msg: can.Message | tuple[int, bytes], peers: PeerMonitor 
     mcu.receive(frame_id, data)
 
 
+def _drain(mcu: Mcu, bus: can.BusABC, peers: PeerMonitor | None) -> None:
+    """Hand ``mcu`` every frame waiting on ``bus``, without waiting: on udp_multicast through
+    ``recv_frame`` (no ``can.Message``; it reads past datagrams it drops), else ``recv(0)``."""
+    read = getattr(bus, "recv_frame", None)
+    if read is None:
+        while (msg := bus.recv(0.0)) is not None:
+            _receive(mcu, msg, peers)
+        return
+    while (frame := read()) is not None:
+        _receive(mcu, frame, peers)
+
+
 def run(
     mcu: Mcu, bus: can.BusABC, clock: Clock, *, duration: float | None = None,
     stop: threading.Event | None = None, on_step: Callable[[Mcu], None] | None = None,
@@ -87,8 +99,7 @@ def run(
             break
         deadline += mcu.dt
         if isinstance(clock, SimClock):
-            while (msg := bus.recv(0.0)) is not None:
-                _receive(mcu, msg, peers)
+            _drain(mcu, bus, peers)
             mcu.step()
             clock.advance(mcu.dt)
         else:
@@ -199,13 +210,7 @@ def run_fleet(
             polled.append(chassis)
 
     def drain(chassis: Chassis) -> None:
-        read = getattr(chassis.bus, "recv_frame", None)  # udp_multicast: no can.Message
-        if read is None:
-            while (msg := chassis.bus.recv(0.0)) is not None:
-                _receive(chassis.mcu, msg, chassis.peers)
-            return
-        while (frame := read()) is not None:
-            _receive(chassis.mcu, frame, chassis.peers)
+        _drain(chassis.mcu, chassis.bus, chassis.peers)
 
     def receive(timeout: float) -> None:
         for key, _ in selector.select(timeout):

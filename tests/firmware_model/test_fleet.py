@@ -368,3 +368,29 @@ def test_a_fleet_reads_the_frames_behind_a_datagram_that_is_no_frame(
         assert chassis.bus.rx_malformed == 1  # type: ignore[attr-defined]
     finally:
         close_fleet(fleet)
+
+
+def test_one_chassis_on_the_simulated_clock_reads_past_a_datagram_that_is_no_frame(
+        udp_bus_config: dict[str, Any]) -> None:
+    """runner.run (``lowerbase emulate --simulated``): as the fleet, the command behind a
+    datagram that is not a frame is read in the same period."""
+    clock = SimClock()
+    bus = open_bus(udp_bus_config)
+    mcu = Mcu(load_profile(), clock, bus_sender(bus))
+    control = CODEC.message("ControlCommand")
+    enable = pack_classic(control.frame_id, control.encode({"Command": "EnableCanControl"}))
+    try:
+        run(mcu, bus, clock, duration=0.4)  # boot
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as upper:
+            upper.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+            upper.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF,
+                             socket.inet_aton("127.0.0.1"))
+            for datagram in (b"not msgpack \xc1", enable):
+                upper.sendto(datagram, (udp_bus_config["channel"], udp_bus_config["port"]))
+        assert select.select([bus], [], [], 2.0)[0]
+        run(mcu, bus, clock, duration=mcu.dt)  # one period
+        assert mcu.stats["control_enable_can_control"] == 1
+        assert bus.rx_malformed == 1  # type: ignore[attr-defined]
+    finally:
+        mcu.shutdown()
+        bus.shutdown()

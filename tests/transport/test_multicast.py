@@ -325,3 +325,24 @@ def test_recv_frame_reads_what_recv_reads_without_messages(
         theirs.shutdown()
         plain.shutdown()
         lean.shutdown()
+
+
+def test_recv_frame_filters_classic_frames_in_user_space_too(
+        udp_bus_config: dict[str, Any]) -> None:
+    """More filters than the kernel program takes: the IDs are filtered in user space only;
+    recv_frame drops what the filters refuse, and takes new filters at once."""
+    many: list[can.typechecking.CanFilter] = [
+        {"can_id": i, "can_mask": 0x7FF} for i in range(0x100, 0x13C)]  # 60 > 48
+    lean = open_bus(udp_bus_config, can_filters=many)
+    sender = open_bus(udp_bus_config)
+    try:
+        sender.send_frame(0x10, b"\x01")  # type: ignore[attr-defined]
+        sender.send_frame(0x101, b"\x02")  # type: ignore[attr-defined]
+        assert _recv_frames(lean, 0x101) == [(0x101, b"\x02")]
+        lean.set_filters(None)
+        sender.send_frame(0x10, b"\x03")  # type: ignore[attr-defined]
+        sender.send_frame(0x101, b"\x04")  # type: ignore[attr-defined]
+        assert _recv_frames(lean, 0x101) == [(0x10, b"\x03"), (0x101, b"\x04")]
+    finally:
+        sender.shutdown()
+        lean.shutdown()

@@ -3,7 +3,8 @@
 ``python -m lowerbase.bench.busload_proc driver --port P --duration S --frames FILE``: the
 driver core (:class:`~lowerbase.driver.core.DriverCore`) in real time against a lower computer
 on the bus, listening as the ROS node's :class:`~lowerbase.driver.links.BusLink` does
-(``--no-filter``: to everything). It drives a twist, waits until the link is ``ready``, prints
+(``--no-filter``: to everything), each frame stamped at its kernel receive time as the
+node stamps it. It drives a twist, waits until the link is ``ready``, prints
 ``measuring`` and for ``S`` seconds records every frame from the lower computer (kernel receive
 time, ID, data) into FILE as JSON; then it prints one JSON line of stats: what it sent since it
 started (for a count comparison with the lower computer's ``rx_frames``), odometry updates
@@ -129,7 +130,8 @@ def run_driver(port: int, duration: float, frames_path: str, *, channel: str = D
                 if recording and msg.arbitration_id in lower:
                     frames.append((msg.timestamp, msg.arbitration_id, bytes(msg.data).hex()))
                 rx_stamp[0] = msg.timestamp
-                core.on_frame(msg.arbitration_id, bytes(msg.data))
+                handle_frame(core, msg, time.time())
+            core.heard_until = clock.now()  # listened until now and found the socket empty
             if clock.now() - deadline > 1.0:
                 deadline = clock.now()
             core.tick()
@@ -147,6 +149,17 @@ def run_driver(port: int, duration: float, frames_path: str, *, channel: str = D
             "odom_max_gap_wall": [rx[0][1], rx[1][1]],
             "foreign": foreign, "frames": len(frames), "malformed": core.stats["malformed"],
             "state": core.state.value}
+
+
+def handle_frame(core: Any, msg: Any, wall_now: float) -> None:
+    """Hand ``msg`` to the driver core as the ROS node does: stamped at its kernel receive time
+    (:func:`~lowerbase.driver.links.receive_age` at ``wall_now``), so that a backlog handled at
+    once after the process waited is judged on the frames' spacing, not the burst's."""
+    from lowerbase.driver.links import receive_age
+
+    stamp = core.clock.now() - receive_age(msg, wall_now)
+    core.heard_until = stamp
+    core.on_frame(msg.arbitration_id, bytes(msg.data), stamp)
 
 
 def longest_gap(times: list[float], stamps: list[T]) -> tuple[float, float, tuple[T, T]]:

@@ -8,8 +8,37 @@ import itertools
 import math
 import os
 
+import can
+import pytest
+
 from benchmarks.bench_bus import RunQueueSampler, usage_between
-from lowerbase.bench.busload_proc import longest_gap, run_queue_wait
+from lowerbase.bench.busload_proc import handle_frame, longest_gap, run_queue_wait
+from lowerbase.driver.core import LinkState
+from tests.driver.test_receive_stamps import StallingLoop
+
+WALL0 = 1.7e9  #: [s] the wall clock (kernel receive stamps) at the simulated clock's zero
+
+
+class BenchReaderLoop(StallingLoop):
+    """StallingLoop whose reader is the bench driver's: each queued frame a can.Message with
+    its kernel receive stamp, handed over by busload_proc.handle_frame; then heard up to now."""
+
+    def step(self) -> None:
+        for frame_id, data in self._to_mcu:
+            self.mcu.receive(frame_id, data)
+        self._to_mcu.clear()
+        self.mcu.step()
+        self.backlog += self._to_driver
+        self._to_driver = []
+        if self.clock.now() % 1.0 >= self.stall:
+            for stamp, frame_id, data in self.backlog:
+                msg = can.Message(arbitration_id=frame_id, data=data, is_extended_id=False,
+                                  timestamp=WALL0 + stamp)
+                handle_frame(self.driver, msg, WALL0 + self.clock.now())
+            self.backlog.clear()
+            self.driver.heard_until = self.clock.now()
+        self.driver.tick()
+        self.clock.advance(self.mcu.dt)
 
 
 def test_the_longest_gap_names_its_updates_and_their_frames_arrival() -> None:
@@ -49,3 +78,19 @@ def test_the_sampler_reads_a_live_process_schedstat() -> None:
     assert times == sorted(times)
     assert all(b[1] >= a[1] and b[2] >= a[2] for a, b in itertools.pairwise(sampler.samples))
     assert run_queue_wait() >= 0.0
+
+
+def test_the_bench_driver_stamps_a_backlog_as_the_node_does() -> None:
+    """The bench's driver core, starved 0.3 s every second (a loaded host), keeps every wheel
+    count as the node does (tests/driver/test_receive_stamps.py): no re-baseline, /odom_raw's
+    distance the emulator's. Handed over unstamped (before), each stall re-baselined."""
+    loop = BenchReaderLoop(stamped=True, stall=0.3)
+    assert loop.run_until(lambda lp: lp.driver.state == LinkState.READY, timeout=5.0)
+    odo = loop.driver.odometry
+    assert odo is not None
+    x0, true0 = odo.x, loop.mcu.truth.x
+    before = loop.driver.stats["odometry_rebaselined"]
+    loop.drive(0.5, 0.0, 6.0)
+    loop.run(1.0)
+    assert loop.driver.stats["odometry_rebaselined"] == before
+    assert odo.x - x0 == pytest.approx(loop.mcu.truth.x - true0, abs=0.02)

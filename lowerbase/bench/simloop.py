@@ -239,6 +239,28 @@ class SimLoop(SteppedLoop):
                 self._batch(k)
                 periods -= k
 
+    def drive(self, linear: float, angular: float, seconds: float, smoothed: bool = False,
+              on_step: Callable[[SimLoop], None] | None = None) -> None:
+        """:meth:`SteppedLoop.drive`; without ``on_step`` the twists every 50 ms are set
+        inside the batches too (before their periods, as the ticks run ahead): one batch spans
+        many of them."""
+        if on_step is not None or self.twist_driver is not self.driver:
+            super().drive(linear, angular, seconds, smoothed, on_step)
+            return
+        every = max(1, round(0.05 / self.control_dt))
+        periods = round(seconds / self.control_dt)
+        done = 0
+        while done < periods:
+            k = self._batchable(periods - done)
+            if k <= 1:
+                if done % every == 0:
+                    self.driver.set_twist(linear, angular, smoothed)
+                self.step()
+                done += 1
+            else:
+                self._batch(k, (done, every, linear, angular, smoothed))
+                done += k
+
     def _batchable(self, periods: int) -> int:
         """How many periods from now may run as one batch: up to and including the first
         whose driver tick may do anything; 1 when anything but the tick could make the driver
@@ -255,15 +277,18 @@ class SimLoop(SteppedLoop):
                 return 1
         return driver.quiet_ticks(self.clock.now(), mcu.dt, min(periods, MAX_BATCH))
 
-    def _batch(self, k: int) -> None:
+    def _batch(self, k: int,
+               twists: tuple[int, int, float, float, bool] | None = None) -> None:
         """``k`` periods: the driver's ``k`` ticks first, each at its period's time, their
         sends (MotionCommands: they read only the twist, the command grid and the link's
         Heartbeat time, which no frame of a READY link's batch moves the wrong way) kept as
         the MCU's ``incoming`` before the next period (the last tick's after the batch); then
         the MCU in one advance, its frames handed to the driver as they are sent, each at its
-        period's time. A frame that would have changed what a tick sends (a reboot: the link
-        configuring, an enable wanted) or a send while a frame is handled is counted in
-        ``batch_stats["mistimed"]`` and ends batching (never expected: see _batchable)."""
+        period's time. ``twists`` (first period's index, every, linear, angular, smoothed): a
+        twist set before each period whose index is a multiple of ``every``. A frame that
+        would have changed what a tick sends (a reboot: the link configuring, an enable
+        wanted) or a send while a frame is handled is counted in ``batch_stats["mistimed"]``
+        and ends batching (never expected: see _batchable)."""
         mcu, clock, driver, pin = self.mcu, self.clock, self.driver, self._driver_clock
         incoming = [(0, frame_id, data) for frame_id, data in self._to_mcu]
         self._to_mcu.clear()
@@ -273,6 +298,9 @@ class SimLoop(SteppedLoop):
         try:
             for j in range(1, k + 1):
                 pin.pinned = now  # as the clock advances
+                if twists is not None and (twists[0] + j - 1) % twists[1] == 0:
+                    self._ahead_period = j - 1
+                    driver.set_twist(*twists[2:])
                 self._ahead_period = j
                 driver.tick()
                 now += mcu.dt

@@ -6,6 +6,9 @@ reboot), enables CAN control, integrates wheel odometry (/odom_raw) and runs the
 keeps the IMU, battery, BMS, parameter, version and status state, and turns twists and LED
 requests into frames. The ROS node, the benches and the demo all drive this one class; time
 comes from the injected clock.
+Its parts: the definitions (core_defs: LinkState, DriverConfig, re-exported here), the link's
+life cycle (core_link: Heartbeats, reboots, parameters, enabling), wheel and gyro input
+(core_odom), the status frames (core_status); this module dispatches frames, sends and ticks.
 
 Reboots are decided from consistent evidence: the Heartbeat's Uptime runs with the receiver's
 clock; a Heartbeat whose Uptime is well *behind* that timeline (it went backwards, or is
@@ -31,82 +34,41 @@ jitter.
 
 from __future__ import annotations
 
-import enum
 import logging
 import math
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 from lowerbase.bms.frames import BmsFrameAccumulator
 from lowerbase.clock import Clock
-from lowerbase.driver.ekf import EkfNoise, PlanarEkf
-from lowerbase.driver.odometry import OdometryNoise, OdometryParameters, WheelOdometry
-from lowerbase.errors import LowerbaseError, ProtocolError, UnknownMessageError
+from lowerbase.driver.core_defs import (
+    _ESTOP_BITS,
+    HOLD_COMMANDS,
+    ODOMETRY_PARAMETERS,
+    RELEASE_GRACE,
+    UPTIME_SLACK,
+    VERSION_FIELDS,
+    DriverConfig,
+    LinkState,
+    Listener,
+    Send,
+)
+from lowerbase.driver.core_link import LinkLifecycle
+from lowerbase.driver.core_status import StatusInput
+from lowerbase.driver.ekf import PlanarEkf
+from lowerbase.driver.odometry import WheelOdometry
+from lowerbase.errors import ProtocolError, UnknownMessageError
 from lowerbase.protocol.codec import Codec, default_codec
-from lowerbase.protocol.status_codes import StatusBit
 from lowerbase.transport.peers import PeerMonitor
+
+__all__ = ["HOLD_COMMANDS", "ODOMETRY_PARAMETERS", "RELEASE_GRACE", "UPTIME_SLACK",
+           "VERSION_FIELDS", "DriverConfig", "DriverCore", "LinkState", "Listener", "Send"]
 
 log = logging.getLogger(__name__)
 
-_IMU_FAULT = int(StatusBit.IMU_FAULT)
 
-#: the woosh_msgs/Parameter fields the odometry needs before it can run
-ODOMETRY_PARAMETERS = ("wheelPerimeter", "wheelDistant", "ratioLeft", "ratioRight",
-                       "pulsePerCircle")
-VERSION_FIELDS = {1: "hardwareVersion", 2: "softwareVersion", 3: "IAPSoftwareVersion",
-                  4: "movebaseType"}
-
-
-class LinkState(enum.Enum):
-    WAITING = "waiting"  #: nothing heard from the lower computer yet
-    CONFIGURING = "configuring"  #: reading parameters
-    STANDBY = "standby"  #: configured, but the chassis ignores commands (not in CAN control)
-    READY = "ready"  #: parameters read, odometry running, the chassis in CAN control
-    LOST = "lost"  #: no Heartbeat within link_timeout
-
-
-@dataclass(frozen=True)
-class DriverConfig:
-    """Tuning of the driver core (the ROS node sets these from ROS parameters)."""
-
-    command_rate: float = 50.0  #: [Hz] MotionCommand rate while the last twist is fresh
-    command_timeout: float = 0.5  #: [s] a twist older than this is stale: stop sending
-    link_timeout: float = 1.5  #: [s] no Heartbeat this long: the link is lost
-    request_retry: float = 0.5  #: [s] parameter/version requests repeated this often
-    auto_enable: bool = True  #: enable CAN control once configured (and after a reboot)
-    malformed_log_period: float = 5.0  #: [s] malformed frames are logged at most this often
-    #: wheel samples further apart than this many WheelFeedback cycles are a gap: the counts
-    #: after it are a new baseline, not motion (a missed reboot, a stalled reader). Below it,
-    #: the 4-bit rolling Counter must agree with the time elapsed (frames lost, not a reboot)
-    wheel_gap_cycles: float = 12.0
-    odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
-    ekf_noise: EkfNoise = field(default_factory=EkfNoise)
-    gyro_sigma: float | None = None  #: [rad/s] per-sample gyro noise for the EKF (None: ekf's)
-
-    def __post_init__(self) -> None:
-        for name in ("command_rate", "command_timeout", "link_timeout", "request_retry",
-                     "wheel_gap_cycles"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise LowerbaseError(f"driver {name} must be > 0, got {value!r}")
-
-
-#: [s] how far a Heartbeat's Uptime may stray from the receiver's clock (plus 2 % of the gap)
-UPTIME_SLACK = 0.5
-_ESTOP_OR_FAULT = (3, 4, "EmergencyStop", "Fault")  # SystemStatus RobotState
-_ESTOP_BITS = int(StatusBit.ESTOP_BUTTON | StatusBit.ESTOP_COMMAND)
-#: commands that put the chassis on hold on purpose: no automatic enable until EnableCanControl
-HOLD_COMMANDS = ("EStopSet", "Standby")
-#: [s] after an EStopRelease is sent the chassis counts as released (its status follows)
-RELEASE_GRACE = 0.3
-
-Send = Callable[[int, bytes], None]
-Listener = Callable[[str, "DriverCore"], None]
-
-
-class DriverCore:
+class DriverCore(LinkLifecycle, StatusInput):
     """See the module docstring. Feed ``on_frame``; call ``tick`` at least at command_rate."""
 
     def __init__(
@@ -298,266 +260,6 @@ class DriverCore:
             self._last_malformed_log = now
             self._malformed_since_log = 0
 
-    def _on_Heartbeat(self, v: dict[str, Any], now: float) -> None:
-        self._last_heartbeat = now
-        boot, uptime = int(v["BootCounter"]), float(v["Uptime"])
-        if self.boot_counter is None or self._uptime is None:
-            self.boot_counter, self._uptime = boot, (uptime, now)
-            self._enable_wanted = self.config.auto_enable
-            self._configure("first contact")
-            return
-        if _continues(self._uptime, uptime, now, self.uptime_slack):
-            self._uptime = (uptime, now)
-            if self._reboot_suspect is not None:
-                self._reboot_suspect = None
-                self.stats["heartbeat_inconsistent"] += 1
-            if boot != self.boot_counter:
-                self.stats["heartbeat_inconsistent"] += 1
-                log.warning("a Heartbeat with BootCounter %d (not %d) but the Uptime still "
-                            "counting: not a reboot, ignored (garbled or forged?)", boot,
-                            self.boot_counter)
-            return
-        suspect = self._reboot_suspect
-        if suspect is not None and _continues(suspect[:2], uptime, now, self.uptime_slack) \
-                and boot == suspect[2]:
-            behind = uptime < self._uptime[0] + (now - self._uptime[1])
-            self._reboot_suspect = None
-            self.boot_counter, self._uptime = boot, (uptime, now)
-            if behind:
-                self.reboots += 1
-                log.warning("the lower computer rebooted (boot #%d, up %.1f s): reading "
-                            "parameters again%s", boot, uptime, "; kept in standby (the "
-                            "operator's hold: call ~enable)" if self.operator_hold else "")
-                self._enable_wanted = self.config.auto_enable and not self.operator_hold
-                self._configure("reboot")
-            else:  # ahead of the old timeline: not a reboot; follow the new one
-                self.stats["heartbeat_timeline_jump"] += 1
-                log.warning("the lower computer's Uptime jumped ahead to %.1f s", uptime)
-            return
-        self._reboot_suspect = (uptime, now, boot)
-        self.stats["heartbeat_off_timeline"] += 1
-        self._hold_odometry(0.0)  # counters may restart: the next sample is a baseline
-
-    def allow_receive_lag(self, seconds: float) -> None:
-        """Take Heartbeats handled up to ``seconds`` late on this core's clock for the same
-        lower computer (not a reboot, a jump or a second one). For ROS sim time: at K x real
-        time a backlog of frames 1/K as long puts their Uptime that far behind /clock."""
-        self.uptime_slack = max(UPTIME_SLACK, seconds)
-        self.peers.tolerance = max(self.peers.tolerance, seconds)
-
-    def _configure(self, why: str) -> None:
-        self.state = LinkState.CONFIGURING
-        self._configured_ok = False
-        self.parameters = {}
-        self.versions = {}
-        self._version_parts = {}
-        self._wheels = {}
-        if self.odometry is not None:
-            self.odometry.reset_baseline()  # counters restart at 0 after a reboot
-        self._last_request = -math.inf
-        self._notify("configuring")
-        log.info("configuring (%s)", why)
-
-    def _on_ParameterResponse(self, v: dict[str, Any], now: float) -> None:
-        name = self._param_names.get(int(v["Index"]))
-        if name is None:
-            return
-        if int(v["Result"]) != 0:
-            self.stats["parameter_nack"] += 1
-            log.warning("parameter %s: nack %d", name, int(v["Result"]))
-        self.parameters[name] = float(v["Value"])
-        if self.state == LinkState.CONFIGURING and set(self._param_names.values()) <= set(
-            self.parameters
-        ):
-            self._configured()
-        elif self.state == LinkState.READY:
-            self._apply_parameters()
-        self._notify("parameters")
-
-    def _wheel_gap(self, counter: int, now: float) -> str | None:
-        """Why this wheel sample must not be integrated against the last one (None: it may)."""
-        if self._odom_gap or self.state == LinkState.LOST:
-            return "link lost or reboot suspected"
-        if self._last_wheel is None:
-            return None
-        dt = now - self._last_wheel[0]
-        cycles = dt / self._wheel_period
-        if cycles > self.config.wheel_gap_cycles:
-            return f"no wheel sample for {dt:.2f} s"
-        if (counter - self._last_wheel[1]) % 16 > cycles + 2.0:
-            # more cycles than the time allows; fewer is a late sender (it catches up next)
-            return "WheelFeedback Counter discontinuity"
-        return None
-
-    def _wheel_stamp(self, counter: int, now: float) -> float:
-        """[s] when this wheel sample was taken, on the sender's time base: the last one's time
-        plus the Counter's cycles, when that disagrees with the receive time ``now`` by more than
-        half a cycle (a sender that ran late and now catches up sends its cycles in a burst),
-        never after ``now``; back on ``now`` when it falls behind by more than the gap limit (a
-        sender whose clock runs slow). Velocities and the EKF then see the cycles' true spacing,
-        not the burst's."""
-        if self._last_wheel is None or not math.isfinite(self._wheel_time):
-            return now
-        period = self._wheel_period
-        stamp = self._wheel_time + (counter - self._last_wheel[1]) % 16 * period
-        if abs(stamp - now) <= 0.5 * period or stamp > now:
-            return now
-        if now - stamp > self.config.wheel_gap_cycles * period:
-            self.stats["wheel_time_reanchored"] += 1
-            return now
-        self.stats["wheel_late_samples"] += 1
-        return stamp
-
-    def _watchdog_time(self) -> float:
-        """[s] how long the base may go on moving unseen: its watchdog, then braking."""
-        v = abs(self.ekf.twist[0])
-        decel = max(self.parameters.get("linearDecelLimit", 1.0), 0.1)
-        return self.parameters.get("commandTimeout", 0.5) + v / (2.0 * decel)
-
-    def _hold_odometry(self, unknown_time: float) -> None:
-        """Stop integrating: hold both poses, zero the velocities, re-baseline the next
-        sample. The base may move ``unknown_time`` [s] unseen: the EKF's pose variance says so."""
-        self._odom_gap = True
-        if self.odometry is not None:
-            self.odometry.hold()
-        v, w = self.ekf.twist
-        self.ekf.hold(abs(v) * unknown_time, abs(w) * unknown_time)
-
-    def _configured(self) -> None:
-        self._apply_parameters()
-        self._configured_ok = True
-        log.info("lower computer configured: %s", ", ".join(
-            f"{k}={self.parameters[k]:g}" for k in ODOMETRY_PARAMETERS))
-        if self._enable_wanted:
-            self._enable()
-        self._notify("ready")  # configured (the link state says whether commands are taken)
-        self._settle()
-
-    def _enable(self) -> None:
-        self._last_enable = self.clock.now()
-        self.control("EnableCanControl")
-
-    def _apply_parameters(self) -> None:
-        params = OdometryParameters.from_lower_computer(self.parameters)
-        # a count jump faster than the drive train can turn is a counter reset, not motion
-        top_rpm = self.parameters.get("maxRPM", 3000.0)
-        ratio = min(params.ratio_left, params.ratio_right)
-        max_wheel_speed = 1.5 * top_rpm / 60.0 / ratio * params.wheel_perimeter
-        if self.odometry is None:
-            self.odometry = WheelOdometry(params, self.config.odometry_noise,
-                                          max_wheel_speed=max_wheel_speed)
-        else:
-            self.odometry.max_wheel_speed = max_wheel_speed
-            if self.odometry.params != params:
-                self.odometry.params = params
-                self.odometry.reset_baseline()
-
-    def _on_VersionResponse(self, v: dict[str, Any], now: float) -> None:
-        field_no = int(v["Field"])
-        parts = self._version_parts.setdefault(field_no, {})
-        parts[int(v["Sequence"])] = int(v["Text"]).to_bytes(6, "little")
-        if int(v["Last"]) and len(parts) == int(v["Sequence"]) + 1:
-            text = b"".join(parts[i] for i in range(len(parts))).rstrip(b"\0")
-            self.versions[VERSION_FIELDS[field_no]] = text.decode("ascii", "replace")
-            self._version_parts.pop(field_no, None)
-            self._notify("information")
-
-    def _on_WheelFeedback(self, v: dict[str, Any], now: float) -> None:
-        wheel = int(v["Wheel"])  # the multiplexer: LeftCount or RightCount
-        self._wheels[wheel] = (int(v["Counter"]), int(v["RightCount" if wheel else "LeftCount"]))
-        left, right = self._wheels.get(0), self._wheels.get(1)
-        if left is None or right is None or left[0] != right[0] or self.odometry is None:
-            return  # wait for both wheels of the same cycle
-        self._wheels = {}
-        odo = self.odometry
-        gap = self._wheel_gap(left[0], now)
-        stamp = now if gap is not None else self._wheel_stamp(left[0], now)
-        self._last_wheel, self._wheel_time = (now, left[0]), stamp
-        if gap is not None:
-            # counts after a gap may come from restarted counters: a new baseline, no motion
-            self.stats["odometry_rebaselined"] += 1
-            log.info("wheel odometry re-baselined: %s", gap)
-            if not self._odom_gap:  # else held already, when the gap began
-                self._hold_odometry(0.0)
-            odo.hold()
-            odo.update(left[1], right[1], stamp)
-            self._odom_gap = self.state == LinkState.LOST
-            return
-        if not odo.update(left[1], right[1], stamp):
-            return
-        # The EKF weighs the wheels with its own model of their errors (EkfNoise.wheel_*):
-        # radius and track errors and slip, which /odom_raw's quantisation-based twist
-        # covariance does not contain; with that one the wheels would outvote the gyro.
-        self.ekf.update_wheels(odo.linear, odo.angular, stamp=stamp)
-        self._notify("odometry")
-
-    def _on_ImuGyro(self, v: dict[str, Any], now: float) -> None:
-        gyro = (float(v["X"]), float(v["Y"]), float(v["Z"]))
-        accel = self.imu[1] if self.imu is not None else (0.0, 0.0, 0.0)
-        self.imu = (gyro, accel)
-        self.imu_stamp = now
-        if self.odometry is not None and not self.status_code & _IMU_FAULT and \
-                not self._odom_gap:
-            # the gyro is the EKF's yaw-rate reference; once the lower computer flags the
-            # IMU as faulty (frozen output) the EKF runs on the wheels alone. The samples
-            # are queued and fused as one with the next wheel update (one EKF step per cycle)
-            self.ekf.add_gyro(gyro[2], now, sigma=self.config.gyro_sigma)
-
-    def _on_ImuAccel(self, v: dict[str, Any], now: float) -> None:
-        gyro = self.imu[0] if self.imu is not None else (0.0, 0.0, 0.0)
-        self.imu = (gyro, (float(v["X"]), float(v["Y"]), float(v["Z"])))
-        self.imu_stamp = now
-        self._notify("imu")
-
-    def _on_MotionState(self, v: dict[str, Any], now: float) -> None:
-        self.measured_twist = (float(v["Linear"]), float(v["Angular"]))
-        self._notify("twist")
-
-    def _on_Odometer(self, v: dict[str, Any], now: float) -> None:
-        self.odometer = float(v["Distance"])
-        self._notify("odometer")
-
-    def _on_StatusCode(self, v: dict[str, Any], now: float) -> None:
-        self.status_code = int(v["Code"])
-        if self.status_code & _IMU_FAULT:
-            self.ekf.discard_gyro()  # queued samples of a gyro now known to be frozen
-        self._notify("status_code")
-
-    def _on_SystemStatus(self, v: dict[str, Any], now: float) -> None:
-        previous = self.system_status.get("RobotState")
-        self.system_status = v
-        self._control_can = v["ControlMode"] in (1, "Can")
-        # enabled: done; e-stopped or faulted: standby after that is the operator's decision
-        if self._control_can or v["RobotState"] in _ESTOP_OR_FAULT:
-            self._enable_wanted = False
-        if previous is not None and previous != v["RobotState"]:
-            self._notify("system_status")
-        if self.state not in (LinkState.LOST, LinkState.WAITING):  # a Heartbeat comes first
-            self._settle()
-
-    def _on_LedState(self, v: dict[str, Any], now: float) -> None:
-        self.leds[(int(v["Strip"]), int(v["Submodule"]))] = {
-            k: int(v[k]) for k in ("Urgency", "Abnormal", "Normal", "Color")}
-
-    def _bms(self, name: str, v: dict[str, Any], now: float) -> None:
-        if self.bms.update(name, v):
-            self._notify("battery")
-
-    def _on_BmsPack(self, v: dict[str, Any], now: float) -> None:
-        self._bms("BmsPack", v, now)
-
-    def _on_BmsCell(self, v: dict[str, Any], now: float) -> None:
-        self._bms("BmsCell", v, now)
-
-    def _on_BmsCapacity(self, v: dict[str, Any], now: float) -> None:
-        self._bms("BmsCapacity", v, now)
-
-    def _on_BmsStatus(self, v: dict[str, Any], now: float) -> None:
-        self._bms("BmsStatus", v, now)
-
-    def _on_BmsLife(self, v: dict[str, Any], now: float) -> None:
-        self._bms("BmsLife", v, now)
-
     # -- periodic work -----------------------------------------------------------------------
 
     def tick(self) -> None:
@@ -663,12 +365,3 @@ class DriverCore:
         """woosh_msgs/Information fields (without header)."""
         return {**{name: self.versions.get(name, "") for name in VERSION_FIELDS.values()},
                 "parameter": dict(self.parameters)}
-
-
-def _continues(last: tuple[float, float], uptime: float, now: float,
-               slack: float = UPTIME_SLACK) -> bool:
-    """Whether a Heartbeat's ``uptime`` received at ``now`` continues the timeline ``last``:
-    never backwards (a frame handled late is still in order; a restart starts again near 0),
-    and within ``slack`` (+ 2 % of the gap) of what the receiver's clock expects."""
-    expected = last[0] + (now - last[1])
-    return uptime > last[0] and abs(uptime - expected) <= slack + 0.02 * (now - last[1])

@@ -8,9 +8,10 @@
 * Cost: DriverCore.on_frame per frame (and as x real time on the recorded frames), the
   EKF per wheel and gyro update and per wheel cycle as the driver runs it [us].
 * SimLoop: the emulated MCU and the driver core on the simulated clock (the scenario path),
-  x real time by CPU time, and the driver's share of it in ms per simulated second. The MCU
-  runs in batches up to the driver's next send (one Mcu.advance each, bit for bit the
-  period-by-period run: tests/bench/test_simloop_batch.py).
+  x real time by CPU time, and the driver's share of it in ms per simulated second. The
+  driver's ticks and twists run ahead of the MCU's frames, the MCU in batches of up to 256
+  periods (one Mcu.advance each with the driver's commands, bit for bit the period-by-period
+  run: tests/bench/test_simloop_batch.py).
 * Latency: a Twist published on /base_cmd_vel -> the MotionCommand on the bus, through a real
   rosmaster and the real node (``lowerbase driver`` in a process of its own, udp_multicast on
   loopback), p50/p99. Without ROS it falls back to DriverCore.set_twist -> send, and says so.

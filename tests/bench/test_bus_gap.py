@@ -24,12 +24,7 @@ class BenchReaderLoop(StallingLoop):
     its kernel receive stamp, handed over by busload_proc.handle_frame; then heard up to now."""
 
     def step(self) -> None:
-        for frame_id, data in self._to_mcu:
-            self.mcu.receive(frame_id, data)
-        self._to_mcu.clear()
-        self.mcu.step()
-        self.backlog += self._to_driver
-        self._to_driver = []
+        self.queue_frames()
         if self.clock.now() % 1.0 >= self.stall:
             for stamp, frame_id, data in self.backlog:
                 msg = can.Message(arbitration_id=frame_id, data=data, is_extended_id=False,

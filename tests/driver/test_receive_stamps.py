@@ -36,13 +36,17 @@ class StallingLoop(SimLoop):
         self.heard = heard
         self.backlog: list[tuple[float, int, bytes]] = []
 
-    def step(self) -> None:
+    def queue_frames(self) -> None:
+        """One period of the lower computer; its frames join the reader's backlog."""
         for frame_id, data in self._to_mcu:
             self.mcu.receive(frame_id, data)
         self._to_mcu.clear()
         self.mcu.step()
         self.backlog += self._to_driver
         self._to_driver = []
+
+    def step(self) -> None:
+        self.queue_frames()
         every = max(EVERY, 2 * self.stall)
         if self.clock.now() % every >= self.stall:  # the reader runs: the backlog, in order
             for stamp, frame_id, data in self.backlog:

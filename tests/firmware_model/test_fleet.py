@@ -185,6 +185,14 @@ def test_emulate_fleet_command(udp_bus_config: dict[str, Any]) -> None:
         "drop --truth"]
 
 
+def _drained(bus: can.BusABC, timeout: float) -> list[tuple[int, bytes]]:
+    """(id, data) of every frame ``bus`` has, until none arrives within ``timeout`` [s]."""
+    frames = []
+    while (msg := bus.recv(timeout)) is not None:
+        frames.append((msg.arbitration_id, bytes(msg.data)))
+    return frames
+
+
 def _blocked_run(block: int, duration: float, channel: str
                  ) -> tuple[list[list[tuple[int, bytes]]], list[tuple[float, float, float]],
                             list[int], float]:
@@ -198,12 +206,7 @@ def _blocked_run(block: int, duration: float, channel: str
     try:
         run_fleet(fleet, clock, duration=duration, block=block,
                   on_chassis_step=lambda k, _: drives[k]())
-        heard = []
-        for bus in uppers:
-            frames = []
-            while (msg := bus.recv(0.0)) is not None:
-                frames.append((msg.arbitration_id, bytes(msg.data)))
-            heard.append(frames)
+        heard = [_drained(bus, 0.0) for bus in uppers]
         poses = [(c.mcu.truth.x, c.mcu.truth.y, c.mcu.truth.yaw) for c in fleet]
         rx = [c.mcu.stats["rx_frames"] for c in fleet]
     finally:
@@ -300,12 +303,7 @@ def _udp_fleet_frames(config: dict[str, Any], block: int) -> tuple[list[list[tup
 
     try:
         run_fleet(fleet, clock, duration=1.03, block=block, on_chassis_step=drive)
-        heard = []
-        for bus in uppers:
-            frames = []
-            while (msg := bus.recv(0.2)) is not None:
-                frames.append((msg.arbitration_id, bytes(msg.data)))
-            heard.append(frames)
+        heard = [_drained(bus, 0.2) for bus in uppers]
         return heard, [c.mcu.stats["tx_frames"] - c.mcu.stats["tx_errors"] for c in fleet]
     finally:
         close_fleet(fleet)
@@ -345,6 +343,17 @@ def test_on_chassis_step_sees_the_clock_of_the_period_it_ran(block: int) -> None
     assert sorted(seen) == sorted(expected)
 
 
+def _send_garbage_then_enable(config: dict[str, Any]) -> None:
+    """An upper computer on the group: a datagram that is no frame, then EnableCanControl."""
+    control = CODEC.message("ControlCommand")
+    enable = pack_classic(control.frame_id, control.encode({"Command": "EnableCanControl"}))
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as upper:
+        upper.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+        upper.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+        for datagram in (b"not msgpack \xc1", enable):
+            upper.sendto(datagram, (config["channel"], config["port"]))
+
+
 def test_a_fleet_reads_the_frames_behind_a_datagram_that_is_no_frame(
         udp_bus_config: dict[str, Any]) -> None:
     """A datagram on the group that is not a frame is dropped and counted; the command right
@@ -352,16 +361,9 @@ def test_a_fleet_reads_the_frames_behind_a_datagram_that_is_no_frame(
     clock = SimClock()
     fleet = open_fleet(load_profile(), clock, udp_bus_config, 1, bms=False)
     chassis = fleet[0]
-    control = CODEC.message("ControlCommand")
-    enable = pack_classic(control.frame_id, control.encode({"Command": "EnableCanControl"}))
     try:
         run_fleet(fleet, clock, duration=0.4)  # boot
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as upper:
-            upper.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
-            upper.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF,
-                             socket.inet_aton("127.0.0.1"))
-            for datagram in (b"not msgpack \xc1", enable):
-                upper.sendto(datagram, (udp_bus_config["channel"], udp_bus_config["port"]))
+        _send_garbage_then_enable(udp_bus_config)
         assert select.select([chassis.bus], [], [], 2.0)[0]
         run_fleet(fleet, clock, duration=chassis.mcu.dt)  # one period
         assert chassis.mcu.stats["control_enable_can_control"] == 1
@@ -377,16 +379,9 @@ def test_one_chassis_on_the_simulated_clock_reads_past_a_datagram_that_is_no_fra
     clock = SimClock()
     bus = open_bus(udp_bus_config)
     mcu = Mcu(load_profile(), clock, bus_sender(bus))
-    control = CODEC.message("ControlCommand")
-    enable = pack_classic(control.frame_id, control.encode({"Command": "EnableCanControl"}))
     try:
         run(mcu, bus, clock, duration=0.4)  # boot
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as upper:
-            upper.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
-            upper.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF,
-                             socket.inet_aton("127.0.0.1"))
-            for datagram in (b"not msgpack \xc1", enable):
-                upper.sendto(datagram, (udp_bus_config["channel"], udp_bus_config["port"]))
+        _send_garbage_then_enable(udp_bus_config)
         assert select.select([bus], [], [], 2.0)[0]
         run(mcu, bus, clock, duration=mcu.dt)  # one period
         assert mcu.stats["control_enable_can_control"] == 1

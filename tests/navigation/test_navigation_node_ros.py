@@ -17,9 +17,9 @@ from scipy.ndimage import distance_transform_edt
 
 from lowerbase.world.footprint import DEFAULT_POINTS
 from lowerbase.world.maps import load_map
-from tests.conftest import Proc, bus_cli_args, free_udp_port
 from tests.driver.conftest import require_ros, ros_master, woosh_msgs_build  # noqa: F401
 from tests.navigation.ros_client import NavClient
+from tests.ros_chain import nav_chain, write_crate
 
 START = (5.0, 4.0, 0.0)  # empty_room's place "start"
 BOX = (5.0, 6.0)  # a crate the map does not know, 2 m left of the robot
@@ -35,40 +35,12 @@ def chain(ros_master: Any, tmp_path_factory: pytest.TempPathFactory  # noqa: F81
           ) -> Iterator[dict[str, Any]]:
     require_ros(("rospy", "actionlib", "tf2_ros", "nav_msgs.srv", "std_srvs.srv"))
     tmp = tmp_path_factory.mktemp("navigation_node")
-    obstacles = tmp / "crate.toml"
-    obstacles.write_text('[[obstacles]]\nkind = "box"\nname = "crate"\n'
-                         f"center = [{BOX[0]}, {BOX[1]}]\nsize = [0.4, 0.4]\n")
-    bus = bus_cli_args({"interface": "udp_multicast", "channel": "239.74.163.98",
-                        "port": free_udp_port(), "hop_limit": 0})
-    truth_port = free_udp_port()
-    env = ros_master.env
-    room = ["--map", "empty_room", "--obstacles", str(obstacles)]
-    procs: list[Proc] = []
-    client: NavClient | None = None
-    try:
-        world = Proc(["world", *room, "--truth-udp", str(truth_port), "--ground-truth",
-                      "--no-camera"], env)
-        procs.append(world)
-        world.wait_for("on ROS master", timeout=30.0)
-        procs.append(Proc(["emulate", *bus, *room, "--truth-udp", f"127.0.0.1:{truth_port}"],
-                          env))
-        driver = Proc(["driver", *bus], env)
-        procs.append(driver)
-        driver.wait_for("ROS master", timeout=30.0)
-        nav = Proc(["navigation", "--map", "empty_room", "--no-camera"], env)
-        procs.append(nav)
-        nav.wait_for("ready", timeout=60.0)
-        client = NavClient(tmp, env)
-        for topic, kind in ((GLOBAL, "nav_msgs/OccupancyGrid"), (LOCAL, "nav_msgs/OccupancyGrid"),
-                            ("/amcl_pose", "geometry_msgs/PoseWithCovarianceStamped"),
-                            ("/odom", "nav_msgs/Odometry")):
-            client.ask(op="sub", topic=topic, type=kind)
-        yield {"client": client, "nav": nav}
-    finally:
-        if client is not None:
-            client.close()
-        for p in reversed(procs):
-            p.stop()
+    room = ["--map", "empty_room", "--obstacles", str(write_crate(tmp / "crate.toml", BOX))]
+    topics = ((GLOBAL, "nav_msgs/OccupancyGrid"), (LOCAL, "nav_msgs/OccupancyGrid"),
+              ("/amcl_pose", "geometry_msgs/PoseWithCovarianceStamped"),
+              ("/odom", "nav_msgs/Odometry"))
+    with nav_chain(ros_master.env, tmp, room, "239.74.163.98", topics) as (chain, client):
+        yield {"client": client, "nav": chain.procs[-1]}
 
 
 def truth(client: NavClient) -> tuple[float, float, float]:

@@ -18,9 +18,9 @@ from typing import Any
 
 import pytest
 
-from tests.conftest import Proc, bus_cli_args, free_udp_port
 from tests.driver.conftest import require_ros, ros_master, woosh_msgs_build  # noqa: F401
 from tests.navigation.ros_client import NavClient
+from tests.ros_chain import nav_chain, write_crate
 
 EXEC = "woosh_msgs/ExecTask"
 MODE = "woosh_msgs/NavigationModeAction"
@@ -39,45 +39,12 @@ def chain(ros_master: Any, tmp_path_factory: pytest.TempPathFactory  # noqa: F81
           ) -> Iterator[dict[str, Any]]:
     require_ros(("rospy", "actionlib", "tf2_ros", "nav_msgs.srv", "std_srvs.srv"))
     tmp = tmp_path_factory.mktemp("tasks_blocked")
-    crate = tmp / "crate.toml"
-    crate.write_text('[[obstacles]]\nkind = "box"\nname = "crate"\n'
-                     f"center = [{CRATE[0]}, {CRATE[1]}]\nsize = [0.4, 0.4]\n")
-    bus = bus_cli_args({"interface": "udp_multicast", "channel": "239.74.163.99",
-                        "port": free_udp_port(), "hop_limit": 0})
-    truth_port = free_udp_port()
-    env = ros_master.env
-    room = ["--map", "empty_room", "--obstacles", str(crate),
+    room = ["--map", "empty_room", "--obstacles", str(write_crate(tmp / "crate.toml", CRATE)),
             "--initial-pose", ",".join(str(v) for v in START)]
-    procs: list[Proc] = []
-    client: NavClient | None = None
-    try:
-        world = Proc(["world", *room, "--truth-udp", str(truth_port), "--ground-truth",
-                      "--no-camera"], env)
-        procs.append(world)
-        world.wait_for("on ROS master", timeout=30.0)
-        procs.append(Proc(["emulate", *bus, *room, "--truth-udp", f"127.0.0.1:{truth_port}"],
-                          env))
-        driver = Proc(["driver", *bus], env)
-        procs.append(driver)
-        driver.wait_for("ROS master", timeout=30.0)
-        nav = Proc(["navigation", "--map", "empty_room", "--no-camera"], env)
-        procs.append(nav)
-        nav.wait_for("ready", timeout=60.0)
-        tasks = Proc(["tasks", "--map", "empty_room"], env)
-        procs.append(tasks)
-        tasks.wait_for("on ROS master", timeout=30.0)
-        client = NavClient(tmp, env)
-        for topic, kind in (("/robot_status", "woosh_msgs/RobotStatus"),
-                            ("/move_base/status", "actionlib_msgs/GoalStatusArray")):
-            client.ask(op="sub", topic=topic, type=kind)
-        client.wait_last("/robot_status", lambda m: m["robot_state"] == IDLE, 60.0,
-                         "robot_state idle")
+    topics = (("/robot_status", "woosh_msgs/RobotStatus"),
+              ("/move_base/status", "actionlib_msgs/GoalStatusArray"))
+    with nav_chain(ros_master.env, tmp, room, "239.74.163.99", topics, tasks=[]) as (_, client):
         yield {"client": client}
-    finally:
-        if client is not None:
-            client.close()
-        for p in reversed(procs):
-            p.stop()
 
 
 def set_mode(client: NavClient, goal: dict[str, Any]) -> None:

@@ -20,9 +20,10 @@ import pytest
 
 from lowerbase.world.maps import load_map
 from lowerbase.world.places import load_places
-from tests.conftest import ROOT, Proc, bus_cli_args, free_udp_port
+from tests.conftest import ROOT
 from tests.driver.conftest import require_ros, ros_master, woosh_msgs_build  # noqa: F401
 from tests.navigation.ros_client import NavClient
+from tests.ros_chain import nav_chain
 
 EXEC = "woosh_msgs/ExecTask"
 MARK = "R1"
@@ -33,41 +34,12 @@ def chain(ros_master: Any, tmp_path_factory: pytest.TempPathFactory  # noqa: F81
           ) -> Iterator[dict[str, Any]]:
     require_ros(("rospy", "actionlib", "tf2_ros", "nav_msgs.srv", "std_srvs.srv"))
     tmp = tmp_path_factory.mktemp("tasks_node")
-    bus = bus_cli_args({"interface": "udp_multicast", "channel": "239.74.163.97",
-                        "port": free_udp_port(), "hop_limit": 0})
-    truth_port = free_udp_port()
     env = ros_master.env
-    room = ["--map", "empty_room"]
-    procs: list[Proc] = []
-    client: NavClient | None = None
-    try:
-        world = Proc(["world", *room, "--truth-udp", str(truth_port), "--ground-truth",
-                      "--no-camera"], env)
-        procs.append(world)
-        world.wait_for("on ROS master", timeout=30.0)
-        procs.append(Proc(["emulate", *bus, *room, "--truth-udp", f"127.0.0.1:{truth_port}"],
-                          env))
-        driver = Proc(["driver", *bus], env)
-        procs.append(driver)
-        driver.wait_for("ROS master", timeout=30.0)
-        nav = Proc(["navigation", *room, "--no-camera"], env)
-        procs.append(nav)
-        nav.wait_for("ready", timeout=60.0)
-        tasks = Proc(["tasks", *room, "--unload-time", "2"], env)
-        procs.append(tasks)
-        tasks.wait_for("on ROS master", timeout=30.0)
-        client = NavClient(tmp, env)
-        for topic, kind in (("/amcl_pose", "geometry_msgs/PoseWithCovarianceStamped"),
-                            ("/robot_status", "woosh_msgs/RobotStatus")):
-            client.ask(op="sub", topic=topic, type=kind)
-        client.wait_last("/robot_status", lambda m: m["robot_state"] == 2, 60.0,
-                         "robot_state idle")
-        yield {"client": client, "tasks": tasks, "env": env}
-    finally:
-        if client is not None:
-            client.close()
-        for p in reversed(procs):
-            p.stop()
+    topics = (("/amcl_pose", "geometry_msgs/PoseWithCovarianceStamped"),
+              ("/robot_status", "woosh_msgs/RobotStatus"))
+    with nav_chain(env, tmp, ["--map", "empty_room"], "239.74.163.97", topics,
+                   tasks=["--unload-time", "2"]) as (chain, client):
+        yield {"client": client, "tasks": chain.procs[-1], "env": env}
 
 
 def truth(client: NavClient) -> tuple[float, float, float]:

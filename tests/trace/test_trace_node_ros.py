@@ -24,8 +24,9 @@ import pytest
 
 from lowerbase.trace import messages as m
 from lowerbase.trace.modules import AVOID_STATUS, POSE, ROUTE, SPEED, STATUS, TOPICS
-from tests.conftest import ROOT, Proc, bus_cli_args, free_udp_port
+from tests.conftest import ROOT, Proc
 from tests.driver.conftest import require_ros
+from tests.ros_chain import ros_chain, write_crate
 from tests.trace.test_ros_msgs import PROTOBUF_MD5
 from tests.trace.trace_ros import trace_build, trace_master  # noqa: F401
 
@@ -99,34 +100,13 @@ def chain(trace_master: Any, tmp_path_factory: pytest.TempPathFactory  # noqa: F
     if shutil.which("rosbag") is None:
         pytest.skip("rosbag is not installed")
     tmp = tmp_path_factory.mktemp("traceros_chain")
-    crate = tmp / "crate.toml"
-    crate.write_text('[[obstacles]]\nkind = "box"\nname = "crate"\n'
-                     f"center = [{CRATE[0]}, {CRATE[1]}]\nsize = [0.4, 0.4]\n")
-    bus = bus_cli_args({"interface": "udp_multicast", "channel": "239.74.163.97",
-                        "port": free_udp_port(), "hop_limit": 0})
-    truth_port = free_udp_port()
-    env = trace_master.env
-    place = [*PLACE, "--obstacles", str(crate)]
-    procs: list[Proc] = []
-    try:
-        world = Proc(["world", *place, "--truth-udp", str(truth_port), "--ground-truth",
-                      "--no-camera"], env)
-        procs.append(world)
-        world.wait_for("on ROS master", timeout=60.0)
-        procs.append(Proc(["emulate", *bus, *place, "--truth-udp", f"127.0.0.1:{truth_port}"],
-                          env))
-        driver = Proc(["driver", *bus], env)
-        procs.append(driver)
-        driver.wait_for("ROS master", timeout=60.0)
-        trace = Proc(["trace", "--map", "warehouse", "--blocked-timeout", "3",
-                      "--status-period", "1"], env)
-        procs.append(trace)
+    place = [*PLACE, "--obstacles", str(write_crate(tmp / "crate.toml", CRATE))]
+    with ros_chain(trace_master.env, place, "239.74.163.97", timeout=60.0) as procs:
+        trace = procs.start(["trace", "--map", "warehouse", "--blocked-timeout", "3",
+                             "--status-period", "1"])
         line = trace.wait_for("lowerbase trace:", timeout=60.0)
         assert line.startswith(f"lowerbase trace: /trace_navigate on ROS master {trace_master.uri}")
         yield {"master": trace_master, "trace": trace, "tmp": tmp}
-    finally:
-        for p in reversed(procs):
-            p.stop()
 
 
 @pytest.mark.ros

@@ -54,6 +54,12 @@ class Bag:
             assert time.monotonic() < end and self.proc.poll() is None, "rosbag did not start"
             time.sleep(0.05)
 
+    def kill(self) -> None:
+        """Stop the recorder without reading (a test failed before :meth:`read`)."""
+        if self.proc.poll() is None:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait(timeout=30)
+
     def read(self) -> list[tuple[str, float, Any, str, str]]:
         """(topic, receipt time, the decoded protobuf, datatype, md5) of every message."""
         import rosbag
@@ -178,15 +184,20 @@ def test_the_empty_list_cancels_zero_speed_idle_once(chain: dict[str, Any]) -> N
 
     x0 = poses_x(1)[0]  # where the diagram left it (6.0 when this test runs alone)
     bag = Bag(chain["tmp"] / "cancel.bag", chain["master"])
-    lines = business(chain["master"], "--route", f"{x0:.3f},1.2:{x0 + 2.5:.3f},1.2",
-                     "--cancel-after", "1.5")
-    assert lines[0].startswith(f"{STATUS} RUNNING") and lines[-1].startswith(f"{STATUS} IDLE")
+    try:
+        lines = business(chain["master"], "--route", f"{x0:.3f},1.2:{x0 + 2.5:.3f},1.2",
+                         "--cancel-after", "1.5")
+        assert lines[0].startswith(f"{STATUS} RUNNING"), lines
+        assert lines[-1].startswith(f"{STATUS} IDLE"), lines
 
-    # the robot comes to rest: a second of poses (20) within a millimetre
-    end = time.monotonic() + 30.0
-    while max(xs := poses_x(20)) - min(xs) > 1e-3:
-        assert time.monotonic() < end, "the robot did not stop"
-    x = xs[-1]
+        # the robot comes to rest: a second of poses (20) within a millimetre
+        end = time.monotonic() + 30.0
+        while max(xs := poses_x(20)) - min(xs) > 1e-3:
+            assert time.monotonic() < end, "the robot did not stop"
+        x = xs[-1]
+    except BaseException:
+        bag.kill()  # no recorder left running after a failure
+        raise
     records = bag.read()
     t_cancel = next(t for topic, t, msg, _, _ in records if topic == ROUTE and not msg.lists)
     after = [(topic, msg) for topic, t, msg, _, _ in records if t >= t_cancel]

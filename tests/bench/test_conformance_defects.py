@@ -111,9 +111,13 @@ def test_defect_fails_exactly_its_checks(proxied: tuple[MutatingProxy, list[str]
                                          defect: str) -> None:
     proxy, bus = proxied
     mutations, hold, expected = DEFECTS[defect]
+    # a wrong value cannot move the watchdog's timing: only the timing defects measure it (a
+    # real-time measurement is the one check a loaded CI host can push over its limit; it
+    # still passes through the proxy in test_the_proxy_itself_changes_nothing)
+    only = ONLY if "safety.watchdog" in expected else ONLY.replace("safety.watchdog,", "")
     proxy.set(mutations, hold_commands=hold)
     try:
-        results, out = _run_suite(capsys, bus)
+        results, out = _run_suite(capsys, bus, only)
     finally:
         proxy.set()
     assert _failed(results) == expected, out

@@ -44,6 +44,7 @@ def compiled(**options: Any) -> Callable[[F], F]:
     return wrap
 
 
+@cache
 def cache_dir(module: str) -> str:
     """The directory ``module``'s kernels are cached in ("" when none is writable: numba then
     tries its own locations, next to the module or user-wide)."""

@@ -55,22 +55,33 @@ def add_subparser(subparsers: Any) -> None:
     p.add_argument("--duration", type=positive_seconds, metavar="S",
                    help="stop after S seconds of wall time (default: until Ctrl-C)")
     p.add_argument("--sim-time", action="store_true",
-                   help="simulated time, as Gazebo and Stage run: /use_sim_time true on the "
-                   "master, the world publishes /clock from the emulator, which runs --speed "
-                   "times real time; every node follows /clock (docs/robot.md)")
-    p.add_argument("--speed", type=_speed_factor, metavar="K",
-                   help=f"with --sim-time: how many times real time (default {DEFAULT_SPEED:g}; "
-                   "the status line shows what the machine achieves)")
+                   help="lockstep simulated time: every part in one process on one clock, "
+                   "/use_sim_time true and /clock from it; the same result on a busy host as "
+                   "on an idle one (docs/robot.md)")
+    p.add_argument("--speed", type=_speed_factor, metavar="K|max",
+                   help=f"with --sim-time: at most K simulated seconds per wall second "
+                   f"(default {DEFAULT_SPEED:g}; max: as fast as the host allows; the status "
+                   "line shows what it achieves)")
+    p.add_argument("--paused", action="store_true",
+                   help="with --sim-time: start paused; time moves only on /lowerbase/step "
+                   "(lowerbase_sim_msgs/Step), for reproducible tests of your nodes")
+    p.add_argument("--seed", type=int, default=0, metavar="S",
+                   help="with --sim-time: the seed of the localization's random numbers "
+                   "(default 0)")
     p.set_defaults(func=run)
 
 
-#: --sim-time's default speed: twice real time keeps up on a 2-core machine (docs/robot.md)
-DEFAULT_SPEED = 2.0
+#: --sim-time's default speed: real time, as a simulator shown to a person (CI: max)
+DEFAULT_SPEED = 1.0
+#: --speed max
+MAX_SPEED = float("inf")
 
 
 def _speed_factor(text: str) -> float:
     from lowerbase.cli.emulate import _speed_factor as emulate_speed
 
+    if text.strip().lower() == "max":
+        return MAX_SPEED
     return emulate_speed(text)
 
 
@@ -141,6 +152,36 @@ def _use_sim_time(uri: str, sim: bool) -> Any:
     return restore
 
 
+def _run_lockstep(args: argparse.Namespace, sup: Any, speed: float, parts: tuple[str, ...],
+                  line: Any, log_dir: Path, uri: str) -> int:
+    """--sim-time: the recorder child (if asked) and the lockstep robot in this process."""
+    from lowerbase.robot.lockstep import LockstepOptions
+    from lowerbase.robot.plan import RobotOptions, recorder_spec
+    from lowerbase.robot.simrun import SimRun, run_sim
+
+    if args.mcap or args.foxglove:
+        sup.start([recorder_spec(RobotOptions(map=args.map, foxglove=args.foxglove,
+                                              mcap=args.mcap))], on_ready=_on_ready)
+    opts = LockstepOptions(map=args.map, parts=parts, soc=args.soc,
+                           ground_truth=args.ground_truth, seed=args.seed, truth=args.truth)
+
+    def alive() -> str | None:
+        for child in sup.children:
+            if child.poll() is not None:
+                return f"{child.spec.name} (see {child.log_path})"
+        return None
+
+    stats = run_sim(SimRun(opts, None if speed == MAX_SPEED else speed, args.paused,
+                           args.duration), lambda text: line.show(
+                               f"lowerbase robot: {text} | master {uri}", time.monotonic()),
+                    alive)
+    line.done()
+    counts = ", ".join(f"{k} {v}" for k, v in sorted(stats.items()) if v)
+    print(f"lowerbase robot: stopped; {counts or 'nothing counted'}; logs in {log_dir}",
+          flush=True)
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from lowerbase.bench.demo import StatusLine
     from lowerbase.robot.master import master_answers, master_uri, own_master, wait_for_master
@@ -148,8 +189,11 @@ def run(args: argparse.Namespace) -> int:
     from lowerbase.robot.supervisor import Supervisor
     from lowerbase.world.maps import load_map
 
-    if args.speed is not None and not args.sim_time:
-        raise ConfigError("--speed K goes with --sim-time (real time runs at 1 x)")
+    if not args.sim_time:
+        for given, flag in ((args.speed is not None, "--speed K"), (args.paused, "--paused"),
+                            (args.seed != 0, "--seed S")):
+            if given:
+                raise ConfigError(f"{flag} goes with --sim-time (real time runs at 1 x)")
     speed = (args.speed or DEFAULT_SPEED) if args.sim_time else None
     load_map(args.map)  # a wrong map is one line now, not a part ending later
     if args.mcap is not None and Path(args.mcap).suffix.lower() != ".mcap":
@@ -173,10 +217,9 @@ def run(args: argparse.Namespace) -> int:
             wait_for_master(uri)
             print(f"lowerbase robot: started a ROS master at {uri}", flush=True)
         restore = _use_sim_time(uri, speed is not None)  # before any node starts
-        if speed is not None:
-            print(f"lowerbase robot: simulated time: /use_sim_time true, the emulator at "
-                  f"{speed:g} x real time, /clock from the world", flush=True)
         parts = tuple(p for p in UPPER if p not in args.without)
+        if speed is not None:
+            return _run_lockstep(args, sup, speed, parts, line, log_dir, uri)
         sup.start(robot_plan(RobotOptions(map=args.map, parts=parts, foxglove=args.foxglove,
                                           sim_speed=speed, truth=args.truth,
                                           mcap=args.mcap, soc=args.soc,

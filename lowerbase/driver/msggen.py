@@ -103,8 +103,15 @@ TRACE = MsgPackage(
     (),
     "lowerbase's messages: the protobuf envelope of the trace navigation module",
 )
+#: the lockstep robot's control: run its simulated clock on (docs/robot.md)
+SIM = MsgPackage(
+    "lowerbase_sim_msgs",
+    Path(__file__).resolve().parents[1] / "robot" / "msg" / "lowerbase_sim_msgs",
+    (),
+    "lowerbase robot --sim-time's control services (docs/robot.md)",
+)
 #: everything ``python -m lowerbase.driver.msggen`` generates, in this order
-PACKAGES = (WOOSH, LEGGED, TRACE)
+PACKAGES = (WOOSH, LEGGED, TRACE, SIM)
 
 _PACKAGE_XML = """<?xml version="1.0"?>
 <package format="2">

@@ -94,14 +94,23 @@ class DriverNode:
 
     def __init__(
         self, settings: NodeSettings, config: DriverConfig, link: Any,
-        clock: Clock | None = None,
+        clock: Clock | None = None, *, core: DriverCore | None = None, wire: Any = None,
+        lock: Any = None,
     ) -> None:
+        """``core``: a DriverCore that already talks to its lower computer (the lockstep
+        robot's, :mod:`lowerbase.robot.lockstep`; ``link`` and ``clock`` are then unused);
+        ``wire``: how the face reaches ROS (:mod:`lowerbase.roswire`; None: rospy as is);
+        ``lock``: shared with the other faces of this process (None: one of its own)."""
+        from lowerbase.roswire import RosWire
+
         self.rospy, self.io = import_ros()
+        self.wire = wire if wire is not None else RosWire(self.rospy)
         self.settings = settings
         self.link = link
-        self.lock = threading.RLock()
+        self.lock = lock if lock is not None else threading.RLock()
         self.stop = threading.Event()
-        self.core = DriverCore(link.send, clock or RealClock(self.stop), config)
+        self.core = core if core is not None else \
+            DriverCore(link.send, clock or RealClock(self.stop), config)
         self.core.listeners.append(self._on_event)
         self._throttles = {k: Throttle(r) for k, r in settings.rates.items()}
         self._battery_dirty = False
@@ -121,7 +130,7 @@ class DriverNode:
 
     def advertise(self) -> None:
         """Create the publishers and subscribers named in the settings (after init_node)."""
-        rospy, io = self.rospy, self.io
+        io, wire = self.io, self.wire
         specs: dict[str, tuple[Any, bool, int]] = {
             "odom_raw": (io.Odometry, False, 10), "odom": (io.Odometry, False, 10),
             "imu": (io.Imu, False, 20), "odom_twist": (io.Twist, False, 10),
@@ -133,12 +142,10 @@ class DriverNode:
         topics = self.settings.topics
         for key, (cls, latch, depth) in specs.items():
             if topics[key]:
-                self._pubs[key] = rospy.Publisher(topics[key], cls, queue_size=depth,
-                                                  latch=latch)
+                self._pubs[key] = wire.publisher(topics[key], cls, queue_size=depth,
+                                                 latch=latch)
         if self.settings.publish_tf:
-            import tf2_ros
-
-            self._tf = tf2_ros.TransformBroadcaster()
+            self._tf = wire.tf_broadcaster()
         subs: list[tuple[str, Any, Callable[[Any], None]]] = [
             ("base_cmd_vel", io.Twist, lambda m: self._on_twist(m, False)),
             ("smooth_cmd_vel", io.Twist, lambda m: self._on_twist(m, True)),
@@ -148,8 +155,8 @@ class DriverNode:
         ]
         for key, cls, callback in subs:
             if topics[key]:
-                self._subs.append(rospy.Subscriber(topics[key], cls, callback, queue_size=10))
-        self._services = services.advertise(rospy, self.core, self.lock)
+                self._subs.append(wire.subscriber(topics[key], cls, callback, queue_size=10))
+        self._services = services.advertise(wire, self.core, self.lock)
 
     # -- ROS -> core -------------------------------------------------------------------------
 
@@ -264,7 +271,7 @@ class DriverNode:
                 self._last_tf_stamp = stamp
                 self._tf.sendTransform(io.transform_from_odometry(msg))
 
-    def _publish_periodic(self) -> None:
+    def publish_periodic(self) -> None:
         """What the main loop publishes: battery/BMS, parameters/information, link state."""
         core, io = self.core, self.io
         now = core.clock.now()
@@ -307,7 +314,7 @@ class DriverNode:
         """One period of the main loop: tick the core, publish the periodic topics."""
         with self.lock:
             self.core.tick()
-            self._publish_periodic()
+            self.publish_periodic()
 
     def spin(self) -> None:
         """Run until rospy shuts down (Ctrl-C, SIGTERM, rosnode kill) or ``stop`` is set."""

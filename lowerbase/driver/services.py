@@ -56,8 +56,10 @@ def send_control(core: DriverCore, command: str) -> tuple[bool, str]:
     return True, f"{command} sent"
 
 
-def advertise(rospy: Any, core: DriverCore, lock: Any) -> list[Any]:
-    """Create the services (after ``init_node``); each call holds ``lock`` around the core."""
+def advertise(wire: Any, core: DriverCore, lock: Any) -> list[Any]:
+    """Create the services (after ``init_node``) through ``wire`` (:mod:`lowerbase.roswire`:
+    anything with ``service(name, cls, handler)``); each call holds ``lock`` around the
+    core."""
     from std_srvs.srv import (  # type: ignore[import-untyped]
         SetBool,
         SetBoolResponse,
@@ -77,7 +79,7 @@ def advertise(rospy: Any, core: DriverCore, lock: Any) -> list[Any]:
             ok, text = send_control(core, ESTOP[1] if request.data else ESTOP[2])
         return SetBoolResponse(success=ok, message=text)
 
-    services = [rospy.Service(f"~{name}", Trigger, trigger(command))
+    services = [wire.service(f"~{name}", Trigger, trigger(command))
                 for name, command in TRIGGERS.items()]
-    services.append(rospy.Service(f"~{ESTOP[0]}", SetBool, estop))
+    services.append(wire.service(f"~{ESTOP[0]}", SetBool, estop))
     return services

@@ -53,13 +53,15 @@ class ActionServers:
 
         self.node = node
         self.step_generation = 0  #: +1 per accepted EXCUTE (which list a goal follows)
-        name = node.rospy.get_name()
-        self.move_base = actionlib.SimpleActionServer(name, MoveBaseAction, self._move_base,
-                                                      auto_start=False)
-        self.steps = actionlib.SimpleActionServer("cmd_vel_control", StepControlAction,
-                                                  self._step_control, auto_start=False)
-        self.mode = actionlib.SimpleActionServer("navigation_mode", NavigationModeAction,
-                                                 self._navigation_mode, auto_start=False)
+        wire = node.wire
+        self.move_base = actionlib.SimpleActionServer(wire.node_name, MoveBaseAction,
+                                                      self._move_base, auto_start=False)
+        self.steps = actionlib.SimpleActionServer(wire.resolve("cmd_vel_control"),
+                                                  StepControlAction, self._step_control,
+                                                  auto_start=False)
+        self.mode = actionlib.SimpleActionServer(wire.resolve("navigation_mode"),
+                                                 NavigationModeAction, self._navigation_mode,
+                                                 auto_start=False)
 
     def start(self) -> None:
         for server in (self.move_base, self.steps, self.mode):

@@ -94,10 +94,15 @@ def make_navigator(setup: NavigationSetup) -> Any:
 class NavigationNode:
     """Subscribers, publishers, services and the control loop around one Navigator."""
 
-    def __init__(self, setup: NavigationSetup) -> None:
+    def __init__(self, setup: NavigationSetup, *, wire: Any = None, lock: Any = None) -> None:
+        """``wire``: how the face reaches ROS (:mod:`lowerbase.roswire`; None: rospy as is);
+        ``lock``: shared with the other faces of this process (None: one of its own)."""
+        from lowerbase.roswire import RosWire
+
         self.rospy, self.io = import_ros()
+        self.wire = wire if wire is not None else RosWire(self.rospy)
         self.setup = setup
-        self.lock = threading.RLock()
+        self.lock = lock if lock is not None else threading.RLock()
         self.ticked = threading.Condition(self.lock)  #: notified after every control tick
         self.stop = threading.Event()
         self.navigator = make_navigator(setup)
@@ -135,7 +140,7 @@ class NavigationNode:
 
     # -- set-up --------------------------------------------------------------------------------
     def advertise(self) -> None:
-        rospy, io = self.rospy, self.io
+        rospy, io, wire = self.rospy, self.io, self.wire
         from lowerbase.world.pacing import pace_for
 
         self.pace = pace_for(rospy, self.stop)
@@ -150,15 +155,15 @@ class NavigationNode:
         from lowerbase.navigation.actions import ActionServers
         from lowerbase.navigation.services import Services
 
-        self.tf.listen()
-        pub = rospy.Publisher
+        self.tf.listen(wire.tf_buffer())
+        pub = wire.publisher
         self.pubs = {
             "cmd_vel": pub("base_cmd_vel", io.Twist, queue_size=5),
             "global": pub("~global_costmap/costmap", io.GridMsg, queue_size=1, latch=True),
             "local": pub("~local_costmap/costmap", io.GridMsg, queue_size=1),
             "plan": pub("~NavfnROS/plan", io.Path, queue_size=1, latch=True),
         }
-        sub = rospy.Subscriber
+        sub = wire.subscriber
         self._subs = [
             sub("scan", ScanMsg, self._on_scan, queue_size=2),
             sub("odom", Odometry, self._on_odom, queue_size=10),
@@ -172,9 +177,9 @@ class NavigationNode:
             self._subs.append(sub(f"{self.setup.camera.name}/depth/cloud_without_planes",
                                   PointCloud2, self._on_cloud, queue_size=1, buff_size=2 ** 24))
         services = Services(self)
-        self._services = [rospy.Service("~make_plan", GetPlan, services.make_plan),
-                          rospy.Service("~enable_costmaps", SetBool, services.enable),
-                          rospy.Service("~clear_costmaps", Empty, services.clear)]
+        self._services = [wire.service("~make_plan", GetPlan, services.make_plan),
+                          wire.service("~enable_costmaps", SetBool, services.enable),
+                          wire.service("~clear_costmaps", Empty, services.clear)]
         self._servers = ActionServers(self)
         self._servers.start()
 

@@ -20,11 +20,15 @@ class MapToOdom:
         self.frames = (map_frame, odom_frame)
         self.buffer: Any = None
 
-    def listen(self) -> None:
+    def listen(self, buffer: Any = None) -> None:
+        """Look up in ``buffer`` (a tf2_ros.Buffer that something else fills, e.g.
+        :meth:`lowerbase.roswire.RosWire.tf_buffer`); None: a buffer of its own on /tf."""
         import tf2_ros
 
-        self.buffer = tf2_ros.Buffer(cache_time=self.rospy.Duration(10.0))
-        self._listener = tf2_ros.TransformListener(self.buffer)
+        if buffer is None:
+            buffer = tf2_ros.Buffer(cache_time=self.rospy.Duration(10.0))
+            self._listener = tf2_ros.TransformListener(buffer)
+        self.buffer = buffer
 
     def _lookup(self, stamp: Any) -> Pose | None:
         import tf2_ros

@@ -80,11 +80,7 @@ def robot_plan(opts: RobotOptions) -> list[ChildSpec]:
         world += ["--publish-clock"]
     specs = [ChildSpec("world", _lowerbase(opts, *world), ON_MASTER)]
     if opts.mcap or opts.foxglove:  # before the emulator: every frame (rosrecord)
-        record = [str(Path(opts.mcap).resolve())] if opts.mcap else []
-        if opts.foxglove:
-            record += ["--foxglove", opts.foxglove]
-        specs.append(ChildSpec("recorder", [opts.python, "-m", "lowerbase.recording.rosrecord",
-                                            *record, *bus], ON_MASTER))
+        specs.append(recorder_spec(opts, bus))
     specs += [
         ChildSpec("emulate", _lowerbase(opts, *emulate), "lower computer on"),
         ChildSpec("driver", _lowerbase(opts, "driver", *bus), "link ready"),
@@ -93,3 +89,15 @@ def robot_plan(opts: RobotOptions) -> list[ChildSpec]:
         if part in opts.parts:
             specs.append(ChildSpec(part, _lowerbase(opts, part, "--map", map_ref), ON_MASTER))
     return specs
+
+
+def recorder_spec(opts: RobotOptions, bus: list[str] | None = None) -> ChildSpec:
+    """The recorder child of --mcap/--foxglove: the robot's ROS topics, and the frames of
+    ``bus`` (None: a bus of its own that nothing sends to, as in lockstep there is no bus)."""
+    record = [str(Path(opts.mcap).resolve())] if opts.mcap else []
+    if opts.foxglove:
+        record += ["--foxglove", opts.foxglove]
+    if bus is None:
+        bus = bus_flags(opts.bus_port or free_loopback_port())
+    return ChildSpec("recorder", [opts.python, "-m", "lowerbase.recording.rosrecord",
+                                  *record, *bus], ON_MASTER)

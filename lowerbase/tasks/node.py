@@ -86,36 +86,45 @@ class TasksNode:
     """The exec_task service, the robot_status publisher, the chassis subscribers and the loop
     around one TaskMachine."""
 
-    def __init__(self, setup: TasksSetup) -> None:
+    def __init__(self, setup: TasksSetup, *, wire: Any = None, lock: Any = None,
+                 nav: Any = None, steps: Any = None) -> None:
+        """``wire``: how the face reaches ROS (:mod:`lowerbase.roswire`; None: rospy as is);
+        ``lock``: shared with the other faces of this process; ``nav`` and ``steps``: the
+        machine's Navigation and step moves (None: actionlib clients of /move_base and
+        /cmd_vel_control; in one process with navigation: :mod:`lowerbase.tasks.local_nav`)."""
+        from lowerbase.roswire import RosWire
         from lowerbase.tasks.machine import TaskMachine
-        from lowerbase.tasks.ros_clients import ActionNavigation, ActionSteps
 
         self.rospy = import_ros()
         from woosh_msgs.msg import RobotStatus
 
+        self.wire = wire if wire is not None else RosWire(self.rospy)
         self.setup = setup
-        self.lock = threading.RLock()
+        self.lock = lock if lock is not None else threading.RLock()
         self.inputs = ChassisInputs(pose_timeout=setup.pose_timeout)
         self.stats: dict[str, int] = {"requests": 0, "refused": 0, "published": 0,
                                       "bad_request": 0, "bad_pose": 0, "bad_odom": 0}
-        self._status_pub = self.rospy.Publisher("robot_status", RobotStatus, queue_size=20,
-                                                latch=True)
-        self.nav = ActionNavigation("move_base", setup.map_frame)
-        self.steps = ActionSteps("cmd_vel_control")
+        self._status_pub = self.wire.publisher("robot_status", RobotStatus, queue_size=20,
+                                               latch=True)
+        if nav is None or steps is None:
+            from lowerbase.tasks.ros_clients import ActionNavigation, ActionSteps
+
+            nav = ActionNavigation("move_base", setup.map_frame)
+            steps = ActionSteps("cmd_vel_control")
+        self.nav, self.steps = nav, steps
         self.machine = TaskMachine(self.nav, setup.places, setup.config,
                                    on_status=self._publish, steps=self.steps)
         self._subs: list[Any] = []
         self._service: Any = None
 
     def advertise(self) -> None:
-        rospy = self.rospy
         from geometry_msgs.msg import Pose2D
         from nav_msgs.msg import Odometry
         from std_msgs.msg import String, UInt64
         from woosh_msgs.msg import BMS, Battery
         from woosh_msgs.srv import ExecTask
 
-        sub = rospy.Subscriber
+        sub = self.wire.subscriber
         self._subs = [
             sub("driver_base/link_state", String, self._on_link, queue_size=5),
             sub("status_code", UInt64, self._on_code, queue_size=5),
@@ -124,7 +133,7 @@ class TasksNode:
             sub("/odom", Odometry, self._on_odom, queue_size=5),
             sub("movebase_pose2d", Pose2D, self._on_pose, queue_size=5),
         ]
-        self._service = rospy.Service("exec_task", ExecTask, self._exec_task)
+        self._service = self.wire.service("exec_task", ExecTask, self._exec_task)
 
     # -- ROS -> machine ------------------------------------------------------------------------
     def _count_bad(self, key: str, what: str) -> None:

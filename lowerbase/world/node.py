@@ -24,7 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from lowerbase.clock import RealClock
+from lowerbase.clock import Clock, RealClock
 from lowerbase.errors import LowerbaseError, WorldError
 from lowerbase.world.camera import DepthCamera
 from lowerbase.world.footprint import validate_pose
@@ -84,18 +84,26 @@ def import_ros() -> tuple[Any, Any]:
 class WorldNode:
     """Publishers, subscribers, services and the sensor loop around one WorldSetup."""
 
-    def __init__(self, setup: WorldSetup, truth: Any) -> None:
+    def __init__(self, setup: WorldSetup, truth: Any, *, clock: Clock | None = None,
+                 wire: Any = None, lock: Any = None) -> None:
+        """``clock``: the localizer's (None: wall time); ``wire``: how the face reaches ROS
+        (:mod:`lowerbase.roswire`; None: rospy as is); ``lock``: shared with the other faces
+        of this process (None: one of its own)."""
+        from lowerbase.roswire import RosWire
+
         self.rospy, self.io = import_ros()
+        self.wire = wire if wire is not None else RosWire(self.rospy)
         self.setup = setup
         self.truth = truth
-        self.lock = threading.RLock()
+        self.lock = lock if lock is not None else threading.RLock()
         self.stop = threading.Event()
         self.scene = Scene(setup.grid)
         self.lidars = LidarRig(setup.sensors.lidars, setup.sensors.scan)
         cam = setup.sensors.camera
         self.camera = DepthCamera(cam) if (cam is not None and setup.camera) else None
         self.served_map = setup.grid  #: what /map and get_map serve (set_map replaces it)
-        self.localizer = Localizer(setup.grid, clock=RealClock(self.stop), seed=setup.seed,
+        self.localizer = Localizer(setup.grid, clock=clock or RealClock(self.stop),
+                                   seed=setup.seed,
                                    initial_pose=setup.start, truth=self._true_map_pose,
                                    ground_truth=setup.ground_truth)
         self.odom: Pose | None = None
@@ -118,14 +126,13 @@ class WorldNode:
 
     # -- set-up --------------------------------------------------------------------------------
     def advertise(self) -> None:
-        rospy, io = self.rospy, self.io
-        import tf2_ros
+        rospy, io, wire = self.rospy, self.io, self.wire
         from geometry_msgs.msg import PoseWithCovarianceStamped
         from nav_msgs.msg import Odometry
         from nav_msgs.srv import GetMap, SetMap
         from std_srvs.srv import SetBool  # type: ignore[import-untyped]
 
-        pub = rospy.Publisher
+        pub = wire.publisher
         self._pubs = {"scan": pub("/scan", io.LaserScan, queue_size=5),
                       "amcl_pose": pub("/amcl_pose", io.PoseWithCovarianceStamped,
                                        queue_size=5, latch=True),
@@ -141,16 +148,16 @@ class WorldNode:
                 "points": pub(f"/{name}/depth/points", io.PointCloud2, queue_size=2),
                 "no_planes": pub(f"/{name}/depth/cloud_without_planes", io.PointCloud2,
                                  queue_size=2)})
-        self._tf = tf2_ros.TransformBroadcaster()
-        self._static = tf2_ros.StaticTransformBroadcaster()
+        self._tf = wire.tf_broadcaster()
+        self._static = wire.static_broadcaster()
         self._static.sendTransform(self.static_transforms(rospy.Time.now()))
         self._publish_map()
-        self._subs = [rospy.Subscriber("/odom", Odometry, self._on_odom, queue_size=10),
-                      rospy.Subscriber("/initialpose", PoseWithCovarianceStamped,
-                                       self._on_initialpose, queue_size=2)]
-        self._services = [rospy.Service("/start_localization", SetBool, self._start),
-                          rospy.Service("set_map", SetMap, self._set_map),
-                          rospy.Service("aic_map_server/get_map", GetMap, self._get_map)]
+        self._subs = [wire.subscriber("/odom", Odometry, self._on_odom, queue_size=10),
+                      wire.subscriber("/initialpose", PoseWithCovarianceStamped,
+                                      self._on_initialpose, queue_size=2)]
+        self._services = [wire.service("/start_localization", SetBool, self._start),
+                          wire.service("set_map", SetMap, self._set_map),
+                          wire.service("aic_map_server/get_map", GetMap, self._get_map)]
 
     def static_transforms(self, stamp: Any) -> list[Any]:
         """base_link -> each lidar frame, -> camera link -> its optical frames (REP-103/105)."""

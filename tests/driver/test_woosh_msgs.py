@@ -386,6 +386,7 @@ def test_cli_generates_and_writes_pth(tmp_path: Path, ros: None) -> None:
     # a second run replaces the output cleanly and leaves no temporary directory behind
     assert msggen.main([str(out), "--no-pth"]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["lowerbase_legged_msgs", "lowerbase_msgs",
+                                                     "lowerbase_sim_msgs",
                                                      "share", "woosh_msgs"]
 
 

@@ -1,0 +1,265 @@
+"""``lowerbase robot --sim-time``: the whole robot in one process, in lockstep on one simulated
+clock: :class:`LockstepRobot`.
+
+The parts are the ones ``lowerbase robot`` starts as processes, with the same ROS faces: the
+emulated lower computer and driver_base's core exchange their frames at their periods' times
+(:class:`~lowerbase.bench.simloop.SimLoop`, the MCU's 5 ms period), and driver_base's face
+(:class:`~lowerbase.driver.node.DriverNode`), the world's (:class:`~lowerbase.world.node.
+WorldNode`: lidars, camera, amcl, the map), navigation's (:class:`~lowerbase.navigation.node.
+NavigationNode`: move_base, step control, costmaps) and the tasks' (:class:`~lowerbase.tasks.
+node.TasksNode`: exec_task, robot_status) publish, subscribe and serve under the names they have
+alone. What one part publishes reaches the others in this process at once
+(:mod:`lowerbase.roswire`), so nothing is late or lost however busy the host is; tasks drive
+navigation directly (:mod:`lowerbase.tasks.local_nav`).
+
+Each period of the MCU the parts whose rate is due run, in a fixed order (/clock at 100 Hz,
+tasks, navigation, costmaps, driver_base's periodic topics, the scan, the camera frame), then
+the lower computer and the driver core step 5 ms. ROS time is the simulated time
+(``rospy.rostime._set_rostime``; this process does not follow its own /clock), so every stamp
+is the simulated instant it describes. Nothing here sleeps or reads the wall clock: the pace
+is :mod:`lowerbase.robot.simcontrol`'s.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from lowerbase.robot.plan import UPPER
+from lowerbase.world.maps import DEFAULT_MAP
+
+CLOCK_RATE = 100.0  #: [Hz] of simulated time: /clock, at the IMU's rate (the fastest sensor)
+NODE = "lowerbase_robot"  #: this process' node name (the faces keep their own names)
+UNTIL = ("", "move_base", "task")  #: the conditions a step can stop at (simcontrol)
+
+
+@dataclass(frozen=True)
+class LockstepOptions:
+    """What ``lowerbase robot --sim-time`` builds (the options of ``lowerbase robot``)."""
+
+    map: str = DEFAULT_MAP
+    parts: tuple[str, ...] = UPPER
+    soc: float | None = None
+    ground_truth: bool = False
+    camera: bool = True
+    seed: int = 0
+    truth: str | None = None  #: --truth FILE: the emulator's ground truth as CSV
+
+
+class _Job:
+    """Work due every ``period`` [s] of simulated time, on the MCU's period grid."""
+
+    def __init__(self, name: str, period: float, dt: float, work: Callable[[], Any]) -> None:
+        self.name, self.period, self.dt, self.work = name, period, dt, work
+        self.n = 0
+        self.due = 0  #: the MCU period it is due at
+
+    def run_if_due(self, step: int) -> None:
+        if step < self.due:
+            return
+        self.work()
+        while self.due <= step:  # a period shorter than the MCU's runs once per period
+            self.n += 1
+            self.due = math.ceil(self.n * self.period / self.dt - 1e-6)
+
+
+class LockstepRobot:
+    """The robot's parts and their faces on one simulated clock (see the module docstring).
+
+    ``rospy`` must be initialised (``init_node``) by the caller; :meth:`advertise` makes every
+    face's topics, services and actions; :meth:`run_periods` moves time on."""
+
+    def __init__(self, opts: LockstepOptions, rospy: Any) -> None:
+        from lowerbase.bench.simloop import SimLoop
+        from lowerbase.driver.node import DriverNode
+        from lowerbase.driver.settings import load_settings
+        from lowerbase.firmware_model.profile import load_profile
+        from lowerbase.roswire import LocalWire, Switchboard
+        from lowerbase.world.charger import ChargerContact
+        from lowerbase.world.grid import OccupancyGrid
+        from lowerbase.world.maps import load_map
+        from lowerbase.world.node import WorldNode, WorldSetup
+        from lowerbase.world.places import load_places
+        from lowerbase.world.sensors import sensors_from_profile_file
+        from lowerbase.world.sim import resolve_start
+        from lowerbase.world.truth import LoopTruth, WorldSurroundings
+
+        self.opts = opts
+        self.rospy = rospy
+        self.lock = threading.RLock()  #: every face's: held around each period and callback
+        grid: OccupancyGrid = load_map(opts.map)
+        start = resolve_start(opts.map, grid, "start")
+        places = load_places(opts.map, grid)
+        sensors = sensors_from_profile_file()
+        settings, config = load_settings({})
+        profile = load_profile()
+        kwargs: dict[str, Any] = {} if opts.soc is None else {"soc": opts.soc}
+        self.loop = SimLoop(profile, driver_config=config, **kwargs)
+        self.loop.surroundings = WorldSurroundings(grid, map_from_truth=start)
+        self.dt = self.loop.control_dt
+        self.board = Switchboard(rospy)
+        self._hooks: list[Callable[[Any], None]] = []
+        if places.charger is not None:
+            self.charger: ChargerContact | None = ChargerContact(places.charger, start)
+            self._hooks.append(self.charger)
+        else:
+            self.charger = None
+        if opts.truth:
+            from lowerbase.bench.recording import TruthLog
+
+            self.truth_log: Any = TruthLog(opts.truth)
+            self._hooks.append(self.truth_log)
+        else:
+            self.truth_log = None
+
+        def wire(name: str) -> LocalWire:
+            return LocalWire(rospy, self.board, name)
+
+        self.driver = DriverNode(settings, config, None, core=self.loop.driver,
+                                 wire=wire("driver_base"), lock=self.lock)
+        self.world = WorldNode(WorldSetup(grid, sensors, start, ground_truth=opts.ground_truth,
+                                          camera=opts.camera, seed=opts.seed),
+                               LoopTruth(self.loop), clock=self.loop.clock,
+                               wire=wire("world"), lock=self.lock)
+        self.navigation: Any = None
+        self.tasks: Any = None
+        if "navigation" in opts.parts:
+            from lowerbase.navigation.node import NavigationNode, NavigationSetup
+
+            camera = sensors.camera if opts.camera else None
+            self.navigation = NavigationNode(NavigationSetup(grid, camera),
+                                             wire=wire("move_base"), lock=self.lock)
+        if "tasks" in opts.parts:
+            if self.navigation is None:
+                from lowerbase.errors import ConfigError
+
+                raise ConfigError("tasks drive through navigation: leave out both "
+                                  "(--without tasks --without navigation) or neither")
+            from lowerbase.tasks.local_nav import NodeNavigation, NodeSteps
+            from lowerbase.tasks.node import TasksNode, TasksSetup
+
+            self.tasks = TasksNode(TasksSetup(places), wire=wire("tasks"), lock=self.lock,
+                                   nav=NodeNavigation(self.navigation),
+                                   steps=NodeSteps(self.navigation))
+        self._clock_pub: Any = None
+        self.steps = 0  #: MCU periods run
+        self.jobs = self._jobs()
+
+    def _jobs(self) -> list[_Job]:
+        dt = self.dt
+        jobs = [_Job("clock", 1.0 / CLOCK_RATE, dt, self._publish_clock)]
+        if self.tasks is not None:
+            jobs.append(_Job("tasks", self.tasks.setup.config.period, dt, self.tasks.tick))
+        nav = self.navigation
+        if nav is not None:
+            jobs.append(_Job("navigation", 1.0 / nav.setup.rate_hz, dt,
+                             lambda: nav.tick(self.now)))
+            jobs.append(_Job("costmaps", 1.0 / nav.setup.costmap_rate_hz, dt,
+                             lambda: nav.publish_costmaps(True)))
+        jobs.append(_Job("driver", 1.0 / self.loop.driver.config.command_rate, dt,
+                         self.driver.publish_periodic))
+        jobs.append(_Job("scan", 1.0 / self.world.lidars.rate_hz, dt, self.world.scan_once))
+        if self.world.camera is not None:
+            jobs.append(_Job("camera", 1.0 / self.world.camera.config.rate_hz, dt,
+                             self.world.frame_once))
+        return jobs
+
+    @property
+    def now(self) -> float:
+        """[s] simulated time, which is ROS time here."""
+        return float(self.loop.now)
+
+    def advertise(self) -> None:
+        """Every face's publishers, subscribers, services and actions; /clock."""
+        from rosgraph_msgs.msg import Clock
+
+        self._set_ros_time()
+        self._clock_pub = self.rospy.Publisher("/clock", Clock, queue_size=10)
+        with self.lock:
+            self.driver.advertise()
+            self.world.advertise()
+            if self.navigation is not None:
+                self.navigation.advertise()
+            if self.tasks is not None:
+                self.tasks.advertise()
+
+    def _set_ros_time(self) -> None:
+        from rospy.rostime import _set_rostime
+
+        _set_rostime(self.rospy.Time.from_sec(self.loop.now))
+
+    def _publish_clock(self) -> None:
+        from rosgraph_msgs.msg import Clock
+
+        self._clock_pub.publish(Clock(clock=self.rospy.Time.from_sec(self.loop.now)))
+
+    def run_periods(self, periods: int, until: Callable[[], bool] | None = None) -> bool:
+        """Run ``periods`` MCU periods (5 ms each), the parts that are due in each; with
+        ``until``, stop early at the first control period (50 ms) where it holds. True when
+        ``until`` held (False without one)."""
+        every = max(1, round(0.05 / self.dt))
+        for _ in range(periods):
+            with self.lock:
+                self.board.drain()
+                self._period()
+            if until is not None and self.steps % every == 0 and until():
+                return True
+        return False
+
+    def _period(self) -> None:
+        self._set_ros_time()
+        step = self.steps
+        for job in self.jobs:
+            job.run_if_due(step)
+        self.loop.step()
+        mcu = self.loop.mcu
+        for hook in self._hooks:
+            hook(mcu)
+        self.steps += 1
+
+    # -- what a step can wait for (simcontrol's ``until``) --------------------------------------
+    def navigation_idle(self) -> bool:
+        nav = self.navigation
+        if nav is None:
+            return True
+        with self.lock:
+            return not nav.navigator_active() and not nav.steps.active
+
+    def task_idle(self) -> bool:
+        tasks = self.tasks
+        if tasks is None:
+            return True
+        with self.lock:
+            return not tasks.machine.active
+
+    def condition(self, name: str) -> Callable[[], bool] | None:
+        """The ``until`` of a step by name (:data:`UNTIL`); ValueError when unknown."""
+        if name not in UNTIL:
+            raise ValueError(f"until {name!r} is not known; one of: "
+                             + ", ".join(repr(u) for u in UNTIL))
+        return {"": None, "move_base": self.navigation_idle,
+                "task": self.task_idle}[name]
+
+    def shutdown(self) -> dict[str, int]:
+        """Stop every face (the top ones first); the counts of all of them."""
+        stats: dict[str, int] = {}
+        for face in (self.tasks, self.navigation, self.world, self.driver):
+            if face is None:
+                continue
+            if face is self.driver:
+                face.stop.set()
+                with self.lock:
+                    for sub in face._subs:
+                        sub.unregister()
+                    for service in face._services:
+                        service.shutdown()
+            else:
+                face.shutdown()
+            stats.update({k: int(v) for k, v in getattr(face, "stats", {}).items()})
+        stats.update(self.loop.driver.stats)
+        if self.truth_log is not None:
+            self.truth_log.close()
+        return stats

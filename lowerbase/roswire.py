@@ -1,0 +1,218 @@
+"""How a lowerbase ROS face reaches ROS: :class:`RosWire` and :class:`LocalWire`.
+
+Every rospy face (driver_base, world, navigation, tasks) makes its publishers, subscribers,
+services and TF through a wire instead of calling rospy directly:
+
+- :class:`RosWire` is rospy as it is: one face per process (``lowerbase driver``, ``lowerbase
+  world``, ...), names resolved by rospy against the process' node name.
+- :class:`LocalWire` puts several faces in one process on one clock (``lowerbase robot
+  --sim-time``, :mod:`lowerbase.robot.lockstep`): each face keeps its own node name for
+  private names (``~parameter`` of driver_base is ``/driver_base/parameter`` as before); what
+  one face publishes reaches the others in this process at once, in the publishing thread,
+  through a :class:`Switchboard` (never through a socket, so never late), and goes out to ROS
+  for everyone else. A subscription to a topic that outside nodes are expected to publish
+  (:data:`EXTERNAL_INPUTS`: a user's twist, LED, /initialpose, footprint) also listens on ROS;
+  what arrives there is held in the switchboard's inbox until the lockstep loop applies it at
+  the start of its next step (:meth:`Switchboard.drain`), and what this process published
+  itself is dropped there (it was delivered in-process already).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import Any
+
+#: topics the lockstep robot also takes from outside nodes (resolved names)
+EXTERNAL_INPUTS = frozenset({
+    "/base_cmd_vel", "/smooth_cmd_vel", "/rgbled", "/rgbled_shelf", "/rgbled_shelf_vendor",
+    "/initialpose", "/move_base/local_costmap/set_footprint",
+    "/move_base/global_costmap/set_footprint",
+})
+
+
+class RosWire:
+    """rospy as it is (one node per process)."""
+
+    def __init__(self, rospy: Any) -> None:
+        self.rospy = rospy
+
+    @property
+    def node_name(self) -> str:
+        return str(self.rospy.get_name())
+
+    def resolve(self, name: str) -> str:
+        return str(self.rospy.resolve_name(name))
+
+    def publisher(self, name: str, cls: Any, **kwargs: Any) -> Any:
+        return self.rospy.Publisher(name, cls, **kwargs)
+
+    def subscriber(self, name: str, cls: Any, callback: Callable[[Any], None],
+                   **kwargs: Any) -> Any:
+        return self.rospy.Subscriber(name, cls, callback, **kwargs)
+
+    def service(self, name: str, cls: Any, handler: Callable[[Any], Any]) -> Any:
+        return self.rospy.Service(name, cls, handler)
+
+    def tf_broadcaster(self) -> Any:
+        import tf2_ros
+
+        return tf2_ros.TransformBroadcaster()
+
+    def static_broadcaster(self) -> Any:
+        import tf2_ros
+
+        return tf2_ros.StaticTransformBroadcaster()
+
+    def tf_buffer(self) -> Any:
+        """A tf2 buffer fed by /tf (its listener is kept with it)."""
+        import tf2_ros
+
+        buffer = tf2_ros.Buffer(cache_time=self.rospy.Duration(10.0))
+        buffer._lowerbase_listener = tf2_ros.TransformListener(buffer)
+        return buffer
+
+
+class Switchboard:
+    """What the faces of one process share: local subscribers by topic, the last message of
+    each latched topic, the tf2 buffer the TF publishers feed, and the inbox of messages from
+    outside nodes (applied by :meth:`drain`)."""
+
+    def __init__(self, rospy: Any, external: frozenset[str] = EXTERNAL_INPUTS) -> None:
+        import tf2_ros
+
+        self.rospy = rospy
+        self.external = external
+        self.local: dict[str, list[Callable[[Any], None]]] = {}
+        self.latched: dict[str, Any] = {}
+        self.tf = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
+        self._inbox: list[tuple[Callable[[Any], None], Any]] = []
+        self._lock = threading.Lock()
+        self.stats = {"local": 0, "external": 0, "own_dropped": 0}
+
+    def deliver(self, topic: str, msg: Any, latch: bool) -> None:
+        if latch:
+            self.latched[topic] = msg
+        for callback in self.local.get(topic, ()):
+            self.stats["local"] += 1
+            callback(msg)
+
+    def add_local(self, topic: str, callback: Callable[[Any], None]) -> None:
+        self.local.setdefault(topic, []).append(callback)
+        if topic in self.latched:
+            callback(self.latched[topic])
+
+    def remove_local(self, topic: str, callback: Callable[[Any], None]) -> None:
+        with_cb = self.local.get(topic, [])
+        if callback in with_cb:
+            with_cb.remove(callback)
+
+    def post(self, callback: Callable[[Any], None], msg: Any) -> None:
+        """A message from outside (a rospy thread): held until :meth:`drain`."""
+        header = getattr(msg, "_connection_header", None) or {}
+        if header.get("callerid") == self.rospy.get_name():
+            self.stats["own_dropped"] += 1
+            return
+        with self._lock:
+            self._inbox.append((callback, msg))
+
+    def drain(self) -> int:
+        """Apply what came from outside since the last call, in arrival order."""
+        with self._lock:
+            inbox, self._inbox = self._inbox, []
+        for callback, msg in inbox:
+            self.stats["external"] += 1
+            callback(msg)
+        return len(inbox)
+
+
+class _TeePublisher:
+    """A rospy publisher that also hands each message to the in-process subscribers."""
+
+    def __init__(self, real: Any, board: Switchboard, topic: str, latch: bool) -> None:
+        self.real, self.board, self.name, self.latch = real, board, topic, latch
+
+    def publish(self, msg: Any) -> None:
+        self.board.deliver(self.name, msg, self.latch)
+        self.real.publish(msg)
+
+    def get_num_connections(self) -> int:
+        return int(self.real.get_num_connections())
+
+    def unregister(self) -> None:
+        self.real.unregister()
+
+
+class _LocalSubscription:
+    def __init__(self, board: Switchboard, topic: str, callback: Callable[[Any], None],
+                 real: Any) -> None:
+        self.board, self.name, self.callback, self.real = board, topic, callback, real
+
+    def unregister(self) -> None:
+        self.board.remove_local(self.name, self.callback)
+        if self.real is not None:
+            self.real.unregister()
+
+
+class _TeeBroadcaster:
+    """A tf2 (static) broadcaster that also fills the switchboard's buffer."""
+
+    def __init__(self, real: Any, board: Switchboard, static: bool) -> None:
+        self.real, self.board, self.static = real, board, static
+
+    def sendTransform(self, transforms: Any) -> None:
+        items = transforms if isinstance(transforms, list) else [transforms]
+        for t in items:
+            if self.static:
+                self.board.tf.set_transform_static(t, "lowerbase")
+            else:
+                self.board.tf.set_transform(t, "lowerbase")
+        self.real.sendTransform(transforms)
+
+
+class LocalWire(RosWire):
+    """One face of several in this process (see the module docstring); ``node`` is the node
+    name the face would have alone (``/driver_base``, ``/world``, ``/move_base``, ``/tasks``)."""
+
+    def __init__(self, rospy: Any, board: Switchboard, node: str) -> None:
+        super().__init__(rospy)
+        self.board = board
+        self.node = "/" + node.strip("/")
+
+    @property
+    def node_name(self) -> str:
+        return self.node
+
+    def resolve(self, name: str) -> str:
+        if name.startswith("~"):
+            rest = name[1:].lstrip("/")
+            return f"{self.node}/{rest}" if rest else self.node
+        return name if name.startswith("/") else "/" + name
+
+    def publisher(self, name: str, cls: Any, **kwargs: Any) -> Any:
+        topic = self.resolve(name)
+        real = self.rospy.Publisher(topic, cls, **kwargs)
+        return _TeePublisher(real, self.board, topic, bool(kwargs.get("latch", False)))
+
+    def subscriber(self, name: str, cls: Any, callback: Callable[[Any], None],
+                   **kwargs: Any) -> Any:
+        topic = self.resolve(name)
+        self.board.add_local(topic, callback)
+        real = None
+        if topic in self.board.external:
+            board = self.board
+            real = self.rospy.Subscriber(topic, cls, lambda m: board.post(callback, m),
+                                         **kwargs)
+        return _LocalSubscription(self.board, topic, callback, real)
+
+    def service(self, name: str, cls: Any, handler: Callable[[Any], Any]) -> Any:
+        return self.rospy.Service(self.resolve(name), cls, handler)
+
+    def tf_broadcaster(self) -> Any:
+        return _TeeBroadcaster(super().tf_broadcaster(), self.board, static=False)
+
+    def static_broadcaster(self) -> Any:
+        return _TeeBroadcaster(super().static_broadcaster(), self.board, static=True)
+
+    def tf_buffer(self) -> Any:
+        return self.board.tf

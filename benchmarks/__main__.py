@@ -14,7 +14,7 @@ from benchmarks.common import Row
 MODULES = ("bench_protocol", "bench_emulator", "bench_fleet", "bench_bus", "bench_bms",
            "bench_driver", "bench_scenarios", "bench_world", "bench_localization",
            "bench_recording", "bench_world_loop", "bench_navigation", "bench_shift",
-           "bench_legged", "bench_trace")
+           "bench_legged", "bench_trace", "bench_robot_sim")
 
 
 def _fmt(v: float) -> str:

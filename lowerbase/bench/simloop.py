@@ -179,6 +179,10 @@ class SimLoop(SteppedLoop):
         self.twist_driver = self.driver
         self.mcu.truth.surroundings = surroundings
         self._motion_id = self.driver.codec.message("MotionCommand").frame_id
+        #: the driver's listeners only read (publish what a frame completed, never send or
+        #: set a twist): they do not keep periods from running in batches, where they are
+        #: called at each frame's period time, the driver's clock pinned there
+        self.passive_listeners = False
 
     @property
     def surroundings(self) -> Surroundings | None:
@@ -266,7 +270,8 @@ class SimLoop(SteppedLoop):
         whose driver tick may do anything; 1 when anything but the tick could make the driver
         send (or the MCU take something else than a MotionCommand)."""
         driver, mcu = self.driver, self.mcu
-        if (periods < 2 or driver.state is not LinkState.READY or driver.listeners
+        if (periods < 2 or driver.state is not LinkState.READY
+                or (driver.listeners and not self.passive_listeners)
                 or self.tap is not None or mcu.faults or mcu._delayed
                 or mcu.state is not RobotState.ACTIVE or driver.heard_until is not None
                 or driver._reboot_suspect is not None or self.batch_stats["mistimed"]

@@ -111,6 +111,10 @@ class DriverNode:
         self.stop = threading.Event()
         self.core = core if core is not None else \
             DriverCore(link.send, clock or RealClock(self.stop), config)
+        #: the ROS time stamps are taken at; with a shared ``core`` its clock's (the lockstep
+        #: robot's simulated time is ROS time, and the core's clock is exact inside a batch)
+        self.ros_now: Callable[[], Any] = self.rospy.Time.now if core is None else \
+            (lambda: self.rospy.Time.from_sec(self.core.clock.now()))
         self.core.listeners.append(self._on_event)
         self._throttles = {k: Throttle(r) for k, r in settings.rates.items()}
         self._battery_dirty = False
@@ -220,7 +224,7 @@ class DriverNode:
                 gyro, accel = core.imu
                 s = self.settings
                 self._publish("imu", self.io.imu_msg(
-                    self.rospy.Time.now(), s.imu_frame, gyro, accel,
+                    self.ros_now(), s.imu_frame, gyro, accel,
                     s.imu_angular_velocity_variance, s.imu_linear_acceleration_variance))
         elif what == "twist":
             if self._throttles["odom_twist"].ready(now):
@@ -240,7 +244,7 @@ class DriverNode:
         """ROS time of the odometry's sample (the EKF's stamp, aged on the core's clock), not
         of publishing: the world and navigation pair scans with /odom by stamp, and a frame
         handled late (a backlog at K=2) was stamped up to 2 s of /clock after its motion."""
-        now, at, last = self.rospy.Time.now(), self.core.ekf.stamp, self._last_odom_stamp
+        now, at, last = self.ros_now(), self.core.ekf.stamp, self._last_odom_stamp
         age = self.core.clock.now() - at if at is not None else math.nan
         stamp = now - self.rospy.Duration.from_sec(age) if 0.0 < age <= MAX_STAMP_AGE else now
         if last is not None and last - MAX_STAMP_AGE < stamp.to_sec() < last:
@@ -278,13 +282,13 @@ class DriverNode:
         if self._battery_dirty and self._throttles["battery"].ready(now):
             self._battery_dirty = False
             battery, bms = core.bms.battery_fields(), core.bms.bms_fields()
-            stamp = self.rospy.Time.now()
+            stamp = self.ros_now()
             if battery is not None and bms is not None:
                 self._publish("battery", io.battery_msg(stamp, battery))
                 self._publish("bms", io.bms_msg(stamp, bms))
         if self._info_dirty and io.parameter_complete(core.parameters):
             self._info_dirty = False
-            stamp = self.rospy.Time.now()
+            stamp = self.ros_now()
             self._publish("parameter", io.parameter_msg(stamp, core.parameters))
             if len(core.versions) == 4:
                 self._publish("information", io.information_msg(stamp, core.information()))

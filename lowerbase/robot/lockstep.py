@@ -44,7 +44,7 @@ class LockstepOptions:
     parts: tuple[str, ...] = UPPER
     soc: float | None = None
     ground_truth: bool = False
-    camera: bool = True
+    camera: bool = False  #: the depth camera (~50 ms a frame to render)
     seed: int = 0
     truth: str | None = None  #: --truth FILE: the emulator's ground truth as CSV
 
@@ -111,7 +111,6 @@ class LockstepRobot:
             from lowerbase.bench.recording import TruthLog
 
             self.truth_log: Any = TruthLog(opts.truth)
-            self._hooks.append(self.truth_log)
         else:
             self.truth_log = None
 
@@ -145,12 +144,17 @@ class LockstepRobot:
                                    nav=NodeNavigation(self.navigation),
                                    steps=NodeSteps(self.navigation))
         self._clock_pub: Any = None
+        self._clock_k, self._clock_next = 0, 0.0  #: the next /clock: its index and time [s]
+        self.loop.passive_listeners = True  # driver_base's face only publishes
         self.steps = 0  #: MCU periods run
         self.jobs = self._jobs()
 
     def _jobs(self) -> list[_Job]:
         dt = self.dt
-        jobs = [_Job("clock", 1.0 / CLOCK_RATE, dt, self._publish_clock)]
+        jobs: list[_Job] = []
+        if self.truth_log is not None:  # its rows every 20 ms
+            log, mcu = self.truth_log, self.loop.mcu
+            jobs.append(_Job("truth", log.period, dt, lambda: log(mcu)))
         if self.tasks is not None:
             jobs.append(_Job("tasks", self.tasks.setup.config.period, dt, self.tasks.tick))
         nav = self.navigation
@@ -192,33 +196,46 @@ class LockstepRobot:
         _set_rostime(self.rospy.Time.from_sec(self.loop.now))
 
     def _publish_clock(self) -> None:
+        """/clock at every 10 ms of simulated time up to now (several after a batch)."""
         from rosgraph_msgs.msg import Clock
 
-        self._clock_pub.publish(Clock(clock=self.rospy.Time.from_sec(self.loop.now)))
+        now = self.loop.now
+        while self._clock_next <= now + 1e-9:
+            self._clock_pub.publish(Clock(clock=self.rospy.Time.from_sec(self._clock_next)))
+            self._clock_k += 1
+            self._clock_next = self._clock_k / CLOCK_RATE
 
     def run_periods(self, periods: int, until: Callable[[], bool] | None = None) -> bool:
         """Run ``periods`` MCU periods (5 ms each), the parts that are due in each; with
         ``until``, stop early at the first control period (50 ms) where it holds. True when
-        ``until`` held (False without one)."""
+        ``until`` held (False without one).
+
+        Between two parts' work the lower computer and the driver core run as one
+        :meth:`SimLoop.advance` (batched where that changes nothing: driver_base's face only
+        publishes, at each frame's own time); /clock gets every 10 ms it passed."""
         every = max(1, round(0.05 / self.dt))
-        for _ in range(periods):
+        end = self.steps + periods
+        while self.steps < end:
             with self.lock:
                 self.board.drain()
-                self._period()
+                self._set_ros_time()
+                self._publish_clock()
+                step = self.steps
+                for job in self.jobs:
+                    job.run_if_due(step)
+                upto = min(end, min(job.due for job in self.jobs),
+                           (step // every + 1) * every if until is not None else end)
+                self.loop.advance(max(1, upto - step))
+                self.steps = max(upto, step + 1)
+                mcu = self.loop.mcu
+                for hook in self._hooks:
+                    hook(mcu)
             if until is not None and self.steps % every == 0 and until():
-                return True
-        return False
-
-    def _period(self) -> None:
-        self._set_ros_time()
-        step = self.steps
-        for job in self.jobs:
-            job.run_if_due(step)
-        self.loop.step()
-        mcu = self.loop.mcu
-        for hook in self._hooks:
-            hook(mcu)
-        self.steps += 1
+                break
+        with self.lock:  # ROS time is where the loop stands (a paused robot's goals)
+            self._set_ros_time()
+            self._publish_clock()
+        return until is not None and bool(until())
 
     # -- what a step can wait for (simcontrol's ``until``) --------------------------------------
     def navigation_idle(self) -> bool:

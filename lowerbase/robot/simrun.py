@@ -88,9 +88,12 @@ def run_sim(run: SimRun, show: Callable[[str], None],
         robot.advertise()
         control.advertise()
         deadline = None if run.duration is None else time.monotonic() + run.duration
-        print(f"lowerbase robot: ready in lockstep on simulated time (--speed "
-              f"{speed_text(run.speed)}{', paused: /lowerbase/step moves it' if run.paused else ''}"
-              f"); parts: driver_base, world"
+        import rosgraph
+
+        paused = ", paused: /lowerbase/step moves it" if run.paused else ""
+        print(f"lowerbase robot: ready on ROS master {rosgraph.get_master_uri()}, in lockstep on "
+              f"simulated time (/use_sim_time true, /clock from it, --speed "
+              f"{speed_text(run.speed)}{paused}); parts: driver_base, world"
               + "".join(f", {p}" for p in run.options.parts) + "; Ctrl-C stops", flush=True)
 
         def tick() -> None:

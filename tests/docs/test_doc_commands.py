@@ -82,13 +82,17 @@ CHECKS: dict[str, Check] = {
     "lowerbase robot --map warehouse": Check("skip", why=ROS),
     "lowerbase robot --map empty_room --without navigation --without tasks": Check(
         "skip", why=ROS),
-    "lowerbase robot --map warehouse --sim-time": Check("skip", why=ROS),
+    # tests/robot/test_robot_whole_ros.py and test_robot_lockstep_ros.py run these on a master
+    "lowerbase robot --map warehouse --sim-time --speed max": Check("skip", why=ROS),
+    "lowerbase robot --map warehouse --sim-time --paused --speed max": Check("skip", why=ROS),
+    "lowerbase robot --map warehouse --sim-time --paused --speed max --seed 2": Check(
+        "skip", why=ROS),
+    "lowerbase robot --map warehouse --sim-time --paused --speed max --truth /tmp/truth.csv":
+        Check("skip", why=ROS),
     "lowerbase robot --map warehouse --mcap robot.mcap": Check("skip", why=ROS),
     "lowerbase robot --map warehouse --foxglove": Check("skip", why=ROS),
     # tests/robot/test_robot_charging_ros.py runs it (with --sim-time --speed 2) on its master
     "lowerbase robot --map empty_room --soc 30 --ground-truth": Check("skip", why=ROS),
-    "lowerbase robot --map warehouse --sim-time --speed 4 --without navigation --without "
-    "tasks": Check("skip", why=ROS),
     "lowerbase emulate --fleet 100": Check("start", "Ctrl-C stops"),
     "lowerbase driver --bus-kwargs port=43115": Check("skip", why=ROS),
     "lowerbase driver --robot legged": Check("skip", why=ROS),

@@ -75,7 +75,7 @@ def cmd_vel_per_sim_second(client: NavClient, window: float = 3.0) -> float:
 
 @pytest.mark.ros
 @pytest.mark.process
-@pytest.mark.parametrize("sim", [False, True], ids=["real-time", "sim-time-x2"])
+@pytest.mark.parametrize("sim", [False, True], ids=["real-time", "lockstep-x4"])
 def test_the_whole_robot_reaches_a_move_base_goal_and_completes_a_transport_task(
         ros_master: Any, tmp_path: Path, sim: bool) -> None:  # noqa: F811
     require_ros(("rospy", "actionlib", "tf2_ros", "nav_msgs.srv", "std_srvs.srv"))
@@ -83,13 +83,13 @@ def test_the_whole_robot_reaches_a_move_base_goal_and_completes_a_transport_task
     places = load_places("warehouse", load_map("warehouse")).named()
     start = places["start"]
     truth_file = tmp_path / "truth.csv"
-    extra = ("--sim-time", "--speed", "2") if sim else ()
+    extra = ("--sim-time", "--speed", "4") if sim else ()
     robot = Robot(env, tmp_path / "logs", "--map", "warehouse", "--truth", str(truth_file),
                   *extra)
     client = None
     try:
         robot.wait_for("ready on ROS master", timeout=240.0)
-        assert len(robot.children()) == 5
+        assert len(robot.children()) == (0 if sim else 5)  # lockstep: one process
         client = NavClient(tmp_path, ros_master.env)
         client.ask(op="sub", topic="/robot_status", type="woosh_msgs/RobotStatus")
         for topic, kind in (("/clock", "rosgraph_msgs/Clock"),
@@ -108,18 +108,13 @@ def test_the_whole_robot_reaches_a_move_base_goal_and_completes_a_transport_task
                      "orientation": {"z": qz, "w": qw}}}, "execution_mode": 0})
         if sim:  # the control loop's 20 Hz is per simulated second (2 per wall second here)
             rate = cmd_vel_per_sim_second(client)
-            assert 0.7 * 20 <= rate <= 1.2 * 20, rate  # 10 when it paced on wall time
-            # the goal itself is not asserted at K=2: driver_base loses WheelFeedback frames on
-            # a loaded host (odometry re-baselined) and amcl can lose the robot (docs/robot.md)
-            client.ask(op="cancel", name="/move_base")
-            assert client.ask(op="result", name="/move_base", timeout=120.0)["done"]
-            return
+            assert 0.9 * 20 <= rate <= 1.1 * 20, rate  # 10 when it paced on wall time
         for _ in range(5):  # the client waits 60 s per request
             res = client.ask(op="result", name="/move_base", timeout=120.0)
             if res["done"]:
                 break
-        assert res["state"] == SUCCEEDED, (res, (tmp_path / "logs" / "navigation.log")
-                                           .read_text()[-3000:])
+        assert res["state"] == SUCCEEDED, (res, "" if sim else (
+            tmp_path / "logs" / "navigation.log").read_text()[-3000:])
         at = standing(truth, start)
         # within move_base's 5 cm / 2 deg on amcl's estimate, plus amcl's own error
         assert near(at, goal, 0.12, math.radians(5.0)), (at, goal)
@@ -138,5 +133,6 @@ def test_the_whole_robot_reaches_a_move_base_goal_and_completes_a_transport_task
         code, out, err = robot.ctrl_c()
     assert code == 0, err
     assert "Traceback" not in err
-    nav_log = (tmp_path / "logs" / "navigation.log").read_text()
-    assert "Traceback" not in nav_log
+    if not sim:
+        nav_log = (tmp_path / "logs" / "navigation.log").read_text()
+        assert "Traceback" not in nav_log

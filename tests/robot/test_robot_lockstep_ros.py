@@ -1,0 +1,100 @@
+"""``lowerbase robot --sim-time``: the whole robot in lockstep on one simulated clock, tried from
+outside with a user's client (examples/sim_goals.py: /map, make_plan, /move_base goals,
+exec_task, robot_status, /lowerbase/step).
+
+The same client against the paused robot twice, once with 16 busy processes beside it (load
+>= 16 on 2 cores): the same robot_status sequence, the same goal results and the same final
+true pose (the emulator's ground truth, ``--truth``) within 1 mm."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.conftest import ROOT
+from tests.driver.conftest import require_ros, ros_master, woosh_msgs_build  # noqa: F401
+from tests.robot.test_robot_ros import Robot
+
+HOG = 16  #: busy processes beside the second run
+HOG_LIMIT = 900.0  #: [s] each of them ends by itself after this at the latest
+
+
+@contextmanager
+def cpu_hog(n: int) -> Iterator[None]:
+    """``n`` processes spinning on the CPU, bounded in time, stopped on the way out. They run
+    at nice 19: the load is theirs (>= n runnable), the robot still gets most of a core, so
+    the test takes minutes, not tens (benchmarks/bench_robot_sim.py runs them at nice 0)."""
+    code = (f"import os, time\nos.nice(19)\nend = time.monotonic() + {HOG_LIMIT}\n"
+            "while time.monotonic() < end: pass")
+    hogs = [subprocess.Popen([sys.executable, "-c", code]) for _ in range(n)]
+    try:
+        yield
+    finally:
+        for h in hogs:
+            h.kill()
+        for h in hogs:
+            h.wait()
+
+
+def last_truth(path: Path) -> tuple[float, ...]:
+    rows = path.read_text().strip().splitlines()
+    return tuple(float(v) for v in rows[-1].split(","))
+
+
+def one_run(env: dict[str, str], tmp: Path, name: str) -> dict[str, Any]:
+    import json
+
+    truth = tmp / f"{name}-truth.csv"
+    report = tmp / f"{name}.json"
+    robot = Robot(env, tmp / f"{name}-logs", "--map", "warehouse", "--sim-time", "--paused",
+                  "--speed", "max", "--truth", str(truth))
+    try:
+        robot.wait_for("in lockstep on simulated time", timeout=300.0)
+        out = subprocess.run(
+            [sys.executable, str(ROOT / "examples" / "sim_goals.py"), "--goals", "2",
+             "--seed", "3", "--mark", "A2-01", "--step", "--report", str(report)],
+            capture_output=True, text=True, env={**os.environ, **env}, timeout=1200)
+        assert out.returncode == 0, (out.stdout[-3000:], out.stderr[-3000:])
+    finally:
+        code, _, err = robot.ctrl_c()
+    assert code == 0, err[-3000:]
+    assert "Traceback" not in err
+    result = json.loads(report.read_text())
+    result["truth"] = last_truth(truth)
+    return result
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_the_same_client_gives_the_same_robot_on_an_idle_and_on_a_loaded_host(
+        ros_master: Any, tmp_path: Path) -> None:  # noqa: F811
+    require_ros(("rospy", "actionlib", "tf2_ros", "nav_msgs.srv", "std_srvs.srv",
+                 "lowerbase_sim_msgs.srv"))
+    env = {k: v for k, v in ros_master.env.items() if k != "ROS_IP"}
+    idle = one_run(env, tmp_path, "idle")
+    t0 = time.monotonic()
+    with cpu_hog(HOG):
+        loaded = one_run(env, tmp_path, "loaded")
+        load = os.getloadavg()[0]
+    print(f"loaded run: {time.monotonic() - t0:.0f} s wall, load {load:.1f}")
+    assert [g["state"] for g in idle["goals"]] == [3, 3]
+    assert idle["task"]["final_task_state"] == 7
+    def goals(run: dict[str, Any]) -> list[tuple[Any, ...]]:
+        return [(tuple(g["goal"]), g["state"], g["text"]) for g in run["goals"]]
+
+    assert goals(loaded) == goals(idle)
+    for key in ("task", "robot_status"):
+        assert loaded[key] == idle[key], key
+    t_idle, t_loaded = idle["truth"], loaded["truth"]
+    assert math.hypot(t_loaded[1] - t_idle[1], t_loaded[2] - t_idle[2]) <= 0.001, \
+        (t_idle, t_loaded)
+    assert abs(t_loaded[3] - t_idle[3]) <= 0.001

@@ -139,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
         config = config_from_args(args)
 
         def link_factory(finished: Any) -> Any:
-            return node.BusLink(config)
+            return bus_link(config)
 
     code = node.run(link_factory, ros_args)
     if replay is not None:
@@ -150,6 +150,17 @@ def run(args: argparse.Namespace) -> int:
             raise LowerbaseError(f"{replay.error}; the replay stopped there "
                                  f"({replay.frames} frames replayed)")
     return code
+
+
+def bus_link(config: dict[str, Any]) -> Any:
+    """The driver's live link; a serial device that is not there yet is waited for, and the
+    user told so in one line (and when it opens)."""
+    from lowerbase.driver.links import BusLink
+
+    def say(text: str) -> None:
+        print(f"lowerbase driver: {text}", flush=True)
+
+    return BusLink(config, announce=say)
 
 
 def run_legged(args: argparse.Namespace, ros_args: list[str]) -> int:

@@ -4,7 +4,9 @@
 Any receive or transmit error (a USB adapter unplugged, the emulator behind a pty killed, an
 interface taken down) closes the bus and reports the link down (``on_down``: the driver core
 shows ``lost`` at once); the bus is then reopened every ``reopen_period`` until it opens, and
-frames flow again: no respawn. :class:`ReplayLink` (lowerbase.driver.replay) feeds a
+frames flow again: no respawn. A serial device that does not exist yet at start (the adapter
+not plugged in, the emulator's pty started second) is waited for the same way: one line says
+so, and the device is opened when it appears. :class:`ReplayLink` (lowerbase.driver.replay) feeds a
 recorded log instead.
 
 A BusLink listens only to what the lower computer sends (:func:`listen_to_lower`) unless the
@@ -17,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -30,12 +33,15 @@ from lowerbase.transport import describe, is_catalog_frame, open_bus
 
 log = logging.getLogger(__name__)
 
-__all__ = ["REPLAY_SUFFIXES", "BusLink", "ReplayLink"]
+__all__ = ["REPLAY_SUFFIXES", "BusLink", "ReplayLink", "missing_device"]
 
 
 FrameSink = Callable[[int, bytes], None]
 DownSink = Callable[[str], None]
 Opener = Callable[[dict[str, Any]], Any]
+
+#: interfaces whose channel is a serial device (a file, possibly ``DEVICE@BAUD`` for slcan)
+SERIAL_INTERFACES = ("lowerbase_serial", "slcan", "serial")
 
 #: compares the whole ID and ignores the extended flag (a foreign extended frame on a catalog
 #: ID still arrives, and is dropped as not a catalog frame)
@@ -64,6 +70,20 @@ def listen_to_lower(bus: Any) -> bool:
     return True
 
 
+def missing_device(config: dict[str, Any]) -> str | None:
+    """The serial device file ``config`` names when it does not exist (yet), else None
+    (not a serial interface, a pyserial URL, a ``pty:`` the bus creates, a device that is
+    there). A dangling link (an emulator's old pty link) does not exist."""
+    if config.get("interface") not in SERIAL_INTERFACES:
+        return None
+    channel = str(config.get("channel") or "")
+    if config.get("interface") == "slcan":
+        channel = channel.split("@", 1)[0]
+    if "://" in channel or channel == "pty" or channel.startswith("pty:") or "/" not in channel:
+        return None
+    return None if os.path.exists(channel) else channel
+
+
 #: [s] a frame's receive stamp older than this (or in the future) is not believed: a bus whose
 #: timestamps are not the wall clock's (a replay, an adapter's own counter)
 MAX_RECEIVE_AGE = 5.0
@@ -83,11 +103,15 @@ def receive_age(msg: Any, wall_now: float) -> float:
 class BusLink:
     """A python-can bus that is closed on any error and reopened every ``reopen_period``.
 
-    ``last_age`` is :func:`receive_age` of the frame being handed to ``on_frame``."""
+    ``last_age`` is :func:`receive_age` of the frame being handed to ``on_frame``.
+    A serial device that does not exist at start (:func:`missing_device`) is waited for:
+    ``announce`` (a line for the user; default: a warning in the log) says so once, and that
+    it is open when it appears; any other failure to open at start is raised."""
 
     def __init__(
         self, config: dict[str, Any], reopen_period: float = 1.0, *,
         opener: Opener | None = None, clock: Clock | None = None, catalog_filter: bool = True,
+        announce: Callable[[str], None] | None = None,
     ) -> None:
         self.config = config
         #: listen to the lower computer's IDs only (unless ``config`` has ``can_filters``)
@@ -96,7 +120,15 @@ class BusLink:
         self.description = describe(config)
         self._open_bus: Opener = opener or open_bus
         self.clock = clock or RealClock()
-        self._bus: Any = self._open(config)  # the first failure is the user's: raise it
+        self._announce = announce or log.warning
+        #: the serial device waited for (it did not exist at start), until it opens
+        self.waiting_for = missing_device(config)
+        self._bus: Any = None
+        if self.waiting_for is None:
+            self._bus = self._open(config)  # the first failure is the user's: raise it
+        else:
+            self._announce(f"waiting for {self.waiting_for} to appear (looking every "
+                           f"{reopen_period:g} s)")
         self._failed: str | None = None  # a transmit error: the reader closes the bus
         self._next_open = -math.inf
         self._last_error_log = -math.inf
@@ -157,14 +189,21 @@ class BusLink:
             now = self.clock.now()
             if now < self._next_open:
                 return self._next_open - now
+            if self.waiting_for is not None and missing_device(self.config) is not None:
+                self._next_open = now + self.reopen_period  # still not there: said already
+                return self.reopen_period
             try:
                 self._bus = self._open(self.config)
             except (LowerbaseError, Exception) as exc:
                 self._next_open = now + self.reopen_period
-                self._log_error(f"cannot reopen: {exc}")
+                self._log_error(f"cannot {'open' if self.waiting_for else 'reopen'}: {exc}")
                 return self.reopen_period
-            self.reopens += 1
-            log.warning("bus reopened: %s", self.description)
+            if self.waiting_for is not None:
+                self._announce(f"{self.waiting_for} appeared: {self.description} open")
+                self.waiting_for = None
+            else:
+                self.reopens += 1
+                log.warning("bus reopened: %s", self.description)
             return 0.0
         try:
             msg = self._bus.recv(timeout)

@@ -9,8 +9,9 @@ from typing import Any
 import can
 import pytest
 
+from lowerbase.cli.driver import bus_link
 from lowerbase.clock import SimClock
-from lowerbase.driver.links import BusLink
+from lowerbase.driver.links import BusLink, missing_device
 from lowerbase.errors import TransportError
 from lowerbase.transport.serial_bus import SerialFrameBus
 
@@ -121,10 +122,82 @@ def test_any_error_closes_and_reopens_on_the_period() -> None:
     assert len(buses) == 3 and link.reopens == 2
 
 
-def test_the_first_open_failure_is_the_users() -> None:
+def test_the_first_open_failure_is_the_users(tmp_path: Path) -> None:
+    """A device that is there but does not open (not a tty, no permission) is an error at
+    start; only a device that does not exist yet is waited for."""
+    there = tmp_path / "ttyUSB9"
+    there.write_text("")
+
     def opener(config: dict[str, Any]) -> Any:
-        raise TransportError("cannot open serial port /dev/ttyUSB9: no such file")
+        raise TransportError(f"cannot open serial port {there}: not a tty")
 
     with pytest.raises(TransportError, match="ttyUSB9"):
-        BusLink({"interface": "lowerbase_serial", "channel": "/dev/ttyUSB9"}, opener=opener)
+        BusLink({"interface": "lowerbase_serial", "channel": str(there)}, opener=opener)
+    with pytest.raises(TransportError, match="ttyUSB9"):
+        BusLink({"interface": "socketcan", "channel": "can0"}, opener=opener)
 
+
+def test_a_serial_device_that_is_not_there_yet_is_waited_for(tmp_path: Path) -> None:
+    """The emulator started second (or the adapter plugged in later): the link says once that
+    it waits, looks for the device every reopen_period and opens it when it appears."""
+    tty = tmp_path / "chassis-tty"
+    clock = SimClock()
+    lines: list[str] = []
+    link = BusLink({"interface": "lowerbase_serial", "channel": str(tty)}, clock=clock,
+                   announce=lines.append)
+    rec = Recorder()
+    try:
+        assert not link.is_open
+        assert len(lines) == 1 and f"waiting for {tty}" in lines[0], lines
+        for _ in range(3):  # missing for 3 s: one look a second, nothing more said
+            assert link.poll(rec.frame, rec.down) == pytest.approx(1.0)
+            assert link.poll(rec.frame, rec.down) == pytest.approx(1.0)  # not before due
+            clock.advance(1.0)
+        assert len(lines) == 1 and rec.downs == [] and link.reopens == 0
+        link.send(0x20, b"\0" * 6)  # what the driver sends meanwhile is counted, not raised
+        assert link.tx_errors == 1
+        emulator = SerialFrameBus(f"pty:{tty}")  # the emulator publishes its pty there
+        try:
+            assert link.poll(rec.frame, rec.down) == 0.0 and link.is_open
+            assert len(lines) == 2 and str(tty) in lines[1] and "open" in lines[1], lines
+            emulator.send(can.Message(arbitration_id=0x90, data=b"\x03" * 8,
+                                      is_extended_id=False))
+            for _ in range(20):  # a generous bound: the frame is there at the first receive
+                link.poll(rec.frame, rec.down, timeout=0.5)
+                if rec.frames:
+                    break
+            assert rec.frames == [(0x90, b"\x03" * 8)] and link.reopens == 0
+        finally:
+            emulator.shutdown()
+    finally:
+        link.close()
+
+
+def test_missing_device_names_only_serial_device_files(tmp_path: Path) -> None:
+    there = tmp_path / "ttyACM0"
+    there.write_text("")
+    gone = tmp_path / "ttyACM1"
+    assert missing_device({"interface": "lowerbase_serial", "channel": str(gone)}) == str(gone)
+    assert missing_device({"interface": "slcan", "channel": f"{gone}@115200"}) == str(gone)
+    assert missing_device({"interface": "lowerbase_serial", "channel": str(there)}) is None
+    assert missing_device({"interface": "lowerbase_serial", "channel": f"pty:{gone}"}) is None
+    assert missing_device({"interface": "lowerbase_serial", "channel": "loop://"}) is None
+    assert missing_device({"interface": "socketcan", "channel": "can0"}) is None
+    assert missing_device({"interface": "udp_multicast", "channel": "239.74.163.2"}) is None
+    (tmp_path / "dangling").symlink_to(gone)  # an emulator's old pty link: not there
+    assert missing_device({"interface": "lowerbase_serial",
+                           "channel": str(tmp_path / "dangling")}) == str(tmp_path / "dangling")
+
+
+
+def test_the_driver_command_says_once_that_it_waits(tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """`lowerbase driver --serial PATH` with PATH not there yet: one line, no exit."""
+    tty = tmp_path / "chassis-tty"
+    link = bus_link({"interface": "lowerbase_serial", "channel": str(tty), "baudrate": 115200})
+    try:
+        assert not link.is_open
+        out = capsys.readouterr().out.splitlines()
+        assert out == [f"lowerbase driver: waiting for {tty} to appear (looking every 1 s)"]
+    finally:
+        link.close()

@@ -1,11 +1,13 @@
 """The live view: a Foxglove WebSocket server with the channels of the MCAP recording.
 
 ``--foxglove [HOST:PORT]`` (``lowerbase emulate``, ``scenario run``, ``demo``, ``robot``) starts
-:class:`FoxgloveSink`: the foxglove-sdk WebSocket server (subprotocol ``foxglove.sdk.v1``, the
-``foxglove.websocket.v1`` protocol under its new name) on 127.0.0.1:8765 unless the user gives
-a host. A :class:`~lowerbase.recording.publisher.RunPublisher` writes to it what it writes to
-an MCAP file: the same channels, schemas and bytes. Messages of a channel no client subscribes
-to are neither built nor serialised.
+:class:`FoxgloveSink`: the foxglove-sdk WebSocket server on 127.0.0.1:8765 unless the user gives
+a host. The SDK speaks subprotocol ``foxglove.sdk.v1`` only (the ``foxglove.websocket.v1``
+protocol under its new name); a :class:`~lowerbase.recording.wsgate.SubprotocolGate` in front
+of it also lets in clients that offer only the old name (Foxglove and Lichtblick releases).
+A :class:`~lowerbase.recording.publisher.RunPublisher` writes to it what it writes to an MCAP
+file: the same channels, schemas and bytes. Messages of a channel no client subscribes to are
+neither built nor serialised.
 
 :class:`EmulatorFeed` is what ``lowerbase emulate`` streams (it runs no driver): the ground
 truth at 50 Hz and every frame sent or received, raw and decoded.
@@ -20,6 +22,7 @@ from typing import Any
 from lowerbase.errors import ConfigError
 from lowerbase.recording.publisher import RunPublisher
 from lowerbase.recording.sinks import ChannelSpec
+from lowerbase.recording.wsgate import SubprotocolGate
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765
@@ -54,7 +57,8 @@ def parse_address(text: str) -> tuple[str, int]:
 
 
 class FoxgloveSink:
-    """A foxglove-sdk WebSocket server on its own Context (so several can run in a process).
+    """A foxglove-sdk WebSocket server on its own Context (so several can run in a process),
+    on a loopback port of its own behind a :class:`SubprotocolGate` on ``host:port``.
 
     ``listener``: a ``foxglove.websocket.ServerListener`` (e.g. told of each subscription).
     ConfigError (one line) when it cannot listen: the port in use, an unknown host."""
@@ -68,17 +72,23 @@ class FoxgloveSink:
             quiet.setLevel(logging.WARNING)
         self._foxglove = foxglove
         self.context = foxglove.Context()
+        def refuse(reason: str) -> ConfigError:
+            return ConfigError(f"--foxglove {host}:{port}: cannot listen ({reason}); give "
+                               f"another port, e.g. --foxglove {host}:{port + 1 if port else 0}")
+
         try:
-            self.server = foxglove.start_server(name=name, host=host, port=port,
+            self.server = foxglove.start_server(name=name, host=DEFAULT_HOST, port=0,
                                                 context=self.context,
                                                 server_listener=listener,
                                                 message_backlog_size=BACKLOG)
         except RuntimeError as exc:  # the SDK's FoxgloveError
-            reason = str(exc).removeprefix("FoxgloveError: ")
-            raise ConfigError(f"--foxglove {host}:{port}: cannot listen ({reason}); give "
-                              f"another port, e.g. --foxglove {host}:{port + 1 if port else 0}"
-                              ) from None
-        self.host, self.port = host, self.server.port
+            raise refuse(str(exc).removeprefix("FoxgloveError: ")) from None
+        try:
+            self.gate = SubprotocolGate(host, port, self.server.port)
+        except OSError as exc:  # the port in use, an unknown host
+            self.server.stop()
+            raise refuse(exc.strerror or str(exc)) from None
+        self.host, self.port = host, self.gate.port
         self._channels: dict[str, Any] = {}
         self._closed = False
 
@@ -118,6 +128,7 @@ class FoxgloveSink:
         self._closed = True
         for ch in self._channels.values():
             ch.close()
+        self.gate.close()
         self.server.stop()
 
 

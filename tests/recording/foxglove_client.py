@@ -14,13 +14,15 @@ from typing import Any
 from websockets.sync.client import connect
 
 SUBPROTOCOL = "foxglove.sdk.v1"  # foxglove.websocket.v1 under its new name (foxglove-sdk)
+LEGACY_SUBPROTOCOL = "foxglove.websocket.v1"  # what Foxglove and Lichtblick releases offer
 
 
 class FoxgloveClient:
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, subprotocols: tuple[str, ...] = (SUBPROTOCOL,)) -> None:
         self._stack = contextlib.ExitStack()
         self.ws = self._stack.enter_context(
-            connect(url, subprotocols=[SUBPROTOCOL], open_timeout=10))  # type: ignore[list-item]
+            connect(url, subprotocols=list(subprotocols),  # type: ignore[arg-type]
+                    open_timeout=10))
         self.channels: dict[str, dict[str, Any]] = {}  #: topic -> advertised channel
         self.server_info: dict[str, Any] = {}
         self._subs: dict[int, str] = {}

@@ -34,7 +34,7 @@ from lowerbase.protocol.codec import default_codec
 from lowerbase.recording.live import EmulatorFeed, FoxgloveSink, parse_address, start_live
 from lowerbase.recording.mcap_writer import McapRecorder
 from lowerbase.recording.messages import to_ns
-from tests.recording.foxglove_client import FoxgloveClient
+from tests.recording.foxglove_client import LEGACY_SUBPROTOCOL, SUBPROTOCOL, FoxgloveClient
 
 ROS1 = get_typestore(Stores.ROS1_NOETIC)
 
@@ -161,8 +161,13 @@ def test_nobody_subscribed_nothing_is_built(tmp_path: Path, live: FoxgloveSink) 
     assert seqs[0] == seqs[1]
 
 
-def test_emulator_feed_streams_truth_and_frames(live: FoxgloveSink) -> None:
-    """`lowerbase emulate --foxglove`: the truth at 50 Hz and every frame sent, decoded."""
+@pytest.mark.parametrize("offered", [(SUBPROTOCOL,), (LEGACY_SUBPROTOCOL,),
+                                     (LEGACY_SUBPROTOCOL, SUBPROTOCOL)])
+def test_emulator_feed_streams_truth_and_frames(live: FoxgloveSink,
+                                                offered: tuple[str, ...]) -> None:
+    """`lowerbase emulate --foxglove`: the truth at 50 Hz and every frame sent, decoded; to a
+    client that offers the protocol's new name, the old one only (Foxglove and Lichtblick
+    releases), or both."""
     clock = SimClock()
     bus = can.Bus(interface="virtual", channel="lowerbase-test-live", receive_own_messages=False)
     feed = EmulatorFeed([live], clock)
@@ -182,8 +187,12 @@ def test_emulator_feed_streams_truth_and_frames(live: FoxgloveSink) -> None:
         truths[to_ns(clock.now() - m.boot_time)] = (tr.x, tr.y, tr.yaw)
 
     run_mcu(mcu, bus, clock, duration=0.3, on_step=step)  # channels exist
-    client = FoxgloveClient(live.url)
+    client: FoxgloveClient | None = None
     try:
+        client = FoxgloveClient(live.url, offered)
+        # the server agrees to what the client offered (the new name when it offers both)
+        assert client.ws.subprotocol == (SUBPROTOCOL if SUBPROTOCOL in offered
+                                         else LEGACY_SUBPROTOCOL)
         topics = ("/ground_truth/odom", "/can/decoded/WheelFeedback", "/can/frames")
         client.pump_until(lambda: all(t in client.channels for t in topics))
         client.subscribe(*topics)
@@ -195,7 +204,8 @@ def test_emulator_feed_streams_truth_and_frames(live: FoxgloveSink) -> None:
         client.pump_until(lambda: all(len(client.messages.get(t, [])) == k
                                       for t, k in n.items()))
     finally:
-        client.close()
+        if client is not None:
+            client.close()
         feed.close()
         bus.shutdown()
     for ns, payload in client.messages["/ground_truth/odom"]:
@@ -279,3 +289,46 @@ def test_cli_bad_value_and_busy_port_are_one_line(tmp_path: Path,
     line = _one_line(["emulate", "--simulated", "--duration", "1", "-i", "virtual",
                       "--foxglove", "[::1"], capsys)
     assert "IPv6" in line
+
+
+def test_the_gate_renames_only_the_subprotocol() -> None:
+    """A request that offers only the old name is passed on with the new one (header names in
+    any case, several headers); the answer names the old one back. Anything else passes."""
+    from lowerbase.recording.wsgate import rewrite_request, rewrite_response
+
+    head = (b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nsec-websocket-protocol: x.v1, "
+            b"foxglove.websocket.v1\r\nSec-WebSocket-Protocol: y.v1\r\nSec-WebSocket-Key: "
+            b"k==\r\n\r\n")
+    out, legacy = rewrite_request(head)
+    assert legacy and out == (b"GET / HTTP/1.1\r\nSec-WebSocket-Protocol: foxglove.sdk.v1\r\n"
+                              b"Host: 127.0.0.1\r\nSec-WebSocket-Key: k==\r\n\r\n")
+    both = head.replace(b"y.v1", b"foxglove.sdk.v1")
+    assert rewrite_request(both) == (both, False)
+    neither = head.replace(b"foxglove.websocket.v1", b"z.v1")
+    assert rewrite_request(neither) == (neither, False)
+    answer = (b"HTTP/1.1 101 Switching Protocols\r\nSec-WebSocket-Accept: a=\r\n"
+              b"sec-websocket-protocol: foxglove.sdk.v1\r\n\r\n")
+    assert rewrite_response(answer) == answer.replace(b": foxglove.sdk.v1",
+                                                      b": foxglove.websocket.v1")
+
+
+def test_closing_the_sink_ends_its_connections() -> None:
+    """A connected client (through the gate) is disconnected when the run ends; a client that
+    offers neither name is refused by the server, as before."""
+    from websockets.exceptions import ConnectionClosed, InvalidStatus
+    from websockets.sync.client import connect
+
+    sink = FoxgloveSink("127.0.0.1", 0)
+    try:
+        with pytest.raises(InvalidStatus, match="400"):
+            connect(sink.url, subprotocols=["other.v1"], open_timeout=10)  # type: ignore[list-item]
+        client = FoxgloveClient(sink.url, (LEGACY_SUBPROTOCOL,))
+        client.pump_until(lambda: bool(client.server_info))
+    finally:
+        sink.close()
+    try:
+        with pytest.raises(ConnectionClosed):
+            while True:
+                client.ws.recv(timeout=10)
+    finally:
+        client.close()

@@ -5,13 +5,15 @@ can.logger`` records too. This adds what it lacks for this protocol: lowerbase's
 transport, a filter by catalog message name (``--only``), a decoded echo (``--print``) and an
 end after ``--duration`` seconds. On a terminal, a status line shows the frame count as it
 grows (rewritten in place, at most twice a second); when stderr is not a terminal, or with
-``--print``, only the start and end lines are printed.
+``--print``, only the start and end lines are printed. ``--duration`` counts from the moment
+the bus opens (frames queue for the file from then), not from when the writer is ready.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import signal
 import sys
 import threading
@@ -74,6 +76,13 @@ class McapFrames:
         self.recorder.close()
 
 
+def open_writer(path: Path) -> Any:
+    """The writer of ``path``: its suffix picks the format (.mcap: :class:`McapFrames`)."""
+    import can
+
+    return McapFrames(path) if path.suffix.lower() == ".mcap" else can.Logger(str(path))
+
+
 def add_subparser(subparsers: Any) -> None:
     from lowerbase.transport import add_bus_arguments
 
@@ -116,19 +125,24 @@ def run(args: argparse.Namespace) -> int:
                 raise ConfigError(f"--only {name}: not a message of the catalog; "
                                   f"known: {', '.join(m.name for m in codec)}") from None
     config = config_from_args(args)
+    if mcap:  # its imports take seconds on a loaded host: before the bus opens, not after
+        importlib.import_module("lowerbase.recording.mcap_writer")
     bus = open_bus(config)
+    # frames queue for the file from here (those that arrive while the writer is set up are
+    # written too): --duration counts from this moment, so the file spans it, any format
+    started = time.monotonic()
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     count = 0
     try:
-        writer = McapFrames(path) if mcap else can.Logger(str(path))
+        writer = open_writer(path)
     except (OSError, ValueError, LowerbaseError) as exc:
         bus.shutdown()
         if isinstance(exc, ConfigError):
             raise
         raise ConfigError(f"cannot write {path}: {exc}") from None
     print(f"lowerbase record: {describe(config)} -> {path}; Ctrl-C stops", file=sys.stderr)
-    end = time.monotonic() + args.duration if args.duration is not None else None
+    end = started + args.duration if args.duration is not None else None
     live = LiveCount(sys.stderr, path, enabled=not args.print_frames)
     try:
         with contextlib.suppress(KeyboardInterrupt):

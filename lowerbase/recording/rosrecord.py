@@ -30,11 +30,13 @@ from typing import Any
 from lowerbase.recording.publisher import RunPublisher
 from lowerbase.recording.sinks import ChannelSpec, McapSink, Sink
 
-#: what the robot publishes (driver, world, navigation, tasks)
+#: what the robot publishes (driver, world, navigation, tasks), and the velocity commands
+#: driver_base obeys: /base_cmd_vel (navigation's, trace's) and /smooth_cmd_vel. Nothing in the
+#: robot publishes or reads /cmd_vel, so it is not recorded (``--topic`` lists others instead).
 TOPICS = ("/odom", "/odom_raw", "/imu/data_raw", "/battery", "/driver_base/bms",
           "/status_code", "/driver_base/link_state", "/scan", "/amcl_pose", "/map",
           "/movebase_pose2d", "/tf", "/tf_static", "/robot_status", "/move_base/NavfnROS/plan",
-          "/cmd_vel")
+          "/base_cmd_vel", "/smooth_cmd_vel")
 
 
 class Latched:

@@ -57,6 +57,12 @@ def test_robot_mcap_records_topics_and_frames(ros_master: Any, tmp_path: Path) -
     assert types["/odom"] == ("nav_msgs/Odometry", "cd5e73d190d741a2f92e81eda573aca7")
     assert types["/scan"][0] == "sensor_msgs/LaserScan"
     assert {"/odom_raw", "/imu/data_raw", "/tf", "/map", "/can/frames"} <= set(types)
+    # the velocity commands driver_base obeys (navigation's, here the probe's 2 s at 20 Hz)
+    assert types["/base_cmd_vel"] == ("geometry_msgs/Twist", "9f195f881246fdfa2798d1d3eebca84a")
+    with path.open("rb") as f:
+        commands = [m for *_, m in make_reader(f, decoder_factories=[DecoderFactory()])
+                    .iter_decoded_messages(topics=["/base_cmd_vel"])]
+    assert len(commands) >= 20 and {(m.linear.x, m.angular.z) for m in commands} == {(0.3, 0.0)}
     # the message the probe saw last is in the file, the same
     for topic in ("/odom", "/scan"):
         theirs = seen[topic]["msg"]

@@ -18,8 +18,9 @@ def add_subparser(subparsers: Any) -> None:
         "adapter or a serial port) against the catalog: every frame (present, DLC, cycle "
         "time, value ranges, counters), the request/response pairs, the safety behaviour and "
         "robustness. Takes python-can's bus flags (default: udp_multicast 239.74.163.2:43113) "
-        "or --serial PORT. Exits 1 when a check fails. The suite enables the chassis and turns "
-        "the wheels at --speed: put a real robot on blocks, or use --no-motion.",
+        "or --serial PORT. Exits 1 when a check fails, or when none passed (all skipped). "
+        "The suite enables the chassis and turns the wheels at --speed: put a real robot on "
+        "blocks, or use --no-motion.",
     )
     add_bus_arguments(p)
     p.add_argument("--junit", metavar="FILE", help="write the results as JUnit XML")
@@ -81,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
         run_suite,
         select,
     )
-    from lowerbase.errors import ConfigError
+    from lowerbase.bench.conformance.core import nothing_passed
+    from lowerbase.errors import ConfigError, LowerbaseError
     from lowerbase.transport import config_from_args, describe, open_bus
 
     if args.robot == "legged":
@@ -125,4 +127,7 @@ def run(args: argparse.Namespace) -> int:
     if args.junit:
         junit_xml(report).write(args.junit, encoding="utf-8", xml_declaration=True)
         print(f"lowerbase conformance: JUnit XML written to {args.junit}", file=sys.stderr)
+    why = nothing_passed(report, describe(config))
+    if why is not None:  # all skipped: not a pass
+        raise LowerbaseError(why)
     return 0 if report.ok else 1

@@ -297,6 +297,40 @@ def test_silent_lower_computer_fails_the_link_and_skips_the_rest(
     assert {r for c, r in results.items() if c != "link.heartbeat"} == {"SKIP"}
 
 
+def test_nothing_passed_on_a_silent_bus_is_a_failure(udp_bus_config: dict[str, Any],
+                                                     tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """Nobody on the bus and link.heartbeat not selected: every check is skipped, none
+    failed, and still the run fails, with one line that says what to check."""
+    bus = bus_cli_args(udp_bus_config)
+    junit = tmp_path / "conformance.xml"
+    code = main(["conformance", *bus, "--only", "frame.Heartbeat.*", "--junit", str(junit)])
+    captured = capsys.readouterr()
+    assert code == 1, captured.out
+    assert "0 passed, 0 failed, 0 errors" in captured.out
+    err = captured.err.strip().splitlines()
+    assert err[-1].startswith("lowerbase conformance: error: nothing passed: no frame from a "
+                              "lower computer"), err
+    assert "239.74.163.99" in err[-1] and "is it running" in err[-1]
+    assert junit.exists()  # written before the verdict
+
+
+def test_a_run_of_skips_only_fails_and_says_so() -> None:
+    """A lower computer answered but every selected check was skipped (e.g. --no-motion with
+    only motion checks): not a pass either."""
+    from lowerbase.bench.conformance.core import Check, CheckResult, Report, nothing_passed
+    from lowerbase.bench.conformance.core import passed as pass_
+    from lowerbase.bench.conformance.core import skipped as skip
+
+    check = Check("safety.watchdog", "the watchdog", lambda _: pass_())
+    skips = Report((CheckResult(check, skip("needs motion (--no-motion)"), 0.0),), 1.0)
+    assert skips.ok and "every check was skipped" in (nothing_passed(skips, "bus x") or "")
+    silent = Report((CheckResult(check, skip("no lower computer"), 0.0),), 3.0, linked=False)
+    assert "no frame from a lower computer on bus x" in (nothing_passed(silent, "bus x") or "")
+    good = Report((CheckResult(check, pass_(), 0.0),), 1.0)
+    assert nothing_passed(good, "bus x") is None
+
+
 @pytest.mark.process
 def test_serial_pty_run(lowerbase_proc: Any, tmp_path: Path,
                         capsys: pytest.CaptureFixture[str]) -> None:

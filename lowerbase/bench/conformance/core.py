@@ -83,6 +83,7 @@ class CheckResult:
 class Report:
     results: tuple[CheckResult, ...]
     duration: float  #: [s]
+    linked: bool = True  #: a lower computer was heard on the bus
 
     def count(self, status: Status) -> int:
         return sum(r.outcome.status == status for r in self.results)
@@ -101,6 +102,18 @@ class Report:
         return (f"{n} check{'s' if n != 1 else ''}: {self.count(Status.PASS)} passed, "
                 f"{self.count(Status.FAIL)} failed, {self.count(Status.ERROR)} errors, "
                 f"{self.count(Status.SKIP)} skipped in {self.duration:.1f} s")
+
+
+def nothing_passed(report: Report, bus: str) -> str | None:
+    """Why a run in which no check failed is still a failure: none passed (None: some did).
+    ``bus``: where the suite listened, for the user to check."""
+    if report.count(Status.PASS) or not report.ok:
+        return None
+    if not report.linked:
+        return (f"nothing passed: no frame from a lower computer on {bus}: is it running, "
+                "and are the bus flags (-i/-c/--bus-kwargs port=..., --serial) its own?")
+    return ("nothing passed: every check was skipped (each row says why); select checks "
+            "that apply, e.g. without --no-motion or with another --only")
 
 
 @dataclass(frozen=True)

@@ -7,8 +7,8 @@ import argparse
 import sys
 from collections.abc import Callable
 
-from lowerbase.bench.conformance.core import CheckResult
-from lowerbase.errors import ConfigError
+from lowerbase.bench.conformance.core import CheckResult, nothing_passed
+from lowerbase.errors import ConfigError, LowerbaseError
 
 
 def run_legged_conformance(args: argparse.Namespace, row: Callable[[str, str, str], str]) -> int:
@@ -70,4 +70,7 @@ def run_legged_conformance(args: argparse.Namespace, row: Callable[[str, str, st
         junit_xml(report, "lowerbase.conformance.legged").write(
             args.junit, encoding="utf-8", xml_declaration=True)
         print(f"lowerbase conformance: JUnit XML written to {args.junit}", file=sys.stderr)
+    why = nothing_passed(report, f"the four leg buses of {describe(config)}")
+    if why is not None:  # all skipped: not a pass
+        raise LowerbaseError(why)
     return 0 if report.ok else 1

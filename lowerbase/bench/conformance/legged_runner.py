@@ -180,4 +180,4 @@ def run_legged_suite(
     finally:
         if ctx.linked:
             ctx.go_to(S.COMM_DISABLED)
-    return Report(tuple(results), time.monotonic() - start)
+    return Report(tuple(results), time.monotonic() - start, linked=ctx.linked)

@@ -162,7 +162,7 @@ def run_suite(
         results.append(CheckResult(check, failed("; ".join(problems)), 0.0))
         if on_result is not None:
             on_result(results[-1])
-    return Report(tuple(results), time.monotonic() - start)
+    return Report(tuple(results), time.monotonic() - start, linked=ctx.linked)
 
 
 # -- JUnit XML ------------------------------------------------------------------------------------

@@ -103,7 +103,9 @@ class LockstepRobot:
         self.board = Switchboard(rospy)
         self._hooks: list[Callable[[Any], None]] = []
         if places.charger is not None:
-            self.charger: ChargerContact | None = ChargerContact(places.charger, start)
+            self.charger: ChargerContact | None = ChargerContact(
+                places.charger, start, lambda line: print(f"lowerbase robot: {line}",
+                                                          flush=True))
             self._hooks.append(self.charger)
         else:
             self.charger = None

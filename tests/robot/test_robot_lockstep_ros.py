@@ -98,3 +98,69 @@ def test_the_same_client_gives_the_same_robot_on_an_idle_and_on_a_loaded_host(
     assert math.hypot(t_loaded[1] - t_idle[1], t_loaded[2] - t_idle[2]) <= 0.001, \
         (t_idle, t_loaded)
     assert abs(t_loaded[3] - t_idle[3]) <= 0.001
+
+
+STAMPS = '''
+import json, sys, time
+import rospy
+from rosgraph_msgs.msg import Clock
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import Imu, LaserScan
+from lowerbase_sim_msgs.srv import Step
+rospy.init_node("stamps", anonymous=True)
+got = {"/clock": [], "/imu/data_raw": [], "/odom": [], "/scan": []}
+def keep(topic, stamp):
+    got[topic].append(stamp.to_sec())
+subs = [rospy.Subscriber("/clock", Clock, lambda m: keep("/clock", m.clock), queue_size=10000),
+        rospy.Subscriber("/imu/data_raw", Imu, lambda m: keep("/imu/data_raw", m.header.stamp),
+                         queue_size=10000),
+        rospy.Subscriber("/odom", Odometry, lambda m: keep("/odom", m.header.stamp),
+                         queue_size=10000),
+        rospy.Subscriber("/scan", LaserScan, lambda m: keep("/scan", m.header.stamp),
+                         queue_size=10000)]
+rospy.wait_for_service("/lowerbase/step", timeout=60)
+step = rospy.ServiceProxy("/lowerbase/step", Step)
+while any(s.get_num_connections() == 0 for s in subs):
+    time.sleep(0.05)
+step(seconds=1.0, until="")  # the link comes up
+time.sleep(1.0)
+for v in got.values():
+    v.clear()
+res = step(seconds=float(sys.argv[2]), until="")
+end = time.monotonic() + 10.0
+while time.monotonic() < end and len(got["/clock"]) < 100 * float(sys.argv[2]):
+    time.sleep(0.1)
+time.sleep(1.0)
+json.dump({"got": got, "sim_time": res.sim_time}, open(sys.argv[1], "w"))
+'''
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_topics_come_at_their_rates_of_simulated_time_with_distinct_rising_stamps(
+        ros_master: Any, tmp_path: Path) -> None:  # noqa: F811
+    """/clock and /imu/data_raw at 100 Hz, /odom at 50 Hz and /scan at 25 Hz of simulated
+    time, each stamp later than the one before: over 5 simulated seconds of /lowerbase/step
+    (the robot at 2 x, so that rospy's queues on both sides keep every message)."""
+    import json
+
+    require_ros(("rospy", "lowerbase_sim_msgs.srv"))
+    env = {k: v for k, v in ros_master.env.items() if k != "ROS_IP"}
+    script, out = tmp_path / "stamps.py", tmp_path / "stamps.json"
+    script.write_text(STAMPS)
+    robot = Robot(env, tmp_path / "logs", "--map", "warehouse", "--sim-time", "--paused",
+                  "--speed", "2")
+    try:
+        robot.wait_for("in lockstep on simulated time", timeout=300.0)
+        run = subprocess.run([sys.executable, str(script), str(out), "5"], capture_output=True,
+                             text=True, env={**os.environ, **env}, timeout=300)
+        assert run.returncode == 0, run.stderr[-3000:]
+    finally:
+        code, _, err = robot.ctrl_c()
+    assert code == 0, err[-3000:]
+    got = json.loads(out.read_text())["got"]
+    for topic, rate in (("/clock", 100), ("/imu/data_raw", 100), ("/odom", 50),
+                        ("/scan", 25)):
+        stamps = got[topic]
+        assert all(b > a for a, b in zip(stamps, stamps[1:])), (topic, stamps[:20])
+        assert abs(len(stamps) - 5 * rate) <= 2, (topic, len(stamps))

@@ -48,7 +48,9 @@ class RosWire:
         return self.rospy.Publisher(name, cls, **kwargs)
 
     def subscriber(self, name: str, cls: Any, callback: Callable[[Any], None],
-                   **kwargs: Any) -> Any:
+                   external: bool | None = None, **kwargs: Any) -> Any:
+        """``external``: outside nodes publish it (LocalWire; None: :data:`EXTERNAL_INPUTS`
+        says)."""
         return self.rospy.Subscriber(name, cls, callback, **kwargs)
 
     def service(self, name: str, cls: Any, handler: Callable[[Any], Any]) -> Any:
@@ -195,11 +197,11 @@ class LocalWire(RosWire):
         return _TeePublisher(real, self.board, topic, bool(kwargs.get("latch", False)))
 
     def subscriber(self, name: str, cls: Any, callback: Callable[[Any], None],
-                   **kwargs: Any) -> Any:
+                   external: bool | None = None, **kwargs: Any) -> Any:
         topic = self.resolve(name)
         self.board.add_local(topic, callback)
         real = None
-        if topic in self.board.external:
+        if topic in self.board.external if external is None else external:
             board = self.board
             real = self.rospy.Subscriber(topic, cls, lambda m: board.post(callback, m),
                                          **kwargs)

@@ -65,6 +65,9 @@ def add_subparser(subparsers: Any) -> None:
     p.add_argument("--paused", action="store_true",
                    help="with --sim-time: start paused; time moves only on /lowerbase/step "
                    "(lowerbase_sim_msgs/Step), for reproducible tests of your nodes")
+    p.add_argument("--robot", choices=("wheeled", "legged"), default="wheeled",
+                   help="with --sim-time: the wheeled AMR (default) or seed 003's legged robot "
+                   "(its lower computer and legged driver in lockstep; docs/legged.md)")
     p.add_argument("--seed", type=int, default=0, metavar="S",
                    help="with --sim-time: the seed of the localization's random numbers "
                    "(default 0)")
@@ -172,7 +175,7 @@ def _run_lockstep(args: argparse.Namespace, sup: Any, speed: float, parts: tuple
         return None
 
     stats = run_sim(SimRun(opts, None if speed == MAX_SPEED else speed, args.paused,
-                           args.duration), lambda text: line.show(
+                           args.duration, legged=args.robot == "legged"), lambda text: line.show(
                                f"lowerbase robot: {text} | master {uri}", time.monotonic()),
                     alive)
     line.done()
@@ -191,7 +194,8 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.sim_time:
         for given, flag in ((args.speed is not None, "--speed K"), (args.paused, "--paused"),
-                            (args.seed != 0, "--seed S")):
+                            (args.seed != 0, "--seed S"),
+                            (args.robot == "legged", "--robot legged")):
             if given:
                 raise ConfigError(f"{flag} goes with --sim-time (real time runs at 1 x)")
     speed = (args.speed or DEFAULT_SPEED) if args.sim_time else None

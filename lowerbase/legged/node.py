@@ -17,6 +17,7 @@ robot_state), rospy's callback threads. ``lowerbase driver --robot legged`` runs
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import math
 import os
@@ -193,12 +194,20 @@ class LeggedNode:
     """Publisher, subscribers, services and the tick loop around one LeggedDriverCore."""
 
     def __init__(self, settings: LeggedSettings, config: LeggedDriverConfig,
-                 links: Sequence[Any]) -> None:
+                 links: Sequence[Any], *, core: LeggedDriverCore | None = None,
+                 wire: Any = None, lock: Any = None) -> None:
+        """``core``: a LeggedDriverCore that already talks to its lower computer (the lockstep
+        robot's; ``links`` are then unused); ``wire``: how the face reaches ROS
+        (:mod:`lowerbase.roswire`; None: rospy as is); ``lock``: shared with the loop."""
+        from lowerbase.roswire import RosWire
+
         self.ros = import_ros()
+        self.wire = wire if wire is not None else RosWire(self.ros.rospy)
         self.settings, self.links = settings, links
-        self.lock = threading.RLock()
+        self.lock = lock if lock is not None else threading.RLock()
         self.stop = threading.Event()
-        self.core = LeggedDriverCore(self._send, RealClock(self.stop), config)
+        self.core = core if core is not None else \
+            LeggedDriverCore(self._send, RealClock(self.stop), config)
         self.goal: LocomotionState | None = None
         self._goal_sent: tuple[LocomotionState, float] | None = None
         self._joy_sub: Any = None
@@ -210,13 +219,13 @@ class LeggedNode:
         self.links[bus].send(frame_id, data)
 
     def advertise(self) -> None:
-        ros, s = self.ros, self.settings
-        rospy, srv = ros.rospy, ros.srv
-        self._state_pub = rospy.Publisher(s.topics["robot_state"], ros.msg.RobotState,
-                                          queue_size=5)
+        ros, s, wire = self.ros, self.settings, self.wire
+        srv = ros.srv
+        self._state_pub = wire.publisher(s.topics["robot_state"], ros.msg.RobotState,
+                                         queue_size=5)
         if s.topics["cmd_vel"]:
-            self._handles.append(rospy.Subscriber(s.topics["cmd_vel"], ros.Twist,
-                                                  self._on_twist, queue_size=10))
+            self._handles.append(wire.subscriber(s.topics["cmd_vel"], ros.Twist,
+                                                 self._on_twist, queue_size=10, external=True))
         handlers: dict[str, tuple[Any, Callable[[Any], Any]]] = {
             "set_waypoints": (srv.SetWaypoints, self._set_waypoints),
             "get_waypoints": (srv.GetWaypoints, self._get_waypoints),
@@ -224,10 +233,12 @@ class LeggedNode:
             "set_map": (srv.SetLaserMap, self._set_map),
             "set_listen": (srv.SetListen, self._set_listen)}
         for key, (cls, handler) in handlers.items():
-            self._handles.append(rospy.Service(s.services[key], cls, handler))
+            self._handles.append(wire.service(s.services[key], cls, handler))
         for name, goal in GOALS.items():
-            self._handles.append(rospy.Service(f"~{name}", ros.Trigger,
-                                               lambda _req, g=goal: self._set_goal(g)))
+            self._handles.append(wire.service(f"~{name}", ros.Trigger, self._goal_handler(goal)))
+
+    def _goal_handler(self, goal: LocomotionState) -> Callable[[Any], Any]:
+        return lambda _req: self._set_goal(goal)
 
     # -- ROS -> core ----------------------------------------------------------------------------
 
@@ -278,8 +289,9 @@ class LeggedNode:
                     self._joy_sub.unregister()
                 self._joy_sub, self._joy_topic = None, topic
                 if topic is not None:
-                    self._joy_sub = self.ros.rospy.Subscriber(
-                        topic, self.ros.Joy, self._on_joy, callback_args=topic, queue_size=10)
+                    self._joy_sub = self.wire.subscriber(
+                        topic, self.ros.Joy, functools.partial(self._on_joy, topic=topic),
+                        queue_size=10, external=True)
         return self.ros.srv.SetListenResponse(success=ok, message=message)
 
     def _set_goal(self, goal: LocomotionState) -> Any:
@@ -314,6 +326,10 @@ class LeggedNode:
             core.request_state(want)
             self._goal_sent = (want, now)
 
+    def publish_state(self) -> None:
+        """robot_state, now."""
+        self._state_pub.publish(self.robot_state_msg())
+
     def robot_state_msg(self) -> Any:
         msg = self.ros.msg
         st = self.core.robot_state()
@@ -344,7 +360,7 @@ class LeggedNode:
                 now = time.monotonic()
                 if now >= next_publish:
                     next_publish = max(next_publish + publish_every, now - publish_every)
-                    self._state_pub.publish(self.robot_state_msg())
+                    self.publish_state()
             deadline += period
             delay = deadline - time.monotonic()
             if delay < -1.0:

@@ -19,7 +19,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from lowerbase.robot.lockstep import LockstepRobot
 from lowerbase.robot.pace import Pacer
 
 CHUNK = 0.05  #: [s] of simulated time between two looks at the pace and the requests
@@ -38,7 +37,9 @@ class _StepRequest:
 class SimControl:
     """Free-running or paused (see the module docstring); :meth:`run` in the main thread."""
 
-    def __init__(self, robot: LockstepRobot, pacer: Pacer, paused: bool = False) -> None:
+    def __init__(self, robot: Any, pacer: Pacer, paused: bool = False) -> None:
+        """``robot``: a :class:`~lowerbase.robot.lockstep.LockstepRobot` or anything with its
+        ``rospy``, ``now``, ``dt``, ``run_periods`` and ``condition``."""
         self.robot = robot
         self.pacer = pacer
         self.paused = paused

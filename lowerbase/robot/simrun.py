@@ -33,6 +33,7 @@ class SimRun:
     speed: float | None = 1.0
     paused: bool = False
     duration: float | None = None
+    legged: bool = False  #: the legged robot (lowerbase.robot.lockstep_legged)
 
 
 def init_rospy() -> Any:
@@ -79,7 +80,15 @@ def run_sim(run: SimRun, show: Callable[[str], None],
     ``alive`` names a helper process that ended (the run then stops). The counts of the
     parts at the end."""
     rospy = init_rospy()
-    robot = LockstepRobot(run.options, rospy)
+    robot: Any
+    if run.legged:
+        from lowerbase.robot.lockstep_legged import LeggedLockstep
+
+        robot = LeggedLockstep(run.options, rospy)
+        parts = robot.parts
+    else:
+        robot = LockstepRobot(run.options, rospy)
+        parts = ("driver_base", "world", *run.options.parts)
     control = SimControl(robot, Pacer(run.speed), paused=run.paused)
     previous = {s: signal.signal(s, lambda *_: control.stop.set())
                 for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
@@ -93,8 +102,8 @@ def run_sim(run: SimRun, show: Callable[[str], None],
         paused = ", paused: /lowerbase/step moves it" if run.paused else ""
         print(f"lowerbase robot: ready on ROS master {rosgraph.get_master_uri()}, in lockstep on "
               f"simulated time (/use_sim_time true, /clock from it, --speed "
-              f"{speed_text(run.speed)}{paused}); parts: driver_base, world"
-              + "".join(f", {p}" for p in run.options.parts) + "; Ctrl-C stops", flush=True)
+              f"{speed_text(run.speed)}{paused}); parts: {', '.join(parts)}; Ctrl-C stops",
+              flush=True)
 
         def tick() -> None:
             show(status_text(control))

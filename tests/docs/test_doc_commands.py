@@ -84,6 +84,7 @@ CHECKS: dict[str, Check] = {
         "skip", why=ROS),
     # tests/robot/test_robot_whole_ros.py and test_robot_lockstep_ros.py run these on a master
     "lowerbase robot --map warehouse --sim-time --speed max": Check("skip", why=ROS),
+    "lowerbase robot --robot legged --sim-time": Check("skip", why=ROS),
     "lowerbase robot --map warehouse --sim-time --paused --speed max": Check("skip", why=ROS),
     "lowerbase robot --map warehouse --sim-time --paused --speed max --seed 2": Check(
         "skip", why=ROS),

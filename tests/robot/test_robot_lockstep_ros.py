@@ -165,3 +165,74 @@ def test_topics_come_at_their_rates_of_simulated_time_with_distinct_rising_stamp
         stamps = got[topic]
         assert all(b > a for a, b in itertools.pairwise(stamps)), (topic, stamps[:20])
         assert abs(len(stamps) - 5 * rate) <= 2, (topic, len(stamps))
+
+
+LEGGED = '''
+import json, math, sys, time
+import rospy
+from std_srvs.srv import Trigger
+from lowerbase_legged_msgs.msg import RobotState, Waypoint
+from lowerbase_legged_msgs.srv import SetWaypoints
+from lowerbase_sim_msgs.srv import Step
+rospy.init_node("legged_probe", anonymous=True)
+states = []
+rospy.Subscriber("/robot_state", RobotState, states.append, queue_size=100000)
+rospy.wait_for_service("/lowerbase/step", timeout=60)
+step = rospy.ServiceProxy("/lowerbase/step", Step)
+walk = rospy.ServiceProxy("/legged_driver/walk", Trigger)
+mission = rospy.ServiceProxy("/planning/set_waypoints", SetWaypoints)
+def settle():
+    time.sleep(0.5)  # wall time: the paused robot's last messages arrive
+step(seconds=2.0, until="")
+settle()
+answer = walk()
+for _ in range(40):
+    step(seconds=0.5, until="")
+    settle()
+    if states and states[-1].state == RobotState.IN_CONTROL:
+        break
+walking_at = states[-1].state
+set_wp = mission(waypoints=[Waypoint(frame="odom", x=1.5, y=0.0)], repetition=1,
+                 current_index=0)
+n0 = len(states)
+res = step(seconds=30.0, until="walked")
+settle()
+walked = states[n0 - 1:]
+path = sum(math.hypot(b.base_pos[0] - a.base_pos[0], b.base_pos[1] - a.base_pos[1])
+           for a, b in zip(walked, walked[1:]))
+said = sum(math.hypot(*a.base_lin_vel[:2]) * 0.02 for a in walked[:-1])
+json.dump({"answer": answer.success, "walking": walking_at, "mission": set_wp.success,
+           "until_met": res.until_met, "end": list(walked[-1].base_pos), "path": path,
+           "said": said, "n": len(walked)}, open(sys.argv[1], "w"))
+'''
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_the_legged_robot_walks_in_lockstep_as_far_as_robot_state_says(
+        ros_master: Any, tmp_path: Path) -> None:  # noqa: F811
+    """``--robot legged --sim-time --paused``: ~walk brings it IN_CONTROL, a one-waypoint
+    mission 1.5 m ahead is walked (step until "walked"), and the distance its base moved is
+    the one robot_state's velocity integrates to (the field trial's body walked at 18-72 % of
+    the velocity robot_state reported while its emulator fell behind the wall clock)."""
+    import json
+
+    require_ros(("rospy", "lowerbase_legged_msgs.msg", "lowerbase_sim_msgs.srv"))
+    env = {k: v for k, v in ros_master.env.items() if k != "ROS_IP"}
+    script, out = tmp_path / "legged.py", tmp_path / "legged.json"
+    script.write_text(LEGGED)
+    robot = Robot(env, tmp_path / "logs", "--robot", "legged", "--sim-time", "--paused",
+                  "--speed", "max")
+    try:
+        robot.wait_for("in lockstep on simulated time", timeout=300.0)
+        run = subprocess.run([sys.executable, str(script), str(out)], capture_output=True,
+                             text=True, env={**os.environ, **env}, timeout=600)
+        assert run.returncode == 0, run.stderr[-3000:]
+    finally:
+        code, _, err = robot.ctrl_c()
+    assert code == 0, err[-3000:]
+    got = json.loads(out.read_text())
+    assert got["answer"] and got["walking"] == 7 and got["mission"], got  # IN_CONTROL
+    assert got["until_met"], got
+    assert math.hypot(got["end"][0] - 1.5, got["end"][1]) < 0.3, got
+    assert got["path"] > 1.0 and abs(got["said"] - got["path"]) <= 0.05 * got["path"], got

@@ -187,7 +187,13 @@ def _run_lockstep(args: argparse.Namespace, sup: Any, speed: float, parts: tuple
 
 def run(args: argparse.Namespace) -> int:
     from lowerbase.bench.demo import StatusLine
-    from lowerbase.robot.master import master_answers, master_uri, own_master, wait_for_master
+    from lowerbase.robot.master import (
+        master_answers,
+        master_uri,
+        own_master,
+        running_robot,
+        wait_for_master,
+    )
     from lowerbase.robot.plan import UPPER, RobotOptions, robot_plan
     from lowerbase.robot.supervisor import Supervisor
     from lowerbase.world.maps import load_map
@@ -209,7 +215,7 @@ def run(args: argparse.Namespace) -> int:
     uri = master_uri()
     sup = Supervisor(log_dir)
     previous = {s: signal.signal(s, lambda *_: sup.request_stop())
-                for s in (signal.SIGINT, signal.SIGTERM)}
+                for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     line = StatusLine(force=False)
     started = time.monotonic()
     ended = None
@@ -220,6 +226,12 @@ def run(args: argparse.Namespace) -> int:
             sup.start([own_master(uri)])
             wait_for_master(uri)
             print(f"lowerbase robot: started a ROS master at {uri}", flush=True)
+        else:
+            other = running_robot(uri)
+            if other is not None:
+                raise ConfigError(f"the ROS master at {uri} has a robot running already "
+                                  f"({other}): stop it first, or give this one a master of "
+                                  "its own (ROS_MASTER_URI=http://localhost:PORT)")
         restore = _use_sim_time(uri, speed is not None)  # before any node starts
         parts = tuple(p for p in UPPER if p not in args.without)
         if speed is not None:

@@ -91,3 +91,30 @@ def get_param(uri: str, name: str) -> Any:
 def delete_param(uri: str, name: str) -> None:
     proxy = xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(2.0))
     proxy.deleteParam("/lowerbase_robot", name)
+
+
+#: the node names a lowerbase robot registers (lockstep: the first; process per part: the rest)
+ROBOT_NODES = ("/lowerbase_robot", "/driver_base", "/world", "/move_base", "/tasks",
+               "/legged_driver")
+
+
+def running_robot(uri: str) -> str | None:
+    """The name of a robot node that is registered on the master at ``uri`` and answers (a
+    robot is running there: a second one would take its names, and ROS would shut the first
+    one's nodes down), or None."""
+    proxy = xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(2.0))
+    for name in ROBOT_NODES:
+        try:
+            reply: Any = proxy.lookupNode("/lowerbase_robot_check", name)
+        except (OSError, xmlrpc.client.Error):
+            return None
+        if reply[0] != 1:
+            continue
+        try:
+            node = xmlrpc.client.ServerProxy(reply[2], transport=_TimeoutTransport(1.0))
+            answer: Any = node.getPid("/lowerbase_robot_check")
+            if answer[0] == 1:
+                return f"{name} (pid {answer[2]})"
+        except (OSError, xmlrpc.client.Error, ValueError):
+            continue  # registered by a process that is gone: not running
+    return None

@@ -44,6 +44,13 @@ class ChildSpec:
     env: dict[str, str] = field(default_factory=dict)
 
 
+def guarded(argv: Sequence[str]) -> list[str]:
+    """``argv`` run through :mod:`lowerbase.robot.guard`: it dies with this process."""
+    import sys
+
+    return [sys.executable, "-m", "lowerbase.robot.guard", str(os.getpid()), *argv]
+
+
 class Child:
     """A running :class:`ChildSpec`, its output copied to ``log_path``."""
 
@@ -55,9 +62,14 @@ class Child:
         self.last_line = ""
         log_path.parent.mkdir(parents=True, exist_ok=True)
         self._log: IO[str] = open(log_path, "w", encoding="utf-8", errors="replace")  # noqa: SIM115
+        import shutil
+
+        if shutil.which(spec.argv[0]) is None:  # the guard would only say so in the log
+            self._log.close()
+            raise RobotError(f"{spec.name}: cannot start {spec.argv[0]}: no such program")
         try:
             self.popen = subprocess.Popen(
-                list(spec.argv), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                guarded(spec.argv), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL, text=True, errors="replace",
                 env={**os.environ, **spec.env}, start_new_session=True)
         except OSError as exc:

@@ -208,3 +208,35 @@ def test_speed_without_sim_time_is_one_line(tmp_path: Path) -> None:
     assert out.returncode != 0
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and "--speed K goes with --sim-time" in lines[0], out.stderr
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_a_second_robot_on_a_master_that_has_one_is_refused_and_sighup_stops_the_first(
+        ros_master: Any, tmp_path: Path) -> None:  # noqa: F811
+    """Issue 22, item 27: a second ``lowerbase robot`` on the same master used to start, say
+    ready, and take the first one's node names (ROS shut the first one's nodes down); closing
+    the terminal (SIGHUP) left the robot running."""
+    env = {k: v for k, v in ros_master.env.items() if k != "ROS_IP"}
+    robot = Robot(env, tmp_path / "logs", "--sim-time", "--speed", "max", "--without",
+                  "navigation", "--without", "tasks")
+    try:
+        robot.wait_for("in lockstep on simulated time", timeout=300.0)
+        second = subprocess.run([sys.executable, "-m", "lowerbase", "robot", "--map",
+                                 "empty_room", "--log-dir", str(tmp_path / "second")],
+                                capture_output=True, text=True, cwd=ROOT, timeout=120,
+                                env={**os.environ, **env})
+        assert second.returncode != 0
+        lines = [x for x in second.stderr.splitlines() if x.strip()]
+        assert len(lines) == 1 and "has a robot running already" in lines[0] \
+            and "/lowerbase_robot" in lines[0], second.stderr
+        assert robot.popen.poll() is None  # the first one runs on
+    finally:
+        robot.popen.send_signal(signal.SIGHUP)
+        try:
+            out, err = robot.popen.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            robot.popen.kill()
+            raise
+    assert robot.popen.returncode == 0, err
+    assert "lowerbase robot: stopped" in out

@@ -103,3 +103,67 @@ def test_a_command_that_does_not_exist_is_one_line(tmp_path: Path) -> None:
     sup = Supervisor(tmp_path)
     with pytest.raises(RobotError, match="ghost: cannot start /no/such/binary"):
         sup.start([ChildSpec("ghost", ["/no/such/binary"])])
+
+
+SUPERVISE = '''
+import sys, time
+from pathlib import Path
+from lowerbase.robot.supervisor import ChildSpec, Supervisor
+sup = Supervisor(Path(sys.argv[1]))
+sup.start([ChildSpec("part", [sys.executable, "-u", "-c",
+                              "import os, time\\nprint('ready', os.getpid(), flush=True)\\n"
+                              "time.sleep(600)"], "ready", 30.0)])
+print("child", sup.children[0].popen.pid, flush=True)
+time.sleep(600)
+'''
+
+
+def _gone(pid: int) -> bool:
+    """No such process, or a zombie (dead, not yet reaped by whoever adopted it)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return True
+    return "\nState:\tZ" in status
+
+
+@pytest.mark.process
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="prctl is Linux's")
+def test_parts_die_with_a_supervisor_killed_by_sigkill(tmp_path: Path) -> None:
+    """kill -9 of ``lowerbase robot`` left every part running (issue 22, item 7): each part
+    gets SIGTERM when its supervisor dies, however it dies."""
+    import signal
+    import subprocess
+    import time
+
+    from tests.conftest import ROOT
+
+    sup = subprocess.Popen([sys.executable, "-u", "-c", SUPERVISE, str(tmp_path)],
+                           stdout=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        assert sup.stdout is not None
+        line = sup.stdout.readline()
+        assert line.startswith("child "), line
+        child = int(line.split()[1])
+        assert not _gone(child)
+    finally:
+        sup.send_signal(signal.SIGKILL)
+        sup.wait()
+    deadline = time.monotonic() + 30.0
+    while not _gone(child) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    if not _gone(child):
+        os.kill(child, signal.SIGKILL)
+        raise AssertionError("the part outlived its supervisor")
+
+
+def test_the_guard_refuses_to_start_once_its_parent_is_gone(tmp_path: Path) -> None:
+    import subprocess
+
+    marker = tmp_path / "started"
+    guard = [sys.executable, "-m", "lowerbase.robot.guard"]
+    run = subprocess.run([*guard, str(2 ** 22 + 7), "touch", str(marker)], timeout=60)
+    assert run.returncode == 1 and not marker.exists()  # not its parent: nothing started
+    run = subprocess.run([*guard, str(os.getpid()), "touch", str(marker)], timeout=60)
+    assert run.returncode == 0 and marker.exists()
+    assert subprocess.run([*guard, "x"], capture_output=True, timeout=60).returncode == 2

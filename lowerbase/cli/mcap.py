@@ -1,7 +1,8 @@
 """``lowerbase mcap``: convert between MCAP and rosbag, and summarise an MCAP file.
 
 ``to-bag`` and ``from-bag`` copy messages unchanged (ROS1 bytes are the same in both formats;
-``lowerbase.recording.convert``); ``info`` lists the topics, types and counts. No ROS needed.
+``lowerbase.recording.convert``); ``info`` lists the topics, types and counts; ``recover``
+rewrites a recording cut short (no footer) as a whole file. No ROS needed.
 """
 
 from __future__ import annotations
@@ -26,6 +27,11 @@ def add_subparser(subparsers: Any) -> None:
     from_bag.add_argument("input", metavar="IN.bag")
     from_bag.add_argument("output", metavar="OUT.mcap")
     from_bag.set_defaults(func=from_bag_command)
+    recover = sub.add_parser("recover", help="a recording cut short (no footer: a killed "
+                             "recorder) -> a whole MCAP file with what could be read")
+    recover.add_argument("input", metavar="IN.mcap")
+    recover.add_argument("output", metavar="OUT.mcap")
+    recover.set_defaults(func=recover_command)
     info = sub.add_parser("info", help="topics, message types and counts of an MCAP file")
     info.add_argument("input", metavar="FILE.mcap")
     info.set_defaults(func=info_command)
@@ -56,4 +62,13 @@ def info_command(args: argparse.Namespace) -> int:
 
     for line in mcap_summary(args.input):
         print(line)
+    return 0
+
+
+def recover_command(args: argparse.Namespace) -> int:
+    from lowerbase.recording.convert import recover_mcap
+
+    done = recover_mcap(args.input, args.output)
+    where = f"; reading stopped at: {done.damage}" if done.damage else "; the file was whole"
+    print(f"{done.messages} message(s) on {len(done.topics)} topic(s) -> {args.output}{where}")
     return 0

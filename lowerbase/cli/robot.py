@@ -129,6 +129,17 @@ def _on_ready(child: Any) -> None:
                   f"foxglove-layout.json)", flush=True)
 
 
+def _on_lost(child: Any) -> None:
+    """A part the robot goes on without (the recorder) ended: one line saying what to do."""
+    what = ""
+    if child.spec.name == "recorder":
+        what = ("; the robot goes on without a recording (an unfinished .mcap: "
+                "lowerbase mcap recover IN.mcap OUT.mcap)")
+    print(f"lowerbase robot: warning: {child.spec.name} ended (exit code {child.poll()}): "
+          f"{child.last_line or 'no output'}; see {child.log_path}{what}", file=sys.stderr,
+          flush=True)
+
+
 def _status(sup: Any, started: float, master: str, watch: Any = None) -> str:
     parts = " ".join(f"{c.spec.name} {'up' if c.ready else 'starting'}" for c in sup.children)
     sim = "" if watch is None else f" | {watch.status()}"
@@ -168,9 +179,15 @@ def _run_lockstep(args: argparse.Namespace, sup: Any, speed: float, parts: tuple
     opts = LockstepOptions(map=args.map, parts=parts, soc=args.soc,
                            ground_truth=args.ground_truth, seed=args.seed, truth=args.truth)
 
+    lost: set[str] = set()
+
     def alive() -> str | None:
         for child in sup.children:
-            if child.poll() is not None:
+            if child.poll() is not None and child.spec.name not in lost:
+                if not child.spec.essential:
+                    lost.add(child.spec.name)
+                    _on_lost(child)
+                    continue
                 return f"{child.spec.name} (see {child.log_path})"
         return None
 
@@ -255,7 +272,7 @@ def run(args: argparse.Namespace) -> int:
             if deadline is not None and time.monotonic() >= deadline:
                 sup.request_stop()
 
-        ended = sup.watch(on_tick=tick)
+        ended = sup.watch(on_tick=tick, on_lost=_on_lost)
     except KeyboardInterrupt:
         pass
     finally:

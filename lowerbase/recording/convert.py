@@ -10,6 +10,7 @@ encodings are skipped and counted. Neither converter needs a ROS install.
 
 from __future__ import annotations
 
+import struct
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -146,3 +147,57 @@ def mcap_summary(path: str | Path) -> list[str]:
         count = stats.channel_message_counts.get(cid, 0)
         lines.append(f"  {channel.topic:<34} {kind:<40} {count}")
     return lines
+
+
+@dataclass
+class Recovered:
+    messages: int = 0
+    topics: Counter[str] = field(default_factory=Counter)
+    damage: str = ""  #: where reading stopped ("" when the file was whole)
+
+
+def recover_mcap(src: str | Path, dst: str | Path) -> Recovered:
+    """Every schema, channel and message that can be read from the start of ``src`` (an MCAP
+    recording cut short: a recorder killed before its footer, a full disk), written to ``dst``
+    as a whole MCAP file with its summary. Reading stops at the first damaged or missing
+    record; what came before it is kept (a chunk still being written is lost)."""
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import StreamReader
+    from mcap.writer import Writer
+
+    s, d = Path(src), Path(dst)
+    _check(s, d, ".mcap", ".mcap")
+    done = Recovered()
+    schemas: dict[int, int] = {}
+    channels: dict[int, tuple[int, str]] = {}
+    try:
+        with s.open("rb") as f, d.open("wb") as out:
+            writer = Writer(out)
+            writer.start(profile="ros1", library="lowerbase mcap recover")
+            try:
+                for record in StreamReader(f, record_size_limit=1 << 30).records:
+                    if isinstance(record, Schema) and record.id not in schemas:
+                        schemas[record.id] = writer.register_schema(
+                            record.name, record.encoding, record.data)
+                    elif isinstance(record, Channel) and record.id not in channels:
+                        schema = schemas.get(record.schema_id, 0)
+                        channels[record.id] = (writer.register_channel(
+                            record.topic, record.message_encoding, schema,
+                            dict(record.metadata)), record.topic)
+                    elif isinstance(record, Message) and record.channel_id in channels:
+                        cid, topic = channels[record.channel_id]
+                        writer.add_message(cid, record.log_time, record.data,
+                                           record.publish_time, record.sequence)
+                        done.messages += 1
+                        done.topics[topic] += 1
+            except (McapError, EOFError, ValueError, struct.error) as exc:
+                done.damage = str(exc) or type(exc).__name__
+            writer.finish()
+    except OSError as exc:
+        raise ConfigError(f"cannot recover {s} into {d}: {exc.strerror or exc}") from None
+    if done.damage and not (schemas or channels):
+        d.unlink(missing_ok=True)
+        raise ConfigError(f"{s}: no MCAP records could be read ({done.damage}): is it an "
+                          "MCAP file?")
+    return done

@@ -46,6 +46,10 @@ class Sink(Protocol):
     def close(self) -> None: ...
 
 
+#: [bytes] of messages per MCAP chunk (compressed and written once full)
+CHUNK_SIZE = 128 * 1024
+
+
 class McapSink:
     """An MCAP file (profile ros1, zstd chunks: the mcap writer's defaults)."""
 
@@ -60,7 +64,10 @@ class McapSink:
             self._file: IO[bytes] = self.path.open("wb")
         except OSError as exc:
             raise ConfigError(f"cannot write {self.path}: {exc.strerror or exc}") from None
-        self._writer = Writer(self._file)
+        # small chunks: a recorder killed before its footer loses at most the chunk being
+        # written (~0.4 s of a robot's topics; 1 MiB, the default, held 3-12 s), and
+        # ``lowerbase mcap recover`` rewrites the rest as a whole file
+        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE)
         self._writer.start(profile="ros1", library=f"lowerbase {__version__}")
         self._schemas: dict[tuple[str, str], int] = {}
         self._closed = False

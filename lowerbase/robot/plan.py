@@ -100,4 +100,4 @@ def recorder_spec(opts: RobotOptions, bus: list[str] | None = None) -> ChildSpec
     if bus is None:
         bus = bus_flags(opts.bus_port or free_loopback_port())
     return ChildSpec("recorder", [opts.python, "-m", "lowerbase.recording.rosrecord",
-                                  *record, *bus], ON_MASTER)
+                                  *record, *bus], ON_MASTER, essential=False)

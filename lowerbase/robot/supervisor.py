@@ -42,6 +42,8 @@ class ChildSpec:
     ready_text: str | None = None
     start_timeout: float = 60.0
     env: dict[str, str] = field(default_factory=dict)
+    #: False: the robot goes on without it when it ends after its start (the recorder)
+    essential: bool = True
 
 
 def guarded(argv: Sequence[str]) -> list[str]:
@@ -156,13 +158,19 @@ class Supervisor:
             child.wait_ready(lambda: self._stop.is_set())
             on_ready(child)
 
-    def watch(self, every: float = 0.5,
-              on_tick: Callable[[], None] = lambda: None) -> Child | None:
-        """Until a child ends (returned) or a stop is requested (None)."""
+    def watch(self, every: float = 0.5, on_tick: Callable[[], None] = lambda: None,
+              on_lost: Callable[[Child], None] = lambda child: None) -> Child | None:
+        """Until an essential child ends (returned) or a stop is requested (None); a child
+        that is not essential ending is handed to ``on_lost`` once and the watch goes on."""
+        lost: set[str] = set()
         while not self._stop.wait(every):
             for child in self.children:
                 if child.poll() is not None:
-                    return child
+                    if child.spec.essential:
+                        return child
+                    if child.spec.name not in lost:
+                        lost.add(child.spec.name)
+                        on_lost(child)
             on_tick()
         return None
 

@@ -175,6 +175,8 @@ CHECKS: dict[str, Check] = {
                                                           files=("run.bag",)),
     "lowerbase mcap from-bag run.bag back.mcap": Check("run", "-> back.mcap",
                                                         files=("back.mcap",)),
+    "lowerbase mcap recover prep/run.mcap whole.mcap": Check("run", "the file was whole",
+                                                             files=("whole.mcap",)),
     "lowerbase scenario run watchdog --realtime --foxglove": Check(
         "start", "live view: Foxglove", (("--foxglove", "--foxglove 127.0.0.1:{tcp}"),),
         why="a free port for 8765"),

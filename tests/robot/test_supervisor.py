@@ -167,3 +167,23 @@ def test_the_guard_refuses_to_start_once_its_parent_is_gone(tmp_path: Path) -> N
     run = subprocess.run([*guard, str(os.getpid()), "touch", str(marker)], timeout=60)
     assert run.returncode == 0 and marker.exists()
     assert subprocess.run([*guard, "x"], capture_output=True, timeout=60).returncode == 2
+
+
+def test_a_part_the_robot_goes_on_without_is_reported_once_and_the_watch_goes_on(
+        tmp_path: Path) -> None:
+    """Issue 22, item 9: the recorder's death ended the robot run."""
+    from dataclasses import replace
+
+    sup = Supervisor(tmp_path)
+    recorder = replace(script("print('ready', flush=True); import time; time.sleep(0.2); "
+                              "print('disk full'); raise SystemExit(2)", "recorder"),
+                       essential=False)
+    sup.start([serving("keeps", tmp_path / "m"), recorder,
+               script("print('ready', flush=True); import time; time.sleep(1.5); "
+                      "raise SystemExit(4)", "dies")])
+    lost: list[str] = []
+    ended = sup.watch(every=0.05, on_lost=lambda c: lost.append(f"{c.spec.name} "
+                                                               f"{c.last_line}"))
+    sup.stop_all()
+    assert lost == ["recorder disk full"]
+    assert ended is not None and ended.spec.name == "dies"

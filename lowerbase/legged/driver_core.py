@@ -288,7 +288,8 @@ class LeggedDriverCore:
             return wp.x, wp.y, wp.z
         if wp.frame == GPS:
             if self.config.gps_datum is None:
-                raise ValueError("gps waypoints need a gps datum (the node's ~gps_datum)")
+                raise ValueError("gps waypoints need a gps datum: set the node's ~gps_origin "
+                                 "[latitude, longitude, altitude, heading]")
             return self.config.gps_datum.to_odom(wp.x, wp.y, wp.z)
         m = self.laser_map
         if m is not None and wp.frame == m.name:
@@ -305,6 +306,12 @@ class LeggedDriverCore:
         if not self.link_up:
             return False, TIMEOUT
         return self.follower.set(waypoints, repetition, current_index)
+
+    def stop_waypoints(self) -> tuple[bool, str]:
+        """End the waypoint mission now, an endless one too (the node's ~stop_waypoints: the
+        seed has no such call and refuses an empty list); answered also while the lower
+        computer is silent, as stopping must always work."""
+        return self.follower.stop()
 
     def get_waypoints(self) -> tuple[bool, str, list[Waypoint], int, int]:
         if not self.link_up:

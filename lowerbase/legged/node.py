@@ -7,7 +7,8 @@ that they sit at the root with no namespace: ``robot_state`` (published at ``~pu
 angular.z; the seed names no velocity topic) and the sensor_msgs/Joy topic handed over by
 set_listen. The seed has no call that brings the robot to walking state: ``~walk``, ``~stand``
 and ``~sit`` (std_srvs/Trigger) send the LocomotionRequests that lead there along the state
-table (:func:`next_request`).
+table (:func:`next_request`). Nor does it have one that ends a waypoint mission (an empty list
+is refused): ``~stop_waypoints`` (std_srvs/Trigger) does, an endless one too.
 
 Threads (one lock around every core call): a reader per leg bus (four BusLinks, each reopened
 every second after an error), the main loop (tick: BodyVelocityCommand, locomotion goal,
@@ -228,6 +229,8 @@ class LeggedNode:
         for name, goal in GOALS.items():
             self._handles.append(rospy.Service(f"~{name}", ros.Trigger,
                                                lambda _req, g=goal: self._set_goal(g)))
+        self._handles.append(rospy.Service("~stop_waypoints", ros.Trigger,
+                                           self._stop_waypoints))
 
     # -- ROS -> core ----------------------------------------------------------------------------
 
@@ -261,6 +264,11 @@ class LeggedNode:
         with self.lock:
             ok, message = self.core.append_waypoint(self._waypoint(req.waypoint))
         return self.ros.srv.AppendWaypointResponse(success=ok, message=message)
+
+    def _stop_waypoints(self, req: Any) -> Any:
+        with self.lock:
+            ok, message = self.core.stop_waypoints()
+        return self.ros.TriggerResponse(success=ok, message=message)
 
     def _set_map(self, req: Any) -> Any:
         p, q = req.initial_pose.position, req.initial_pose.orientation

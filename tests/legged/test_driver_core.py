@@ -20,7 +20,14 @@ from lowerbase.legged.driver_core import (
 )
 from lowerbase.legged.pcdmap import make_cloud, read_pcd
 from lowerbase.legged.protocol import BODY_BUS, JOINT_NAMES, REPLY_PREFIX, legged_codec
-from lowerbase.legged.waypoints import EMPTY, SET_SUCCESS, TIMEOUT, GpsDatum, Waypoint
+from lowerbase.legged.waypoints import (
+    EMPTY,
+    SET_SUCCESS,
+    STOPPED,
+    TIMEOUT,
+    GpsDatum,
+    Waypoint,
+)
 
 CODEC = legged_codec()
 
@@ -203,6 +210,7 @@ def test_gps_waypoints_need_a_datum() -> None:
     rig.publish_pose()
     ok, msg = rig.core.set_waypoints([Waypoint("gps", 48.0, 11.0, 500.0)], 1, 0)
     assert not ok and "gps datum" in msg
+    assert "~gps_origin" in msg and "~gps_datum" not in msg  # the parameter's real name
     rig = Rig(LeggedDriverConfig(gps_datum=GpsDatum(48.0, 11.0, 500.0)))
     rig.publish_pose()
     assert rig.core.set_waypoints([Waypoint("gps", 48.00001, 11.0, 500.0)], 1, 0)[0]
@@ -216,3 +224,16 @@ def test_locomotion_request_frame() -> None:
     bus, frame_id, data = rig.sent[-1]
     assert (bus, frame_id) == (BODY_BUS, 16)
     assert CODEC.decode(frame_id, data)[1]["Request"] == 6
+
+
+def test_stop_waypoints_ends_an_endless_mission_and_the_robot_stops() -> None:
+    rig = Rig()
+    rig.publish_pose()
+    square = [Waypoint("odom", 1, 0), Waypoint("odom", 1, 1)]
+    assert rig.core.set_waypoints(square, 0, 0) == (True, SET_SUCCESS)  # endless
+    rig.run(0.5)
+    assert rig.core.last_command[0] > 0.1
+    assert rig.core.stop_waypoints() == (True, STOPPED)
+    rig.run(0.1)
+    assert rig.core.last_command == (0.0, 0.0, 0.0)
+    assert rig.core.get_waypoints() == (True, STOPPED, square, 0, 0)

@@ -295,6 +295,8 @@ def test_set_listen_hands_the_joystick_over_and_back(rig: dict[str, Any]) -> Non
 
     probe: Probe = rig["probe"]
     legs: ScriptedLegs = rig["rig"].legs
+    reply = call("/set_listen", SetListen, data="/<&>x")  # rospy logged FATAL on it
+    assert not reply.success and "is not a ROS topic name" in reply.message
     reply = call("/set_listen", SetListen, data="joy<&>my_app")
     assert reply.success, reply.message
     reply = call("/set_listen", SetListen, data="joy<&>other_app")

@@ -78,12 +78,30 @@ def _read(device: RegisterDevice, table: int, address: int, count: int) -> bytes
     return bytes([2 * count]) + b"".join(w.to_bytes(2, "big") for w in words)
 
 
+#: each kind of drop (and refused writes) is logged the first LOG_FIRST times, then every
+#: LOG_EVERY-th with the count so far: a port scan or a broken client does not flood the log
+LOG_FIRST, LOG_EVERY = 5, 100
+_refused_writes: Counter[str] = Counter()  #: process-wide, by exception code
+
+
+def count_suffix(n: int) -> str | None:
+    """What the n-th occurrence of a kind of event adds to its log line, or None when it is not
+    logged (the first :data:`LOG_FIRST`, then every :data:`LOG_EVERY`-th)."""
+    if n > LOG_FIRST and n % LOG_EVERY:
+        return None
+    return "" if n < LOG_FIRST else f" ({n} so far; further ones are logged every {LOG_EVERY}th)"
+
+
 def _write(device: RegisterDevice, address: int, data: bytes) -> None:
     values = [_u16(data, i) for i in range(0, len(data), 2)]
     try:
         device.write_holding(address, values)
     except RegisterValueError as exc:
-        log.info("refused write at %#06x: %s", address, exc)
+        key = f"{exc.exception_code:02x}"
+        _refused_writes[key] += 1
+        more = count_suffix(_refused_writes[key])
+        if more is not None:
+            log.info("refused write at %#06x: %s%s", address, exc, more)
         raise _Refused(exc.exception_code) from None
 
 
@@ -141,7 +159,8 @@ def handle_pdu(device: RegisterDevice, pdu: bytes) -> bytes:
 class SlaveCore:
     """Unit-id filtering and drop counting shared by the TCP and RTU framings.
 
-    ``dropped`` counts what got no answer, by reason; each drop is logged.
+    ``dropped`` counts what got no answer, by reason; drops are logged rate-limited per reason
+    (:func:`count_suffix`: the first five, then every 100th with the count).
     """
 
     def __init__(self, device: RegisterDevice) -> None:
@@ -150,7 +169,9 @@ class SlaveCore:
 
     def drop(self, reason: str, detail: str = "") -> None:
         self.dropped[reason] += 1
-        log.info("Modbus: dropped %s%s", reason, f" ({detail})" if detail else "")
+        more = count_suffix(self.dropped[reason])
+        if more is not None:
+            log.info("Modbus: dropped %s%s%s", reason, f" ({detail})" if detail else "", more)
 
     def answer(self, unit: int, pdu: bytes) -> bytes | None:
         """The response PDU, or None when the device stays silent (another unit id, a

@@ -49,12 +49,17 @@ from lowerbase.legged.waypoints import (
     Waypoint,
     WaypointFollower,
 )
+from lowerbase.text import point
 
 __all__ = ["JoyListenType", "LeggedDriverConfig", "LeggedDriverCore", "LocomotionState"]
 
 log = logging.getLogger(__name__)
 
 MAP_SAVED = "Map saved."
+#: a refusal: this, then the reason (the seed gives only the success string)
+MAP_NOT_SAVED = "Map not saved: "
+#: an initial_pose quaternion shorter than this is no rotation (others are normalised)
+MIN_QUATERNION_NORM = 1e-3
 #: BodyVelocityCommand's ranges (legged.dbc)
 VX_MAX, VY_MAX, WZ_MAX = 3.0, 3.0, 6.0
 
@@ -288,7 +293,8 @@ class LeggedDriverCore:
             return wp.x, wp.y, wp.z
         if wp.frame == GPS:
             if self.config.gps_datum is None:
-                raise ValueError("gps waypoints need a gps datum (the node's ~gps_datum)")
+                raise ValueError("gps waypoints need a gps datum: set the node's ~gps_origin "
+                                 "[latitude, longitude, altitude, heading]")
             return self.config.gps_datum.to_odom(wp.x, wp.y, wp.z)
         m = self.laser_map
         if m is not None and wp.frame == m.name:
@@ -305,6 +311,12 @@ class LeggedDriverCore:
         if not self.link_up:
             return False, TIMEOUT
         return self.follower.set(waypoints, repetition, current_index)
+
+    def stop_waypoints(self) -> tuple[bool, str]:
+        """End the waypoint mission now, an endless one too (the node's ~stop_waypoints: the
+        seed has no such call and refuses an empty list); answered also while the lower
+        computer is silent, as stopping must always work."""
+        return self.follower.stop()
 
     def get_waypoints(self) -> tuple[bool, str, list[Waypoint], int, int]:
         if not self.link_up:
@@ -326,16 +338,24 @@ class LeggedDriverCore:
         try:
             pcdmap.check_name(name)
             if len(initial_pose) != 7 or not all(math.isfinite(v) for v in initial_pose):
-                raise MapError(f"initial_pose must be 7 finite numbers, got {initial_pose}")
+                raise MapError(f"initial_pose must be 7 finite numbers, got "
+                               f"{point(*initial_pose)}")
+            q = initial_pose[3:]
+            norm = math.sqrt(sum(v * v for v in q))
+            if norm < MIN_QUATERNION_NORM:
+                raise MapError(f"initial_pose orientation {point(*q, decimals=0)} is not a "
+                               f"rotation (norm {norm:.3g}): send a unit quaternion, e.g. "
+                               f"(0, 0, 0, 1)")
             points = pcdmap.cloud_points(cloud)
             path = None
             if self.config.map_dir is not None:
                 path = pcdmap.write_pcd(self.config.map_dir / f"{name}.pcd", points)
         except MapError as exc:
             self.stats["set_map_refused"] += 1
-            return False, str(exc)
+            log.warning("set_map refused: %s", exc)
+            return False, f"{MAP_NOT_SAVED}{exc}"
         pose = self.pose
-        map_yaw = yaw_of(initial_pose[3:])
+        map_yaw = yaw_of([v / norm for v in q])  # normalised, as tf does
         yaw = map_yaw - pose.yaw
         c, s = math.cos(yaw), math.sin(yaw)
         t = (initial_pose[0] - (c * pose.x - s * pose.y),

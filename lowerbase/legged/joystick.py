@@ -13,9 +13,12 @@ control but the robot stops until they resume.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
+
+from lowerbase.text import clip
 
 SEPARATOR = "<&>"
 CLOSE = "<CLOSE>"
@@ -48,16 +51,24 @@ class Holder:
     client: str
 
 
+#: a ROS graph resource name (wiki.ros.org/Names): global (/), relative or private (~), tokens
+#: of letters, digits and '_' each starting with a letter, separated by single '/'
+TOPIC_NAME = re.compile(r"(~|/)?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*")
+
+
 def parse(data: str) -> tuple[str, str]:
-    """(topic, client or CLOSE) of a set_listen string; ValueError with what is wrong."""
+    """(topic, client or CLOSE) of a set_listen string; ValueError with what is wrong (the
+    input quoted short: :func:`~lowerbase.text.clip`)."""
     topic, sep, client = data.partition(SEPARATOR)
     topic, client = topic.strip(), client.strip()
     if not sep or not topic or not client:
-        raise ValueError(f"expected 'topic<&>client_id' or 'topic<&><CLOSE>', got {data!r}")
+        raise ValueError(f"expected 'topic<&>client_id' or 'topic<&><CLOSE>', got {clip(data)}")
     if SEPARATOR in client:
-        raise ValueError(f"one '<&>' expected, got {data!r}")
-    if any(c.isspace() for c in topic) or not all(c.isalnum() or c in "/_~" for c in topic):
-        raise ValueError(f"{topic!r} is not a ROS topic name")
+        raise ValueError(f"one '<&>' expected, got {clip(data)}")
+    if not TOPIC_NAME.fullmatch(topic):
+        raise ValueError(f"{clip(topic)} is not a ROS topic name: letters, digits and '_' in "
+                         "tokens that start with a letter, separated by single '/' (e.g. "
+                         "'joy', '/ns/joy', '~joy')")
     return topic, client
 
 
@@ -89,18 +100,18 @@ class JoyHandover:
             if held is None:
                 return False, "joystick control is not handed over: nothing to close"
             if topic != held.topic:
-                return False, (f"joystick control is on topic {held.topic!r}, not {topic!r}: "
+                return False, (f"joystick control is on topic {held.topic!r}, not {clip(topic)}: "
                                f"send '{held.topic}{SEPARATOR}{CLOSE}'")
             self.holder = None
             self._command = (0.0, 0.0, 0.0)
-            return True, f"joystick control taken back from {held.client!r}"
+            return True, f"joystick control taken back from {clip(held.client)}"
         if held is not None and held.client != client:
-            return False, (f"joystick control is held by {held.client!r} on {held.topic!r}; "
+            return False, (f"joystick control is held by {clip(held.client)} on {held.topic!r}; "
                            f"it must release it first ('{held.topic}{SEPARATOR}{CLOSE}')")
         self.holder = Holder(topic, client)
         self._command = (0.0, 0.0, 0.0)
         self._last_joy = -math.inf
-        return True, f"joystick control handed to {client!r} on topic {topic!r}"
+        return True, f"joystick control handed to {clip(client)} on topic {clip(topic)}"
 
     def on_joy(self, topic: str, axes: Sequence[float], now: float) -> bool:
         """A Joy message from ``topic``; False (counted) unless it is the holder's."""

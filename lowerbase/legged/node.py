@@ -7,7 +7,8 @@ that they sit at the root with no namespace: ``robot_state`` (published at ``~pu
 angular.z; the seed names no velocity topic) and the sensor_msgs/Joy topic handed over by
 set_listen. The seed has no call that brings the robot to walking state: ``~walk``, ``~stand``
 and ``~sit`` (std_srvs/Trigger) send the LocomotionRequests that lead there along the state
-table (:func:`next_request`).
+table (:func:`next_request`). Nor does it have one that ends a waypoint mission (an empty list
+is refused): ``~stop_waypoints`` (std_srvs/Trigger) does, an endless one too.
 
 Threads (one lock around every core call): a reader per leg bus (four BusLinks, each reopened
 every second after an error), the main loop (tick: BodyVelocityCommand, locomotion goal,
@@ -236,6 +237,7 @@ class LeggedNode:
             self._handles.append(wire.service(s.services[key], cls, handler))
         for name, goal in GOALS.items():
             self._handles.append(wire.service(f"~{name}", ros.Trigger, self._goal_handler(goal)))
+        self._handles.append(wire.service("~stop_waypoints", ros.Trigger, self._stop_waypoints))
 
     def _goal_handler(self, goal: LocomotionState) -> Callable[[Any], Any]:
         return lambda _req: self._set_goal(goal)
@@ -272,6 +274,11 @@ class LeggedNode:
         with self.lock:
             ok, message = self.core.append_waypoint(self._waypoint(req.waypoint))
         return self.ros.srv.AppendWaypointResponse(success=ok, message=message)
+
+    def _stop_waypoints(self, req: Any) -> Any:
+        with self.lock:
+            ok, message = self.core.stop_waypoints()
+        return self.ros.TriggerResponse(success=ok, message=message)
 
     def _set_map(self, req: Any) -> Any:
         p, q = req.initial_pose.position, req.initial_pose.orientation

@@ -3,7 +3,9 @@
 ROS-free: :func:`cloud_points` reads any object with PointCloud2's fields (height, width, fields
 with name/offset/datatype/count, is_bigendian, point_step, row_step, data, is_dense), so the
 generated message and the tests' plain objects both work. Bad clouds raise
-:class:`~lowerbase.errors.MapError` saying what is wrong.
+:class:`~lowerbase.errors.MapError` saying what is wrong: x, y, z fields missing, with a count
+other than 1, overlapping or not fitting ``point_step``; ``data`` not exactly ``height x
+row_step`` bytes; no finite point, or points beyond :data:`MAX_COORDINATE`.
 """
 
 from __future__ import annotations
@@ -16,11 +18,14 @@ from typing import Any
 import numpy as np
 
 from lowerbase.errors import MapError
+from lowerbase.text import clip, point
 
 #: sensor_msgs/PointField datatypes -> numpy
 DATATYPES: dict[int, str] = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4",
                              8: "f8"}
 FLOAT32 = 7
+#: [m] a map point farther out than this is not a map's (1000 km; float32 resolves 6 cm there)
+MAX_COORDINATE = 1e6
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")
 
 
@@ -60,33 +65,58 @@ def cloud_points(msg: Any) -> np.ndarray:
     missing = [n for n in "xyz" if n not in specs]
     if missing:
         raise MapError(f"the point cloud has no {', '.join(missing)} field "
-                       f"(fields: {sorted(specs)})")
-    if height * width == 0:
+                       f"(fields: {clip(str(sorted(specs)))})")
+    if height < 0 or width < 0 or height * width == 0:
         raise MapError("the point cloud is empty")
-    if point_step <= 0 or row_step < width * point_step or len(data) < height * row_step:
-        raise MapError(f"the point cloud's data ({len(data)} bytes) does not hold {height} x "
-                       f"{width} points of {point_step} bytes (row_step {row_step})")
+    if point_step <= 0:
+        raise MapError(f"the point cloud's point_step {point_step} must be > 0 bytes")
+    if row_step < width * point_step:
+        raise MapError(f"the point cloud's data does not hold {height} x {width} points of "
+                       f"{point_step} bytes: row_step {row_step} < width x point_step")
+    if len(data) != height * row_step:
+        raise MapError(f"the point cloud's data is {len(data)} bytes, not height x row_step = "
+                       f"{height * row_step}: it does not hold {height} x {width} points of "
+                       f"{point_step} bytes")
     order = ">" if msg.is_bigendian else "<"
-    names, formats, offsets = [], [], []
+    names: list[str] = []
+    formats: list[str] = []
+    offsets: list[int] = []
+    spans: list[tuple[int, int]] = []
     for n in "xyz":
         spec = specs[n]
         kind = DATATYPES.get(int(spec.datatype))
-        if kind is None or int(spec.offset) + np.dtype(kind).itemsize > point_step:
+        offset = int(spec.offset)
+        if kind is None or offset < 0 or offset + np.dtype(kind).itemsize > point_step:
             raise MapError(f"field {n}: datatype {spec.datatype} at offset {spec.offset} does "
                            f"not fit a {point_step}-byte point")
+        if int(spec.count) != 1:
+            raise MapError(f"the point cloud's field {n} has count {spec.count}: x, y, z need "
+                           f"count 1")
+        for other, (a, b) in zip(names, spans, strict=True):
+            if offset < b and a < offset + np.dtype(kind).itemsize:
+                raise MapError(f"the point cloud's fields {other} and {n} overlap (offsets "
+                               f"{a} and {offset})")
         names.append(n)
         formats.append(order + kind)
-        offsets.append(int(spec.offset))
+        offsets.append(offset)
+        spans.append((offset, offset + np.dtype(kind).itemsize))
     dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets,
                       "itemsize": point_step})
     rows = np.frombuffer(data, dtype=np.uint8, count=height * row_step).reshape(height,
                                                                                 row_step)
     packed = np.ascontiguousarray(rows[:, :width * point_step]).view(dtype).reshape(-1)
-    xyz = np.stack([packed[n].astype(np.float64) for n in "xyz"], axis=1)
+    with np.errstate(invalid="ignore"):  # signalling NaNs in the bytes: dropped below
+        xyz = np.stack([packed[n].astype(np.float64) for n in "xyz"], axis=1)
     finite = np.isfinite(xyz).all(axis=1)
     xyz = xyz[finite]
     if len(xyz) == 0:
         raise MapError("the point cloud has no finite point")
+    far = np.abs(xyz).max(axis=1) > MAX_COORDINATE
+    if far.any():
+        i = int(np.argmax(far))
+        raise MapError(f"{int(far.sum())} of the point cloud's {len(xyz)} finite points lie "
+                       f"beyond {MAX_COORDINATE:g} m, e.g. {point(*xyz[i])}: not a map (random "
+                       f"bytes or a wrong datatype/endianness?)")
     return xyz
 
 

@@ -14,9 +14,15 @@ Frames of a waypoint (shared/seeds/003, ``Waypoint.frame``):
 * the name of the loaded point-cloud map (set_map's ``name``; the seed calls this frame
   "map_name"): map coordinates, brought into odom with localization's map -> odom transform.
 
+Bounds: every coordinate within :data:`MAX_RANGE` (10 km; gps: latitude within -90..90 deg,
+longitude within -180..180 deg) and the point it resolves to in odom within 10 km of the odom
+origin; anything else is refused (a waypoint at 1e308 would be walked toward for ever).
+
 Repetition: ``repetition`` laps of the list, 0 = endless; the first lap starts at
 ``current_index``, every further lap at 0. get_waypoints reports the laps still to be walked
-including the current one (0 while endless, and 0 once the mission is complete).
+including the current one (0 while endless, and 0 once the mission is complete). The seed has
+no call that ends a mission (an empty list is refused): :meth:`WaypointFollower.stop` does
+(the node's ``~stop_waypoints``).
 ``use_z``: the waypoint counts as reached only when the base height is within ``z_tolerance``
 too (the robot cannot command its height: it keeps closing in on the spot, which brings a
 ramp's height with it, and otherwise waits there, reported in ``status``).
@@ -28,12 +34,17 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
+from lowerbase.text import num, point
+
 ODOM = "odom"
 GPS = "gps"
 #: the seed's response messages
 SET_SUCCESS = "set waypoint success"
 EMPTY = "waypoint list is empty"
 TIMEOUT = "service timeout"
+STOPPED = "waypoint mission stopped"
+#: [m] a waypoint's coordinates, and where it resolves to in odom, lie within +- this
+MAX_RANGE = 10_000.0
 #: current_index and repetition are uint8 on the wire
 MAX_WAYPOINTS = 256
 
@@ -66,13 +77,29 @@ class GpsDatum:
 
     def to_odom(self, latitude: float, longitude: float, altitude: float) -> tuple[
             float, float, float]:
-        """(x, y, z) in odom of a geodetic point: ENU about the datum, rotated by heading."""
+        """(x, y, z) in odom of a geodetic point: ENU about the datum, rotated by heading;
+        ValueError for a latitude/longitude off the earth."""
         import pymap3d
+
+        check_geodetic(latitude, longitude)
 
         east, north, up = pymap3d.geodetic2enu(latitude, longitude, altitude, self.latitude,
                                                self.longitude, self.altitude)
         c, s = math.cos(self.heading), math.sin(self.heading)
         return (float(c * east + s * north), float(-s * east + c * north), float(up))
+
+
+def check_geodetic(latitude: float, longitude: float) -> None:
+    """ValueError unless latitude is within -90..90 deg and longitude within -180..180 deg."""
+    if not -90.0 <= latitude <= 90.0:
+        raise ValueError(f"gps latitude {latitude:.10g} is outside -90..90 deg")
+    if not -180.0 <= longitude <= 180.0:
+        raise ValueError(f"gps longitude {longitude:.10g} is outside -180..180 deg")
+
+
+def _in_range(values: tuple[float, float, float], what: str) -> None:
+    if not all(abs(v) <= MAX_RANGE for v in values):
+        raise ValueError(f"{what} {point(*values)} must lie within +-{MAX_RANGE:g} m")
 
 
 @dataclass(frozen=True)
@@ -119,10 +146,18 @@ class WaypointFollower:
 
     def _check(self, waypoints: Sequence[Waypoint]) -> str | None:
         for i, wp in enumerate(waypoints):
-            if not all(math.isfinite(v) for v in (wp.x, wp.y, wp.z)):
-                return f"waypoint {i}: coordinates must be finite, got {(wp.x, wp.y, wp.z)}"
+            xyz = (wp.x, wp.y, wp.z)
+            if not all(math.isfinite(v) for v in xyz):
+                return f"waypoint {i}: coordinates must be finite, got {point(*xyz)}"
             try:
-                self.resolve(wp)
+                if wp.frame == GPS:
+                    check_geodetic(wp.x, wp.y)
+                    if abs(wp.z) > MAX_RANGE:
+                        raise ValueError(f"gps altitude {num(wp.z)} m must lie within "
+                                         f"+-{MAX_RANGE:g} m")
+                else:
+                    _in_range(xyz, "x, y, z")
+                _in_range(self.resolve(wp), "the point in odom")
             except ValueError as exc:
                 return f"waypoint {i}: {exc}"
         return None
@@ -173,15 +208,21 @@ class WaypointFollower:
         if not self.waypoints:
             return True, EMPTY, [], 0, 0
         if not self.active:
-            message = "mission complete"
+            message = STOPPED if self.status == STOPPED else "mission complete"
         else:
             lap = "endless" if self.repetition == 0 else f"{self.laps_left} lap(s) left"
             message = f"{self.status} of {len(self.waypoints)}, {lap}"
         return True, message, list(self.waypoints), self.laps_left, self.current_index
 
-    def cancel(self) -> None:
+    def stop(self) -> tuple[bool, str]:
+        """End the mission now (also an endless one); the list stays for get_waypoints, with 0
+        laps left. Appending walks on from the new waypoint, as after a finished mission."""
+        if not self.active:
+            return True, "no waypoint mission is running"
         self.active = False
-        self.status = "cancelled"
+        self.laps_left = 0
+        self.status = STOPPED
+        return True, STOPPED
 
     # -- control -----------------------------------------------------------------------------
 

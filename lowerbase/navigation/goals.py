@@ -19,6 +19,7 @@ from lowerbase.navigation.costmap import CostmapParams
 from lowerbase.navigation.layers import InflationParams
 from lowerbase.navigation.planner import INSCRIBED, GlobalPlanner
 from lowerbase.navigation.recovery import BackOffConfig
+from lowerbase.text import num, point
 
 Pose = tuple[float, float, float]
 
@@ -120,6 +121,28 @@ def _pose(value: Sequence[float], what: str) -> Pose:
     if not all(math.isfinite(v) for v in (x, y, yaw)):
         raise NavigationError(f"the {what} must be finite numbers, got ({x}, {y}, {yaw})")
     return x, y, yaw
+
+
+def off_map(extent: Sequence[float], x: float, y: float) -> float:
+    """How far [m] the point (x, y) lies outside the map's ``extent`` (x_min, y_min, x_max,
+    y_max); 0 on it (the far edges count as off, as the cells there do not exist); NaN: inf."""
+    x0, y0, x1, y1 = extent
+    if x0 <= x < x1 and y0 <= y < y1:
+        return 0.0
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return math.inf
+    return max(math.hypot(max(x0 - x, 0.0, x - x1), max(y0 - y, 0.0, y - y1)), 1e-12)
+
+
+def check_on_map(extent: Sequence[float], x: float, y: float, what: str,
+                 tolerance: float = 0.0) -> None:
+    """:class:`NavigationError` when (x, y) lies off the map by more than ``tolerance`` [m];
+    the numbers are written compactly (a 1e300 is ``1e+300``, not 301 digits)."""
+    if off_map(extent, x, y) > tolerance:
+        x0, y0, x1, y1 = extent
+        within = f" by more than the tolerance {num(tolerance)} m" if tolerance > 0 else ""
+        raise NavigationError(f"the {what} {point(x, y)} is off the map (x {num(x0)}..{num(x1)}"
+                              f" m, y {num(y0)}..{num(y1)} m){within}: give a pose on the map")
 
 
 def path_blocked(rest: Sequence[Pose], costs: np.ndarray, resolution: float,

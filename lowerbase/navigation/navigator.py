@@ -54,6 +54,7 @@ from lowerbase.navigation.goals import (
     Pose,
     ProgressWatch,
     _pose,
+    check_on_map,
     path_blocked,
     remaining,
 )
@@ -209,8 +210,13 @@ class Navigator:
         """/move_base/make_plan (nav_msgs/GetPlan): a plan on the global costmap with the local
         marks and the mode's clearance; empty with a reason when there is none. A start inside
         an obstacle's inflation is planned out of (the robot may be there after localization
-        error); a NaN pose or bad tolerance: :class:`PlanningError`."""
-        return self.planning.make_plan(start, goal, tolerance, self.mode, self._fp_forward)
+        error); a NaN pose or bad tolerance: :class:`PlanningError`; a start off the map, or a
+        goal off it by more than ``tolerance``: :class:`NavigationError`."""
+        s, g = _pose(start, "start"), _pose(goal, "goal")
+        check_on_map(self.grid.extent, s[0], s[1], "start")
+        if math.isfinite(tolerance):
+            check_on_map(self.grid.extent, g[0], g[1], "goal", max(tolerance, 0.0))
+        return self.planning.make_plan(s, g, tolerance, self.mode, self._fp_forward)
 
     # -- goals -----------------------------------------------------------------------------------
     def send_goal(self, target: Sequence[float], poses: Sequence[Sequence[float]] = (),
@@ -220,12 +226,8 @@ class Navigator:
         off-map pose, or an unknown execution_mode: :class:`NavigationError`, nothing changed."""
         points = [_pose(p, f"path pose {i}") for i, p in enumerate(poses)]
         points.append(_pose(target, "target pose"))
-        g = self.grid
         for x, y, _ in points:
-            if not (g.origin[0] <= x < g.origin[0] + g.width * g.resolution
-                    and g.origin[1] <= y < g.origin[1] + g.height * g.resolution):
-                raise NavigationError(f"the goal ({x:.2f}, {y:.2f}) is off the map: give a pose "
-                                      f"on the map")
+            check_on_map(self.grid.extent, x, y, "goal")
         if execution_mode not in (0, 1):
             raise NavigationError(f"execution_mode {execution_mode!r} is not known; 1 point by "
                                   f"point, 0 free")

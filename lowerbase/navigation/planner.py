@@ -37,11 +37,14 @@ from skimage.graph import MCP_Geometric
 
 from lowerbase.errors import WorldError
 from lowerbase.navigation.kernels import footprint_max, footprint_max_at
+from lowerbase.text import point
 
 LETHAL = 254
 INSCRIBED = 253
 NO_INFORMATION = 255
 FREE = 0
+#: cell indices are clamped to +-this (a point at 1e308 m would overflow math.floor)
+_FAR = 1e15
 #: a pose faces from this far behind it to this far ahead along the path [m]
 HEADING_SPAN = 0.25
 
@@ -213,9 +216,19 @@ class GlobalPlanner:
 
     # -- cells and metres -----------------------------------------------------------------------
     def cell(self, x: float, y: float) -> tuple[int, int]:
-        """(row, col) of a map point (may lie outside the grid)."""
-        return (math.floor((y - self.origin[1]) / self.resolution),
-                math.floor((x - self.origin[0]) / self.resolution))
+        """(row, col) of a finite map point (may lie outside the grid; a point so far out that
+        its index would overflow is clamped, still outside)."""
+        r = (y - self.origin[1]) / self.resolution
+        c = (x - self.origin[0]) / self.resolution
+        return (math.floor(min(max(r, -_FAR), _FAR)), math.floor(min(max(c, -_FAR), _FAR)))
+
+    def outside_by(self, x: float, y: float) -> float:
+        """How far [m] the point lies outside the costmap's area (0 on it)."""
+        h, w = self.costs.shape
+        x0, y0 = self.origin[0], self.origin[1]
+        dx = max(x0 - x, 0.0, x - (x0 + w * self.resolution))
+        dy = max(y0 - y, 0.0, y - (y0 + h * self.resolution))
+        return math.hypot(dx, dy)
 
     def centre(self, row: int, col: int) -> tuple[float, float]:
         return (self.origin[0] + (col + 0.5) * self.resolution,
@@ -242,21 +255,24 @@ class GlobalPlanner:
             raise PlanningError(f"the goal tolerance must be >= 0 m, got {tolerance}")
         s_cell = self.cell(sx, sy)
         if not self.inside(*s_cell):
-            raise PlanningError(f"the start ({sx:.2f}, {sy:.2f}) is outside the costmap")
+            raise PlanningError(f"the start {point(sx, sy)} is outside the costmap")
         if self.blocked[s_cell]:
             raise PlanningError(
-                f"the start ({sx:.2f}, {sy:.2f}) is in an obstacle (cost "
+                f"the start {point(sx, sy)} is in an obstacle (cost "
                 f"{int(self.costs[s_cell])}): move the robot clear or clear the costmap")
+        if self.outside_by(gx, gy) > tolerance:
+            return Plan(reason=f"the goal {point(gx, gy)} is outside the costmap by more than "
+                               f"the tolerance {tolerance:g} m")
         candidates = self._goal_cells(gx, gy, tolerance)
         if not candidates:
-            return Plan(reason=f"the goal ({gx:.2f}, {gy:.2f}) is blocked and no free cell "
+            return Plan(reason=f"the goal {point(gx, gy)} is blocked and no free cell "
                                f"lies within the tolerance {tolerance:g} m")
         mcp = MCP_Geometric(self.weights, fully_connected=True)
         cumulative, _ = mcp.find_costs([s_cell], [c for _, c in candidates], find_all_ends=True)
         reached = [c for _, c in candidates if math.isfinite(cumulative[c])]
         if not reached:
-            return Plan(reason=f"no path from ({sx:.2f}, {sy:.2f}) to the goal ({gx:.2f}, "
-                               f"{gy:.2f}) within the tolerance {tolerance:g} m")
+            return Plan(reason=f"no path from {point(sx, sy)} to the goal {point(gx, gy)} "
+                               f"within the tolerance {tolerance:g} m")
         end = reached[0]  # candidates are sorted by distance to the goal
         cells = np.asarray(mcp.traceback(end))
         target = (gx, gy) if end == self.cell(gx, gy) else self.centre(*end)

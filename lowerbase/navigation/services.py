@@ -2,8 +2,8 @@
 /move_base/enable_costmaps (std_srvs/SetBool) and /move_base/clear_costmaps (std_srvs/Empty).
 
 Each answers from the :class:`~lowerbase.navigation.node.NavigationNode`'s Navigator under the
-node's lock; bad input (a NaN pose, another frame, no robot pose yet) is an empty plan with the
-reason in the log, never an exception out of rospy's service thread.
+node's lock; bad input (a NaN pose, a pose off the map, another frame, no robot pose yet) is an
+empty plan with the reason in one log line, never an exception out of rospy's service thread.
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ import logging
 from typing import Any
 
 from lowerbase.errors import LowerbaseError, WorldError
+from lowerbase.text import point
 
 log = logging.getLogger(__name__)
 
@@ -45,8 +46,8 @@ class Services:
             log.warning("make_plan refused: %s", exc)
             return GetPlanResponse(plan=io.path_msg([], stamp, frame))
         if not plan.ok:
-            log.warning("make_plan: no path from (%.2f, %.2f) to (%.2f, %.2f): %s",
-                        start[0], start[1], goal[0], goal[1], plan.reason)
+            log.warning("make_plan: no path from %s to %s: %s", point(start[0], start[1]),
+                        point(goal[0], goal[1]), plan.reason)
         path = io.path_msg(plan.poses, stamp, frame)
         node.stats["plans"] += 1
         node.pubs["plan"].publish(path)

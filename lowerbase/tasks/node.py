@@ -28,6 +28,7 @@ from lowerbase.errors import LowerbaseError, WorldError
 from lowerbase.tasks.inputs import ChassisInputs, finite_pose
 from lowerbase.tasks.model import Pose, Status, TaskRequest, TaskResponse
 from lowerbase.tasks.plan import TaskConfig
+from lowerbase.text import clip
 from lowerbase.world.places import Places
 
 log = logging.getLogger(__name__)
@@ -72,7 +73,7 @@ def request_of(msg: Any, frame: str = "map") -> TaskRequest:
     for i, p in enumerate(msg.poses, 1):
         got = p.header.frame_id.lstrip("/")
         if got not in ("", frame):
-            raise WorldError(f"pose {i} is in frame {got!r}: send poses in {frame!r}")
+            raise WorldError(f"pose {i} is in frame {clip(got)}: send poses in {frame!r}")
         yaw = yaw_of(p.pose.orientation, f"pose {i}")
         poses.append((float(p.pose.position.x), float(p.pose.position.y), yaw))
     custom = msg.custom

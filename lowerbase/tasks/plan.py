@@ -1,6 +1,8 @@
 """An ExecTask execute request checked against the map's places and turned into actions.
 
-Every refusal is a :class:`TaskRefused` whose message says what to send instead.
+Every refusal is a :class:`TaskRefused` whose message says what to send instead; it quotes the
+request's strings cut short (:func:`~lowerbase.text.clip`: a 1 MB mark_no by its first 64
+characters and its length) and its numbers compactly (``1e+300``).
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from dataclasses import dataclass
 from lowerbase.errors import LowerbaseError
 from lowerbase.navigation.controller import wrap
 from lowerbase.tasks.model import ActionType, Direction, Pose, TaskRequest, TaskType
+from lowerbase.text import clip, point
 from lowerbase.world.places import Places
 
 
@@ -77,7 +80,7 @@ def _same(a: Pose, b: Pose, cfg: TaskConfig) -> bool:
 
 
 def _fmt(p: Pose) -> str:
-    return f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f})"
+    return point(*p, decimals=3)
 
 
 def target_of(req: TaskRequest, places: Places, cfg: TaskConfig) -> tuple[Pose, str]:
@@ -91,13 +94,13 @@ def target_of(req: TaskRequest, places: Places, cfg: TaskConfig) -> tuple[Pose, 
                               "(charger: pose, approach)")
         if req.mark_no not in ("", "charger"):
             raise TaskRefused(f"a charging task goes to the charger: leave mark_no empty or "
-                              f"send 'charger', not {req.mark_no!r}")
+                              f"send 'charger', not {clip(req.mark_no)}")
         mark, name = places.charger.approach, "charger"
     elif req.mark_no:
         named = places.named()
         if req.mark_no not in named:
             some = ", ".join(sorted(places.storage)[:3]) or "none"
-            raise TaskRefused(f"unknown mark_no {req.mark_no!r}: this map has "
+            raise TaskRefused(f"unknown mark_no {clip(req.mark_no)}: this map has "
                               f"{len(places.storage)} storage points (e.g. {some})")
         mark, name = named[req.mark_no], req.mark_no
     elif req.poses:

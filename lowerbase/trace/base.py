@@ -8,8 +8,9 @@ marked and cleared from each scan, inflated) and drives with the navigation's
 is what stops the robot in front of an obstacle.
 
 Answers common to both modules: an empty list cancels (zero speed at once, IDLE reported once);
-a list that cannot be driven is refused (:func:`~lowerbase.trace.messages.check_route`: logged,
-counted in ``stats["refused"]``, answered once with the list as received and IDLE); a list while
+a list that cannot be driven (a point off the map included) is refused
+(:func:`~lowerbase.trace.messages.check_route`: logged, counted in ``stats["refused"]``,
+answered once with the list as received and IDLE); a list while
 one RUNS is refused the same way but answered with the running list, RUNNING. A scan or pose
 with NaN where a number is needed is dropped and counted.
 """
@@ -75,8 +76,11 @@ class Navigator:
 
     def __init__(self, clock: Clock, publish: Publish, publish_speed: PublishSpeed,
                  params: TraceParams | None = None, *, limits: Limits | None = None,
-                 footprint: Footprint = DEFAULT_FOOTPRINT) -> None:
+                 footprint: Footprint = DEFAULT_FOOTPRINT,
+                 extent: m.Extent | None = None) -> None:
         self.clock = clock
+        #: the map's area [m]: a list with a point outside it is refused (None: not checked)
+        self.extent = extent
         self.params = params or TraceParams()
         self._publish = publish
         self._publish_speed = publish_speed
@@ -138,7 +142,7 @@ class Navigator:
                               "cancel it", m.RUNNING)
             return
         try:
-            route = m.check_route(msg, self.params.map_name)
+            route = m.check_route(msg, self.params.map_name, self.extent)
         except m.TraceError as exc:
             self._refuse(msg, str(exc), m.IDLE)
             return

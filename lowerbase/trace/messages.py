@@ -1,8 +1,9 @@
 """The seed's messages: the generated classes, the checked route, the ROS envelope.
 
-A route (:class:`Route`) is a GTraceList checked once on arrival: every point finite, no
-segment shorter than :data:`MIN_SEGMENT`, ``finished`` within 0..1, the map the module runs on
-(``map`` holds the map's name, UTF-8; empty: whatever map the module runs on). A point's
+A route (:class:`Route`) is a GTraceList checked once on arrival: every point finite and on
+the map (its extent, as move_base refuses an off-map goal), no segment shorter than
+:data:`MIN_SEGMENT`, ``finished`` within 0..1, the map the module runs on (``map`` holds the
+map's name, UTF-8; empty: whatever map the module runs on). A point's
 ``speed`` is in mm/s (int32); absent or <= 0 means the module's default speed.
 
 On ROS every message travels as ``lowerbase_msgs/Protobuf``: ``type`` the protobuf message's
@@ -17,6 +18,7 @@ from dataclasses import dataclass
 from google.protobuf.message import DecodeError, Message
 
 from lowerbase.errors import LowerbaseError
+from lowerbase.text import num, point
 from lowerbase.trace.proto.trace_pb2 import (
     GLaserScan,
     GRobotSpeedControl,
@@ -91,8 +93,22 @@ def _finite(value: float, what: str) -> float:
     return float(value)
 
 
-def check_route(msg: GTraceList, map_name: str = "") -> Route:
-    """The route of a non-empty GTraceList, or a :class:`TraceError` saying what is wrong."""
+#: (x_min, y_min, x_max, y_max) [m] of a map (``OccupancyGrid.extent``)
+Extent = tuple[float, float, float, float]
+
+
+def _on_map(x: float, y: float, extent: Extent | None, what: str) -> None:
+    if extent is None:
+        return
+    x0, y0, x1, y1 = extent
+    if not (x0 <= x < x1 and y0 <= y < y1):
+        raise TraceError(f"{what} {point(x, y)} is off the map (x {num(x0)}..{num(x1)} m, "
+                         f"y {num(y0)}..{num(y1)} m): send points on the map")
+
+
+def check_route(msg: GTraceList, map_name: str = "", extent: Extent | None = None) -> Route:
+    """The route of a non-empty GTraceList, or a :class:`TraceError` saying what is wrong.
+    ``extent``: the map's area; a point outside it is refused (None: not checked)."""
     if msg.map and map_name and msg.map != map_name.encode():
         raise TraceError(f"the list is for map {msg.map!r}, this module runs on {map_name!r}")
     segs: list[Segment] = []
@@ -102,6 +118,8 @@ def check_route(msg: GTraceList, map_name: str = "") -> Route:
         coords = [_finite(v, f"segment {i} {w}") for v, w in (
             (a.x, "first.x"), (a.y, "first.y"), (a.angle, "first.angle"), (b.x, "second.x"),
             (b.y, "second.y"), (b.angle, "second.angle"))]
+        _on_map(coords[0], coords[1], extent, f"segment {i} first point")
+        _on_map(coords[3], coords[4], extent, f"segment {i} second point")
         f = _finite(s.finished, f"segment {i} finished")
         if not 0.0 <= f <= 1.0:
             raise TraceError(f"segment {i} finished = {f}: it must lie within 0..1")

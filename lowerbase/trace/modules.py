@@ -51,7 +51,7 @@ class TraceModules:
         self.dropped: Counter[str] = Counter()
         self.trace = TraceNavigate(clock, lambda msg: send(STATUS, msg),
                                    lambda msg: send(SPEED, msg), self.params, limits=limits,
-                                   footprint=footprint)
+                                   footprint=footprint, extent=grid.extent)
         self.obstacle = ObstacleNavigate(clock, grid, lambda msg: send(AVOID_STATUS, msg),
                                          lambda msg: send(SPEED, msg), self.params,
                                          limits=limits, footprint=footprint)

@@ -44,6 +44,7 @@ class ObstacleNavigate(Navigator):
     def __init__(self, clock: Clock, grid: OccupancyGrid, publish: Publish,
                  publish_speed: PublishSpeed, params: TraceParams | None = None,
                  **kwargs: Any) -> None:
+        kwargs.setdefault("extent", grid.extent)
         super().__init__(clock, publish, publish_speed, params, **kwargs)
         self.costmap: LayeredCostmap = global_costmap(grid, CostmapParams(obstacles=True))
         self.cells = FootprintCells(self.footprint.points, grid.resolution)

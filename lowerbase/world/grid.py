@@ -57,6 +57,18 @@ class OccupancyGrid:
         """(width, height) [m]."""
         return self.width * self.resolution, self.height * self.resolution
 
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """(x_min, y_min, x_max, y_max) [m] of the map's area in the map frame."""
+        ox, oy, _ = self.origin
+        w, h = self.size_m
+        return ox, oy, ox + w, oy + h
+
+    def contains(self, x: float, y: float) -> bool:
+        """Whether the map-frame point (x, y) [m] lies on the map (NaN: no)."""
+        x0, y0, x1, y1 = self.extent
+        return x0 <= x < x1 and y0 <= y < y1
+
     def occupied(self, threshold: int = 50) -> np.ndarray:
         """Boolean mask of cells at or above ``threshold`` (unknown cells are not occupied)."""
         return self.data >= threshold

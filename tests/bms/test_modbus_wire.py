@@ -235,3 +235,36 @@ def test_a_failing_model_is_a_device_failure(caplog: pytest.LogCaptureFixture) -
     with caplog.at_level("ERROR", logger="lowerbase.bms.modbus"):
         assert handle_pdu(Broken(), h("04 00 00 00 01")) == h("84 04")
     assert "BMS device failure on request 04 00 00 00 01" in caplog.text
+
+
+def test_garbage_connections_are_counted_and_logged_rate_limited(
+        server: BmsServer, caplog: pytest.LogCaptureFixture) -> None:
+    """Each garbage connection is counted; only the first few of a kind and then every 100th
+    are logged, with the count so far (a port scan does not flood the log)."""
+    assert server.tcp_address is not None
+    with caplog.at_level("INFO", logger="lowerbase.bms.modbus"):
+        for _ in range(30):
+            with socket.create_connection(server.tcp_address, timeout=5.0) as s:
+                s.sendall(h("00 01 00 00 01 00 01 03"))  # length 256: garbage
+                assert closed_by_peer(s)  # the drop is counted (and logged) before the close
+    assert server.dropped["connection with a bad MBAP length"] == 30
+    lines = [r.getMessage() for r in caplog.records if "bad MBAP length" in r.getMessage()]
+    assert len(lines) == 5, lines
+    assert "(5 so far; further ones are logged every 100th)" in lines[-1]
+
+
+def test_drop_logs_the_first_five_then_every_hundredth(caplog: pytest.LogCaptureFixture) -> None:
+    from lowerbase.bms.modbus import SlaveCore
+
+    core = SlaveCore(BmsDevice(BatteryPack(soc=72.0), unit=1))
+    with caplog.at_level("INFO", logger="lowerbase.bms.modbus"):
+        for _ in range(1000):
+            core.drop("idle connection", "127.0.0.1:1")
+        core.drop("empty PDU")  # counted per kind
+    assert core.dropped["idle connection"] == 1000 and core.dropped["empty PDU"] == 1
+    lines = [r.getMessage() for r in caplog.records]
+    assert len(lines) == 5 + 10 + 1
+    assert lines[0] == "Modbus: dropped idle connection (127.0.0.1:1)"
+    assert lines[14] == "Modbus: dropped idle connection (127.0.0.1:1) (1000 so far; further " \
+                        "ones are logged every 100th)"
+    assert lines[15] == "Modbus: dropped empty PDU"

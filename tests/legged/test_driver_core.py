@@ -20,7 +20,14 @@ from lowerbase.legged.driver_core import (
 )
 from lowerbase.legged.pcdmap import make_cloud, read_pcd
 from lowerbase.legged.protocol import BODY_BUS, JOINT_NAMES, REPLY_PREFIX, legged_codec
-from lowerbase.legged.waypoints import EMPTY, SET_SUCCESS, TIMEOUT, GpsDatum, Waypoint
+from lowerbase.legged.waypoints import (
+    EMPTY,
+    SET_SUCCESS,
+    STOPPED,
+    TIMEOUT,
+    GpsDatum,
+    Waypoint,
+)
 
 CODEC = legged_codec()
 
@@ -193,9 +200,33 @@ def test_set_map_refusals() -> None:
     rig.publish_pose()
     assert rig.core.set_map("../etc", cloud, (0, 0, 0, 0, 0, 0, 1))[0] is False
     assert rig.core.set_map("m", object(), (0, 0, 0, 0, 0, 0, 1)) == (
-        False, "not a PointCloud2: 'object' object has no attribute 'height'")
+        False, "Map not saved: not a PointCloud2: 'object' object has no attribute 'height'")
     ok, msg = rig.core.set_map("m", cloud, (0, 0, math.nan, 0, 0, 0, 1))
     assert not ok and "finite" in msg and rig.core.laser_map is None
+
+
+def test_set_map_refuses_a_zero_quaternion_and_bad_clouds(tmp_path: Path) -> None:
+    """Issue 22 item 21: each answered "Map saved." before; now success false, "Map not
+    saved: " and the reason, nothing written, no map loaded."""
+    rig = Rig(LeggedDriverConfig(map_dir=tmp_path))
+    rig.publish_pose()
+    good = make_cloud(np.array([[1.0, 2.0, 0.0], [3.0, -1.0, 0.5]]))
+    ok, msg = rig.core.set_map("m", good, (0, 0, 0, 0, 0, 0, 0))
+    assert (ok, msg) == (False, "Map not saved: initial_pose orientation (0, 0, 0, 0) is not "
+                                "a rotation (norm 0): send a unit quaternion, e.g. (0, 0, 0, 1)")
+    count0 = make_cloud(np.zeros((3, 3)))
+    count0.fields[0].count = 0
+    noise = make_cloud(np.zeros((1000, 3)))
+    noise.data = np.random.default_rng(3).bytes(12000)  # 12 kB of random bytes
+    for cloud, why in ((count0, "count 0"), (noise, "beyond")):
+        ok, msg = rig.core.set_map("m", cloud, (0, 0, 0, 0, 0, 0, 1))
+        assert not ok and msg.startswith("Map not saved: ") and why in msg, msg
+        assert "\n" not in msg and len(msg) < 200
+    assert rig.core.laser_map is None and list(tmp_path.iterdir()) == []
+    # a quaternion that is not unit length (but a rotation) is normalised, as tf does
+    assert rig.core.set_map("m", good, (0, 0, 0, 0, 0, 1, 1)) == (True, MAP_SAVED)
+    est = rig.core.pose_in_map()
+    assert est is not None and est.yaw == pytest.approx(math.pi / 2)
 
 
 def test_gps_waypoints_need_a_datum() -> None:
@@ -203,6 +234,7 @@ def test_gps_waypoints_need_a_datum() -> None:
     rig.publish_pose()
     ok, msg = rig.core.set_waypoints([Waypoint("gps", 48.0, 11.0, 500.0)], 1, 0)
     assert not ok and "gps datum" in msg
+    assert "~gps_origin" in msg and "~gps_datum" not in msg  # the parameter's real name
     rig = Rig(LeggedDriverConfig(gps_datum=GpsDatum(48.0, 11.0, 500.0)))
     rig.publish_pose()
     assert rig.core.set_waypoints([Waypoint("gps", 48.00001, 11.0, 500.0)], 1, 0)[0]
@@ -216,3 +248,16 @@ def test_locomotion_request_frame() -> None:
     bus, frame_id, data = rig.sent[-1]
     assert (bus, frame_id) == (BODY_BUS, 16)
     assert CODEC.decode(frame_id, data)[1]["Request"] == 6
+
+
+def test_stop_waypoints_ends_an_endless_mission_and_the_robot_stops() -> None:
+    rig = Rig()
+    rig.publish_pose()
+    square = [Waypoint("odom", 1, 0), Waypoint("odom", 1, 1)]
+    assert rig.core.set_waypoints(square, 0, 0) == (True, SET_SUCCESS)  # endless
+    rig.run(0.5)
+    assert rig.core.last_command[0] > 0.1
+    assert rig.core.stop_waypoints() == (True, STOPPED)
+    rig.run(0.1)
+    assert rig.core.last_command == (0.0, 0.0, 0.0)
+    assert rig.core.get_waypoints() == (True, STOPPED, square, 0, 0)

@@ -17,6 +17,24 @@ def test_parse_the_seeds_strings() -> None:
             parse(bad)
 
 
+@pytest.mark.parametrize("topic", ["/", "//joy", "joy/", "/ns//joy", "1joy", "/ns/2x", "~",
+                                   "~/joy", "/_joy", "jo~y", "/ns/joy/"])
+def test_set_listen_refuses_topics_that_are_not_ros_names(topic: str) -> None:
+    """Issue 22 item 21: "/<&>x" was accepted, then rospy logged FATAL subscribing to it."""
+    with pytest.raises(ValueError, match="is not a ROS topic name"):
+        parse(f"{topic}<&>x")
+    hand = JoyHandover()
+    ok, msg = hand.request(f"{topic}<&>x")
+    assert not ok and hand.holder is None and "\n" not in msg
+
+
+def test_legal_topic_names_and_long_input_quoted_short() -> None:
+    for topic in ("joy", "/joy", "~joy", "/ns/joy_1", "ns/Joy2", "a"):
+        assert parse(f"{topic}<&>app") == (topic, "app")
+    ok, msg = JoyHandover().request("/" * 100_000 + "<&>x")
+    assert not ok and len(msg) < 250 and "(100000 chars)" in msg
+
+
 def test_hand_over_and_take_back() -> None:
     h = JoyHandover()
     assert h.listen_type is JoyListenType.VEL_CMD and h.command(0.0) is None

@@ -28,7 +28,7 @@ from lowerbase.legged.node import (
     next_request,
 )
 from lowerbase.legged.protocol import JOINT_NAMES, LocomotionState
-from lowerbase.legged.waypoints import EMPTY, SET_SUCCESS, TIMEOUT
+from lowerbase.legged.waypoints import EMPTY, SET_SUCCESS, STOPPED, TIMEOUT
 from tests.conftest import TEST_GROUP, Proc, bus_cli_args, free_udp_port
 from tests.driver.conftest import RosMaster
 from tests.driver.test_node_ros import PROBE, Probe
@@ -257,11 +257,46 @@ def test_waypoints_are_walked(rig: dict[str, Any], legged_msgs: ModuleType,  # n
 
 @pytest.mark.ros
 @pytest.mark.process
+def test_an_endless_mission_is_stopped_by_stop_waypoints(
+        rig: dict[str, Any], legged_msgs: ModuleType,  # noqa: F811
+        legged_srvs: ModuleType) -> None:  # noqa: F811
+    """The seed has no call that ends a mission and refuses an empty list: ~stop_waypoints
+    (std_srvs/Trigger) ends an endless one and the robot is sent zero velocity."""
+    from std_srvs.srv import Trigger  # type: ignore[import-untyped]
+
+    probe: Probe = rig["probe"]
+    legs: ScriptedLegs = rig["rig"].legs
+    Wp = legged_msgs.Waypoint
+    wps = [Wp(frame="odom", x=0.0, y=0.0, z=0.0, use_z=False),
+           Wp(frame="odom", x=0.6, y=0.0, z=0.0, use_z=False)]
+    reply = call("/planning/set_waypoints", legged_srvs.SetWaypoints, waypoints=wps,
+                 repetition=0, current_index=0)
+    assert (reply.success, reply.message) == (True, SET_SUCCESS)
+
+    def last_command() -> tuple[float, float, float]:
+        with legs.lock:
+            return legs.commands[-1] if legs.commands else (0.0, 0.0, 0.0)
+
+    probe.wait_for(lambda s: any(abs(v) > 0.05 for v in last_command()), 20.0,
+                   "the endless mission walking")
+    reply = call("/legged_driver/stop_waypoints", Trigger)
+    assert (reply.success, reply.message) == (True, STOPPED)
+    got = call("/planning/get_waypoints", legged_srvs.GetWaypoints)
+    assert (got.message, got.repetition, len(got.waypoints)) == (STOPPED, 0, 2)
+    probe.wait_for(lambda s: last_command() == (0.0, 0.0, 0.0), 20.0, "zero velocity")
+    reply = call("/legged_driver/stop_waypoints", Trigger)
+    assert (reply.success, reply.message) == (True, "no waypoint mission is running")
+
+
+@pytest.mark.ros
+@pytest.mark.process
 def test_set_listen_hands_the_joystick_over_and_back(rig: dict[str, Any]) -> None:
     from lowerbase_legged_msgs.srv import SetListen
 
     probe: Probe = rig["probe"]
     legs: ScriptedLegs = rig["rig"].legs
+    reply = call("/set_listen", SetListen, data="/<&>x")  # rospy logged FATAL on it
+    assert not reply.success and "is not a ROS topic name" in reply.message
     reply = call("/set_listen", SetListen, data="joy<&>my_app")
     assert reply.success, reply.message
     reply = call("/set_listen", SetListen, data="joy<&>other_app")

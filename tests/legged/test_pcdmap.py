@@ -68,6 +68,15 @@ def test_padded_big_endian_organised_cloud_with_nans() -> None:
     ({"fields": [PointFieldSpec("x", 0, 99), PointFieldSpec("y", 4, 7),
                  PointFieldSpec("z", 8, 7)]}, "datatype 99"),
     ({"data": np.full(3, np.nan, "<f4").tobytes()}, "no finite point"),
+    # issue 22 item 21
+    ({"fields": [PointFieldSpec("x", 0, 7, 0), PointFieldSpec("y", 4, 7),
+                 PointFieldSpec("z", 8, 7)]}, "field x has count 0: x, y, z need count 1"),
+    ({"fields": [PointFieldSpec("x", 0, 7), PointFieldSpec("y", 2, 7),
+                 PointFieldSpec("z", 8, 7)]}, "fields x and y overlap"),
+    ({"data": b"\0" * 12 + bytes(12000)}, r"data is 12012 bytes, not height x row_step = 12"),
+    ({"point_step": 0}, "point_step 0"),
+    ({"width": 1000, "row_step": 12000,
+      "data": np.random.default_rng(7).bytes(12000)}, "beyond 1e\\+06 m"),
 ])
 def test_bad_clouds_are_one_clear_error(change: dict[str, object], match: str) -> None:
     cloud = make_cloud(np.array([[1.0, 2.0, 3.0]]))

@@ -9,8 +9,10 @@ import pytest
 
 from lowerbase.legged.waypoints import (
     EMPTY,
+    MAX_RANGE,
     MAX_WAYPOINTS,
     SET_SUCCESS,
+    STOPPED,
     FollowerConfig,
     GpsDatum,
     Pose,
@@ -180,3 +182,52 @@ def test_follower_walks_gps_waypoints_through_the_datum() -> None:
     goal = datum.to_odom(48.00002, 11.00002, 500.0)
     assert not f.active and math.dist((pose.x, pose.y), goal[:2]) <= f.config.xy_tolerance
     assert goal[0] == pytest.approx(1.49, abs=0.01) and goal[1] == pytest.approx(2.22, abs=0.01)
+
+
+# -- bad input (issue 22 item 20) -------------------------------------------------------------
+
+
+def test_waypoints_far_beyond_any_walk_are_refused_and_nothing_changes() -> None:
+    f = WaypointFollower(odom_only)
+    assert f.set(SQUARE, 1, 0) == (True, SET_SUCCESS)
+    for wp in (Waypoint("odom", 1e308, -1e308), Waypoint("odom", 0.0, 0.0, 2e4),
+               Waypoint("odom", MAX_RANGE + 1.0, 0.0)):
+        ok, msg = f.set([SQUARE[0], wp], 1, 0)
+        assert not ok and msg.startswith("waypoint 1: ") and f"{MAX_RANGE:g} m" in msg, msg
+        assert len(msg) < 150, msg
+        ok, msg = f.append(wp)
+        assert not ok and msg.startswith("waypoint 4: "), msg
+    ok, msg = f.set([Waypoint("odom", 1e308, -1e308)], 1, 0)
+    assert "(1e+308, -1e+308, 0.00)" in msg, msg
+    assert f.waypoints == SQUARE and f.active
+    assert f.set([Waypoint("odom", MAX_RANGE - 1.0, -MAX_RANGE + 1.0)], 1, 0)[0]
+    # a resolver that puts an in-range waypoint far away (a far gps point) is refused too
+    far = WaypointFollower(lambda wp: (wp.x * 1e6, wp.y, wp.z))
+    ok, msg = far.set([Waypoint("odom", 100.0, 0.0)], 1, 0)
+    assert (ok, msg) == (False, "waypoint 0: the point in odom (1e+08, 0.00, 0.00) must "
+                         "lie within +-10000 m")
+
+
+@pytest.mark.parametrize("lat, lon, why", [
+    (95.0, 11.0, "latitude 95 is outside -90..90 deg"),
+    (-90.5, 11.0, "latitude -90.5 is outside -90..90 deg"),
+    (48.0, 181.0, "longitude 181 is outside -180..180 deg"),
+])
+def test_gps_latitude_and_longitude_must_be_on_the_earth(lat: float, lon: float,
+                                                         why: str) -> None:
+    datum = GpsDatum(48.0, 11.0, 500.0)
+    f = WaypointFollower(lambda wp: datum.to_odom(wp.x, wp.y, wp.z))
+    ok, msg = f.set([Waypoint("gps", lat, lon, 500.0)], 1, 0)
+    assert (ok, msg) == (False, f"waypoint 0: gps {why}")
+    with pytest.raises(ValueError, match=why):
+        datum.to_odom(lat, lon, 500.0)
+
+
+def test_stop_ends_an_endless_mission() -> None:
+    f = WaypointFollower(odom_only)
+    assert f.set(SQUARE, 0, 0) == (True, SET_SUCCESS)  # endless
+    assert f.stop() == (True, STOPPED)
+    assert not f.active and f.step(Pose(0.0, 0.0, 0.3, 0.0)) == (0.0, 0.0, 0.0)
+    assert f.get() == (True, STOPPED, SQUARE, 0, 0)
+    assert f.stop() == (True, "no waypoint mission is running")
+    assert f.append(Waypoint("odom", 2, 2))[0] and f.active  # append walks on from it, once

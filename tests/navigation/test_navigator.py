@@ -182,3 +182,25 @@ def test_bad_goals_are_refused_with_one_line_and_change_nothing() -> None:
     assert (cmd.linear, cmd.angular, cmd.status) == (0.0, 0.0, Status.IDLE)
     with pytest.raises(NavigationError, match="stuck_timeout"):
         NavigatorConfig(stuck_timeout=math.nan)
+
+
+def test_off_map_poses_are_refused_compactly_without_a_traceback() -> None:
+    """/move_base/make_plan with a goal (or start) at 1e308 is refused with a LowerbaseError
+    (the service answers an empty plan and logs one line), not an OverflowError from the
+    cell arithmetic; a refusal quotes such numbers as %g, not as 300 digits."""
+    nav = Navigator(load_map("empty_room"))  # 10 x 8.6 m
+    for start, goal in (((1.0, 1.0, 0.0), (1e308, 0.0, 0.0)),
+                        ((1.0, 1.0, 0.0), (-1e308, 1e308, 0.0)),
+                        ((1e308, 1.0, 0.0), (3.0, 3.0, 0.0)),
+                        ((1.0, 1.0, 0.0), (50.0, 3.0, 0.0))):
+        with pytest.raises(LowerbaseError, match="off the map") as info:
+            nav.make_plan(start, goal)
+        assert "\n" not in str(info.value) and len(str(info.value)) < 160
+    with pytest.raises(LowerbaseError, match=r"\(1e\+308, 0.00\)"):
+        nav.make_plan((1.0, 1.0, 0.0), (1e308, 0.0, 0.0))
+    # a goal just off the map within the tolerance still plans to the nearest free cell
+    assert nav.make_plan((1.0, 1.0, 0.0), (10.1, 4.0, 0.0), tolerance=1.0).ok
+    with pytest.raises(NavigationError) as refused:
+        nav.send_goal((1e300, 2.0, 0.0))
+    assert str(refused.value) == ("the goal (1e+300, 2.00) is off the map (x 0.00..10.00 m, "
+                                  "y 0.00..8.60 m): give a pose on the map")

@@ -181,3 +181,14 @@ def test_plans_on_the_navigation_global_costmap() -> None:
     assert plan.ok and plan.poses[-1] == pytest.approx(goal)
     for pose in plan.poses[1:-1]:
         assert contact(pose, grid, footprint=PADDED) is None
+
+
+def test_far_off_poses_are_answered_not_overflowed() -> None:
+    """A goal at 1e308 m is a plan with a reason (quoted as %g), a start there a
+    PlanningError: never OverflowError from the cell arithmetic."""
+    planner = GlobalPlanner(np.zeros((50, 50), np.uint8), 0.1)
+    plan = planner.make_plan((1.0, 1.0, 0.0), (1e308, -1e308, 0.0), tolerance=1e308)
+    assert not plan.ok and "(1e+308, -1e+308)" in plan.reason
+    assert not planner.make_plan((1.0, 1.0, 0.0), (6.0, 1.0, 0.0)).ok  # just off: no cell
+    with pytest.raises(PlanningError, match=r"the start \(1e\+308, 1.00\) is outside"):
+        planner.make_plan((1e308, 1.0, 0.0), (1.0, 1.0, 0.0))

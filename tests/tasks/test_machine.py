@@ -359,3 +359,20 @@ def test_critical_battery_still_accepts_charging() -> None:
     b.machine.config = type(b.machine.config)(auto_charge=False)
     b.tick()
     assert b.send(EXEC, 1, CHARGE).success
+
+
+def test_a_huge_mark_no_or_pose_is_quoted_short_in_the_answer_and_the_log(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A 1 MB mark_no is refused quoting its first 64 characters and its length, in the
+    response and in the log; a pose at 1e300 is quoted as %g."""
+    b = ready()
+    huge = "Z" * (1 << 20)
+    with caplog.at_level("INFO", logger="lowerbase.tasks"):
+        for kw in (dict(task_type=PARK, mark_no=huge), dict(task_type=CHARGE, mark_no=huge)):
+            r = b.send(EXEC, 4, **kw)  # type: ignore[arg-type]
+            assert not r.success and f"'{'Z' * 64}'... (1048576 chars)" in r.message
+            assert len(r.message) < 300, len(r.message)
+        r = b.send(EXEC, 4, PARK, mark_no="S1", poses=((1e300, 0.0, 0.0),))
+        assert not r.success and "(1e+300, 0.000, 0.000)" in r.message, r.message
+        assert len(r.message) < 300
+    assert caplog.records and max(len(rec.getMessage()) for rec in caplog.records) < 300

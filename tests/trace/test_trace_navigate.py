@@ -7,8 +7,11 @@ import math
 
 import pytest
 
+from lowerbase.clock import SimClock
 from lowerbase.trace import messages as m
+from lowerbase.trace import modules
 from lowerbase.trace.sim import ROUTE, SPEED, STATUS, TraceSim
+from lowerbase.world.maps import load_map
 from tests.trace.routes import Y, route, trace_sim
 
 
@@ -92,3 +95,30 @@ def test_default_wait_is_60s_on_the_sim_clock() -> None:
     moving = [t for t, s in sim.published[SPEED] if abs(s.linear) > 1e-3]
     assert t_block - moving[-1] == pytest.approx(60.0, abs=0.5)  # stopped, then 60 s
     assert sim.world.true_pose()[1] == pytest.approx(Y, abs=0.03)
+
+
+def test_a_point_off_the_map_is_refused_by_both_modules() -> None:
+    """A 10 m map (empty_room, 10 x 8.6 m) and a point at x = 50: refused with IDLE and the
+    reason, as move_base refuses an off-map goal; no speed is sent."""
+    lst = route([2.0, 50.0], y=2.0)
+    lst.map = b""
+    with pytest.raises(m.TraceError, match=r"segment 0 second point \(50.00, 2.00\) is off "
+                       r"the map \(x 0.00..10.00 m, y 0.00..8.60 m\)"):
+        m.check_route(lst, extent=(0.0, 0.0, 10.0, 8.6))
+    lst.lists[0].second.x = 1e300
+    with pytest.raises(m.TraceError, match=r"\(1e\+300, 2.00\) is off the map"):
+        m.check_route(lst, extent=(0.0, 0.0, 10.0, 8.6))
+    lst.lists[0].second.x = 50.0
+    sent: list[tuple[str, object]] = []
+    mods = modules.TraceModules(SimClock(), load_map("empty_room"),
+                                lambda t, msg: sent.append((t, msg)))
+    mods.deliver(modules.POSE, m.RobotPose2D(x=2.0, y=2.0, theta=0.0))
+    for topic, status in ((modules.ROUTE, modules.STATUS),
+                          (modules.AVOID_ROUTE, modules.AVOID_STATUS)):
+        mods.deliver(topic, lst)
+        assert [(t, msg.status) for t, msg in sent] == [(status, m.IDLE)]  # type: ignore
+        sent.clear()
+    for _ in range(10):
+        mods.tick()
+    assert sent == []
+    assert mods.trace.stats["refused"] == mods.obstacle.stats["refused"] == 1

@@ -327,6 +327,7 @@ def test_start_stop_has_setbool_semantics() -> None:
     ((float("nan"), 1.0, 0.0), "three finite numbers"),
     ((1.0, 2.0), "three finite numbers"),
     ((30.0, 2.0, 0.0), "outside the map"),
+    ((1e300, -1e300, 0.0), r"^initial pose \(1e\+300, -1e\+300\) is outside the map"),
     ((5.2, 1.5, 0.0), "not in free space"),   # inside the box (5.0..5.4, 1.0..2.6)
 ])
 def test_bad_poses_are_refused_and_nothing_changes(pose: tuple, message: str) -> None:

@@ -24,6 +24,7 @@ import numpy as np
 
 from lowerbase.clock import Clock
 from lowerbase.errors import WorldError
+from lowerbase.text import point
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.localization.likelihood import Beams, LikelihoodField, ScanLike
 from lowerbase.world.localization.motion import sample_diff
@@ -284,14 +285,12 @@ class Localizer:
         if not is_finite_pose(pose):
             raise WorldError(f"{what} must be three finite numbers (x, y, yaw), got {pose!r}")
         x, y = float(pose[0]), float(pose[1])  # type: ignore[index]
-        col, row = fld.grid.world_to_cell(x, y)
-        if not bool(fld.grid.inside(col, row)):
-            w, h = fld.grid.size_m
-            ox, oy, _ = fld.grid.origin
-            raise WorldError(f"{what} ({x:.3f}, {y:.3f}) is outside the map "
-                             f"(x {ox:g}..{ox + w:g}, y {oy:g}..{oy + h:g} m)")
+        if not fld.grid.contains(x, y):  # before the cell arithmetic: 1e300 / res overflows
+            x0, y0, x1, y1 = fld.grid.extent
+            raise WorldError(f"{what} {point(x, y, decimals=3)} is outside the map "
+                             f"(x {x0:g}..{x1:g}, y {y0:g}..{y1:g} m)")
         if not fld.is_free(x, y):
-            raise WorldError(f"{what} ({x:.3f}, {y:.3f}) is not in free space on the map "
+            raise WorldError(f"{what} {point(x, y, decimals=3)} is not in free space on the map "
                              "(an occupied or unknown cell): place the robot in free space")
 
 

@@ -127,6 +127,7 @@ class LeggedDriverCore:
         self.state = LocomotionState.COMM_DISABLED
         self.fault = 0
         self._last_body = -math.inf
+        self._link_shown = False  #: robot_state showed the link up last time (one warning)
         self._velocity = (0.0, 0.0, 0.0)
         self._velocity_at = -math.inf
         self._counter = 0
@@ -227,14 +228,24 @@ class LeggedDriverCore:
         return Pose(x, y, z, yaw_of(self.base_quat))
 
     def robot_state(self) -> dict[str, object]:
-        """robot_state's fields (shared/seeds/003)."""
+        """robot_state's fields (shared/seeds/003). While the lower computer is silent (past
+        ``link_timeout``) the state is COMM_DISABLED and the velocities zero: nothing is known
+        of them (the last pose and readings stay, as they were last heard)."""
+        up = self.link_up
+        if not up and self._link_shown:
+            log.warning("the lower computer is silent (no body frame for %.1f s): robot_state "
+                        "says COMM_DISABLED", self.config.link_timeout)
+        self._link_shown = up
+        zero = [0.0, 0.0, 0.0]
         return {
             "actuator_states": [vars(a).copy() for a in self.actuators],
             "base_pos": list(self.base_pos), "base_quat": list(self.base_quat),
-            "base_lin_vel": list(self.base_lin_vel), "base_ang_vel": list(self.base_ang_vel),
+            "base_lin_vel": list(self.base_lin_vel) if up else zero,
+            "base_ang_vel": list(self.base_ang_vel) if up else zero,
             "voltage": self.voltage, "current": self.current,
             "max_voltage": self.max_voltage, "min_voltage": self.min_voltage,
-            "body_temperature": self.body_temperature, "state": int(self.state),
+            "body_temperature": self.body_temperature,
+            "state": int(self.state) if up else int(LocomotionState.COMM_DISABLED),
             "joy_listen_type": int(self.joystick.listen_type),
         }
 

@@ -261,3 +261,26 @@ def test_stop_waypoints_ends_an_endless_mission_and_the_robot_stops() -> None:
     rig.run(0.1)
     assert rig.core.last_command == (0.0, 0.0, 0.0)
     assert rig.core.get_waypoints() == (True, STOPPED, square, 0, 0)
+
+
+def test_robot_state_shows_a_silent_lower_computer_within_the_link_timeout() -> None:
+    """Issue 22 item 4: robot_state kept its last values at 50 Hz after the lower computer
+    was gone; past link_timeout (0.5 s) it says COMM_DISABLED with zero velocities."""
+    from lowerbase.bench.legged_sim import LeggedSimLoop
+    from lowerbase.legged.protocol import LocomotionState
+
+    loop = LeggedSimLoop()
+    loop.set_goal(LocomotionState.STANDING_MODE)
+    loop.run(6.0)
+    up = loop.driver.robot_state()
+    assert up["state"] == int(LocomotionState.STANDING_MODE), up["state"]
+    loop.clock.advance(0.45)  # silent, within the timeout: still the last state
+    assert loop.driver.robot_state()["state"] == int(LocomotionState.STANDING_MODE)
+    loop.clock.advance(0.1)  # 0.55 s without a body frame
+    gone = loop.driver.robot_state()
+    assert gone["state"] == int(LocomotionState.COMM_DISABLED)
+    assert gone["base_lin_vel"] == [0.0, 0.0, 0.0] and gone["base_ang_vel"] == [0.0, 0.0, 0.0]
+    assert gone["base_pos"] == up["base_pos"]
+    loop.run(0.1)  # heard again
+    assert loop.driver.robot_state()["state"] == int(LocomotionState.STANDING_MODE)
+    loop.close()

@@ -135,6 +135,9 @@ class DriverCore(LinkLifecycle, StatusInput):
         self._wheels: dict[int, tuple[int, int]] = {}
         self._wheel_period = self.codec.message("WheelFeedback").cycle_time or 0.02
         self._last_wheel: tuple[float, int] | None = None  # (time, rolling Counter)
+        self._last_counts: tuple[int, int] | None = None  # its (left, right) counts
+        self._wheels_done: tuple[int, int] | None = None  # the pair being taken
+        self._wheel_speeds = (0.0, 0.0)  # [m/s] left, right over the last interval
         #: [s] the last wheel sample's time on the sender's time base (see _wheel_stamp)
         self._wheel_time = -math.inf
         #: the next wheel sample is a new baseline, not motion (link lost, reboot suspected)

@@ -111,10 +111,7 @@ class DriverNode:
         self.stop = threading.Event()
         self.core = core if core is not None else \
             DriverCore(link.send, clock or RealClock(self.stop), config)
-        #: the ROS time stamps are taken at; with a shared ``core`` its clock's (the lockstep
-        #: robot's simulated time is ROS time, and the core's clock is exact inside a batch)
-        self.ros_now: Callable[[], Any] = self.rospy.Time.now if core is None else \
-            (lambda: self.rospy.Time.from_sec(self.core.clock.now()))
+        self._shared_core = core is not None
         self.core.listeners.append(self._on_event)
         self._throttles = {k: Throttle(r) for k, r in settings.rates.items()}
         self._battery_dirty = False
@@ -129,6 +126,13 @@ class DriverNode:
         self._last_tf_stamp: Any = None  #: of the last odom -> base_link sent
         self._last_odom_stamp: float | None = None  #: [s] of the last /odom
         self._reader: threading.Thread | None = None
+
+    def ros_now(self) -> Any:
+        """The ROS time stamps are taken at; with a shared core its clock's (the lockstep
+        robot's simulated time is ROS time, and the core's clock is exact inside a batch)."""
+        if self._shared_core:
+            return self.rospy.Time.from_sec(self.core.clock.now())
+        return self.rospy.Time.now()
 
     # -- set-up ------------------------------------------------------------------------------
 

@@ -183,3 +183,25 @@ def test_a_suspected_reboot_makes_the_next_sample_a_baseline(stopped: SimLoop) -
         {"Uptime": 0.0, "BootCounter": 1, "Counter": 0, "ProtocolVersion": 1}), t + 0.01)
     wheels(loop, t + 0.02, c + 1, left - 10, right - 10)  # 10 pulses back: plausible motion
     assert poses(loop) == (raw0, odom0)
+
+
+def test_frames_lost_past_the_counters_wrap_are_integrated_over_their_true_interval(
+        stopped: SimLoop) -> None:
+    """21 cycles with no sample while driving at 0.5 m/s: the Counter says 5 (21 mod 16);
+    the counts and the last speed say 21. Integrated over 21 cycles: the distance all there,
+    the speed 0.5 m/s, not 2.1 (issue 22 items 1 and 2)."""
+    loop = stopped
+    mpp = metres_per_pulse(loop)
+    per_cycle = round(0.5 * 0.02 / mpp)  # pulses per 20 ms at 0.5 m/s
+    t, c, left, right = last_cycle(loop)
+    for k in range(1, 11):  # 10 cycles at 0.5 m/s: the wheels' speed is known
+        wheels(loop, t + 0.02 * k, c + k, left + k * per_cycle, right + k * per_cycle)
+    raw0, _ = poses(loop)
+    t, c, left, right = t + 0.2, c + 10, left + 10 * per_cycle, right + 10 * per_cycle
+    wheels(loop, t + 21 * 0.02, c + 21, left + 21 * per_cycle, right + 21 * per_cycle)
+    raw1, _ = poses(loop)
+    odo = loop.driver.odometry
+    assert odo is not None
+    assert raw1[0] - raw0[0] == pytest.approx(21 * per_cycle * mpp, rel=1e-6)
+    assert odo.linear == pytest.approx(0.5, rel=0.02)
+    assert loop.driver.stats["odometry_rebaselined"] == 0

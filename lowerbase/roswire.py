@@ -14,7 +14,11 @@ services and TF through a wire instead of calling rospy directly:
   (:data:`EXTERNAL_INPUTS`: a user's twist, LED, /initialpose, footprint) also listens on ROS;
   what arrives there is held in the switchboard's inbox until the lockstep loop applies it at
   the start of its next step (:meth:`Switchboard.drain`), and what this process published
-  itself is dropped there (it was delivered in-process already).
+  itself is dropped there (it was delivered in-process already). Such a subscription does not
+  connect to this process' own publisher of the topic at all (:func:`_skip_own_publisher`):
+  every message over that connection would be dropped, and each one cost the publishing
+  thread rospy's hand-over to its writer and reader threads (~1 ms of wall time per
+  /base_cmd_vel).
 """
 
 from __future__ import annotations
@@ -29,6 +33,26 @@ EXTERNAL_INPUTS = frozenset({
     "/initialpose", "/move_base/local_costmap/set_footprint",
     "/move_base/global_costmap/set_footprint",
 })
+
+
+def _skip_own_publisher(rospy: Any, subscriber: Any) -> None:
+    """Make ``subscriber``'s topic (rospy's ``_SubscriberImpl``, shared by every subscriber
+    of the topic in this process) never connect to this process' own publisher: rospy asks
+    the subscriber whether it is connected to a publisher's URI before it connects, so this
+    one answers yes for this node's own URI. Outside publishers connect as before. Should a
+    connection to itself be made before this (a race with rospy's registration thread),
+    what comes over it is still dropped (:meth:`Switchboard.post`)."""
+    impl = getattr(subscriber, "impl", None)
+    if impl is None or getattr(impl, "_lowerbase_skips_own", False):
+        return
+    connected = impl.has_connection
+    get_node_uri = rospy.core.get_node_uri
+
+    def has_connection(endpoint_id: str) -> bool:
+        return bool(endpoint_id == get_node_uri() or connected(endpoint_id))
+
+    impl.has_connection = has_connection
+    impl._lowerbase_skips_own = True
 
 
 class RosWire:
@@ -203,6 +227,7 @@ class LocalWire(RosWire):
             board = self.board
             real = self.rospy.Subscriber(topic, cls, lambda m: board.post(callback, m),
                                          **kwargs)
+            _skip_own_publisher(self.rospy, real)
         return _LocalSubscription(self.board, topic, callback, real)
 
     def service(self, name: str, cls: Any, handler: Callable[[Any], Any]) -> Any:

@@ -14,7 +14,17 @@ services and TF through a wire instead of calling rospy directly:
   (:data:`EXTERNAL_INPUTS`: a user's twist, LED, /initialpose, footprint) also listens on ROS;
   what arrives there is held in the switchboard's inbox until the lockstep loop applies it at
   the start of its next step (:meth:`Switchboard.drain`), and what this process published
-  itself is dropped there (it was delivered in-process already).
+  itself is dropped there (it was delivered in-process already). Such a subscription does not
+  connect to this process' own publisher of the topic at all (:func:`_skip_own_publisher`):
+  every message over that connection would be dropped, and each one cost the publishing
+  thread rospy's hand-over to its writer and reader threads (~1 ms of wall time per
+  /base_cmd_vel).
+
+A subscriber converts what it receives through its wire (:meth:`RosWire.convert`): alone it
+converts; in-process the conversion is made once per delivered message and shared by every face
+that asks for it (three faces read the same /odom pose), or comes from the publisher, which
+already had the value the message was built from (:meth:`RosWire.publish_converted`: the world's
+scan for navigation). The message published to ROS is the same either way.
 """
 
 from __future__ import annotations
@@ -29,6 +39,26 @@ EXTERNAL_INPUTS = frozenset({
     "/initialpose", "/move_base/local_costmap/set_footprint",
     "/move_base/global_costmap/set_footprint",
 })
+
+
+def _skip_own_publisher(rospy: Any, subscriber: Any) -> None:
+    """Make ``subscriber``'s topic (rospy's ``_SubscriberImpl``, shared by every subscriber
+    of the topic in this process) never connect to this process' own publisher: rospy asks
+    the subscriber whether it is connected to a publisher's URI before it connects, so this
+    one answers yes for this node's own URI. Outside publishers connect as before. Should a
+    connection to itself be made before this (a race with rospy's registration thread),
+    what comes over it is still dropped (:meth:`Switchboard.post`)."""
+    impl = getattr(subscriber, "impl", None)
+    if impl is None or getattr(impl, "_lowerbase_skips_own", False):
+        return
+    connected = impl.has_connection
+    get_node_uri = rospy.core.get_node_uri
+
+    def has_connection(endpoint_id: str) -> bool:
+        return bool(endpoint_id == get_node_uri() or connected(endpoint_id))
+
+    impl.has_connection = has_connection
+    impl._lowerbase_skips_own = True
 
 
 class RosWire:
@@ -55,6 +85,19 @@ class RosWire:
 
     def service(self, name: str, cls: Any, handler: Callable[[Any], Any]) -> Any:
         return self.rospy.Service(name, cls, handler)
+
+    def publish_converted(self, publisher: Any, msg: Any,
+                          converted: dict[str, Callable[[], Any]]) -> None:
+        """``publisher.publish(msg)``; in-process subscribers that :meth:`convert` ``msg`` by
+        a key of ``converted`` get what its function makes (called once, only if asked for:
+        it must give what their conversion of ``msg`` would). Alone nobody is in-process and
+        ``converted`` is not used."""
+        publisher.publish(msg)
+
+    def convert(self, msg: Any, key: str, conversion: Callable[[Any], Any]) -> Any:
+        """``conversion(msg)``: in-process (:class:`LocalWire`) made once per delivered message
+        and ``key``, or the publisher's value (:meth:`publish_converted`)."""
+        return conversion(msg)
 
     def tf_broadcaster(self) -> Any:
         import tf2_ros
@@ -90,14 +133,38 @@ class Switchboard:
         self.tf = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
         self._inbox: list[tuple[Callable[[Any], None], Any]] = []
         self._lock = threading.Lock()
+        #: the messages being delivered (a callback may publish: nested), their conversions
+        #: made so far and the publisher's ways to make them
+        self._delivering: list[tuple[Any, dict[str, Any], dict[str, Callable[[], Any]]]] = []
         self.stats = {"local": 0, "external": 0, "own_dropped": 0}
 
-    def deliver(self, topic: str, msg: Any, latch: bool) -> None:
+    def deliver(self, topic: str, msg: Any, latch: bool,
+                converted: dict[str, Callable[[], Any]] | None = None) -> None:
         if latch:
             self.latched[topic] = msg
-        for callback in self.local.get(topic, ()):
-            self.stats["local"] += 1
-            callback(msg)
+        callbacks = self.local.get(topic, ())
+        if not callbacks:
+            return
+        self._delivering.append((msg, {}, converted or {}))
+        try:
+            for callback in callbacks:
+                self.stats["local"] += 1
+                callback(msg)
+        finally:
+            self._delivering.pop()
+
+    def convert(self, msg: Any, key: str, conversion: Callable[[Any], Any]) -> Any:
+        """``conversion(msg)``, made once per :meth:`deliver` of ``msg`` and ``key`` (by the
+        publisher's function for ``key`` if it gave one; an error is raised to each caller,
+        not kept); a message not being delivered (from outside, a latched one replayed) is
+        converted each time."""
+        for delivering, done, makers in reversed(self._delivering):
+            if delivering is msg:
+                if key not in done:
+                    make = makers.get(key)
+                    done[key] = make() if make is not None else conversion(msg)
+                return done[key]
+        return conversion(msg)
 
     def add_local(self, topic: str, callback: Callable[[Any], None]) -> None:
         self.local.setdefault(topic, []).append(callback)
@@ -134,8 +201,8 @@ class _TeePublisher:
     def __init__(self, real: Any, board: Switchboard, topic: str, latch: bool) -> None:
         self.real, self.board, self.name, self.latch = real, board, topic, latch
 
-    def publish(self, msg: Any) -> None:
-        self.board.deliver(self.name, msg, self.latch)
+    def publish(self, msg: Any, converted: dict[str, Callable[[], Any]] | None = None) -> None:
+        self.board.deliver(self.name, msg, self.latch, converted)
         self.real.publish(msg)
 
     def get_num_connections(self) -> int:
@@ -205,10 +272,18 @@ class LocalWire(RosWire):
             board = self.board
             real = self.rospy.Subscriber(topic, cls, lambda m: board.post(callback, m),
                                          **kwargs)
+            _skip_own_publisher(self.rospy, real)
         return _LocalSubscription(self.board, topic, callback, real)
 
     def service(self, name: str, cls: Any, handler: Callable[[Any], Any]) -> Any:
         return self.rospy.Service(self.resolve(name), cls, handler)
+
+    def publish_converted(self, publisher: Any, msg: Any,
+                          converted: dict[str, Callable[[], Any]]) -> None:
+        publisher.publish(msg, converted)
+
+    def convert(self, msg: Any, key: str, conversion: Callable[[Any], Any]) -> Any:
+        return self.board.convert(msg, key, conversion)
 
     def tf_broadcaster(self) -> Any:
         return _TeeBroadcaster(super().tf_broadcaster(), self.board, static=False)

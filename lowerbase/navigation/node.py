@@ -191,7 +191,7 @@ class NavigationNode:
 
     def _on_odom(self, msg: Any) -> None:
         try:
-            pose = self.io.pose_of(msg.pose.pose, "/odom")
+            pose = self.wire.convert(msg, self.io.ODOM_POSE, self.io.odom_pose)
         except WorldError as exc:
             self._count_bad("bad_odom", exc)
             return
@@ -207,7 +207,7 @@ class NavigationNode:
 
     def _on_scan(self, msg: Any) -> None:
         try:
-            scan = self.io.scan_of(msg)
+            scan = self.wire.convert(msg, self.io.SCAN, self.io.scan_of)
             if scan.frame_id.lstrip("/") != self.setup.base_frame:
                 raise WorldError(f"/scan must be in {self.setup.base_frame!r} (the merged "
                                  f"scan), got {scan.frame_id!r}")

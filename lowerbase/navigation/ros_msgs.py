@@ -20,13 +20,13 @@ from nav_msgs.msg import Path
 
 from lowerbase.errors import WorldError
 from lowerbase.world.lidar import LaserScan as Scan
-from lowerbase.world.ros_msgs import header, pose_of, yaw_quaternion
+from lowerbase.world.ros_msgs import ODOM_POSE, SCAN, header, odom_pose, pose_of, yaw_quaternion
 
 Pose = tuple[float, float, float]
 
-__all__ = ["GridMsg", "Path", "PoseStamped", "Twist", "cloud_points", "costmap_msg",
-           "path_msg", "polygon_points", "pose_of", "pose_stamped", "scan_of", "stamped_pose",
-           "twist"]
+__all__ = ["ODOM_POSE", "SCAN", "GridMsg", "Path", "PoseStamped", "Twist", "cloud_points",
+           "costmap_msg", "odom_pose", "path_msg", "polygon_points", "pose_of", "pose_stamped",
+           "scan_of", "stamped_pose", "twist"]
 
 
 def _translation() -> np.ndarray:

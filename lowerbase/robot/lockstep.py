@@ -98,7 +98,11 @@ class LockstepRobot:
         profile = load_profile()
         kwargs: dict[str, Any] = {} if opts.soc is None else {"soc": opts.soc}
         self.loop = SimLoop(profile, driver_config=config, **kwargs)
-        self.loop.surroundings = WorldSurroundings(grid, map_from_truth=start)
+        from lowerbase.world.contact_gate import ContactGate
+
+        #: the world's walls installed in the emulator only while a move may touch them, so
+        #: the periods far from every wall run compiled (as WorldSim's; the same bits)
+        self.gate = ContactGate(self.loop, WorldSurroundings(grid, map_from_truth=start))
         self.dt = self.loop.control_dt
         self.board = Switchboard(rospy)
         self._hooks: list[Callable[[Any], None]] = []
@@ -227,7 +231,7 @@ class LockstepRobot:
                     job.run_if_due(step)
                 upto = min(end, min(job.due for job in self.jobs),
                            (step // every + 1) * every if until is not None else end)
-                self.loop.advance(max(1, upto - step))
+                self._advance(max(1, upto - step))
                 self.steps = max(upto, step + 1)
                 mcu = self.loop.mcu
                 for hook in self._hooks:
@@ -238,6 +242,20 @@ class LockstepRobot:
             self._set_ros_time()
             self._publish_clock()
         return until is not None and bool(until())
+
+    def _advance(self, periods: int) -> None:
+        """:meth:`SimLoop.advance` of ``periods`` with the contact gate (as
+        :meth:`WorldSim.run_periods`): all of them as one batch without the surroundings when
+        the free space measured covers them (:meth:`ContactGate.clear_run`), else one period
+        after the gate's check (which measures the free space when due) and the rest again."""
+        gate, loop = self.gate, self.loop
+        while periods > 0:
+            if periods > 1 and gate.clear_run(periods):
+                loop.advance(periods)
+                return
+            gate.check()
+            loop.advance(1)
+            periods -= 1
 
     # -- what a step can wait for (simcontrol's ``until``) --------------------------------------
     def navigation_idle(self) -> bool:

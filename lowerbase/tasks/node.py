@@ -159,10 +159,10 @@ class TasksNode:
             self.inputs.bms_status = int(msg.BMSStatus)
 
     def _on_odom(self, msg: Any) -> None:
-        from lowerbase.world.ros_msgs import pose_of
+        from lowerbase.world.ros_msgs import ODOM_POSE, odom_pose
 
         try:
-            pose = pose_of(msg.pose.pose, "/odom")
+            pose = self.wire.convert(msg, ODOM_POSE, odom_pose)
         except WorldError as exc:
             self._count_bad("bad_odom", str(exc))
             return

@@ -185,7 +185,7 @@ class WorldNode:
     # -- ROS -> world --------------------------------------------------------------------------
     def _on_odom(self, msg: Any) -> None:
         try:
-            pose = self.io.pose_of(msg.pose.pose, "/odom")
+            pose = self.wire.convert(msg, self.io.ODOM_POSE, self.io.odom_pose)
         except WorldError as exc:
             self._count_bad("bad_odom", exc)
             return
@@ -275,7 +275,9 @@ class WorldNode:
             if not self.scan_odom.fresh(stamp.to_sec()):
                 return  # a second scan in one /clock step (a catch-up): the same instant
         scan = self.lidars.scan(self.scene_at(t), pose, t)
-        self._pubs["scan"].publish(self.io.laser_scan(scan, stamp))
+        io = self.io  # in-process, navigation takes the scan as it would read it back
+        self.wire.publish_converted(self._pubs["scan"], io.laser_scan(scan, stamp),
+                                    {io.SCAN: lambda: io.scan_as_received(scan, stamp)})
         self.stats["scans"] += 1
         with self.lock:
             self.scan_odom.add_scan(stamp.to_sec(), scan)

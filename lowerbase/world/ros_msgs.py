@@ -73,6 +73,15 @@ def pose_of(pose: Any, what: str) -> Pose:
     return float(x), float(y), yaw_of(pose.orientation, what)
 
 
+def odom_pose(msg: Any) -> Pose:
+    """The pose of a nav_msgs/Odometry (/odom), as every face reads it (:func:`pose_of`)."""
+    return pose_of(msg.pose.pose, "/odom")
+
+
+#: the key of :func:`odom_pose` in a wire's conversions (lowerbase.roswire)
+ODOM_POSE = "odom_pose"
+
+
 def transform(stamp: Any, parent: str, child: str, xyz: Sequence[float],
               quat: Sequence[float]) -> TransformStamped:
     msg = TransformStamped()
@@ -95,6 +104,22 @@ def laser_scan(scan: Scan, stamp: Any) -> LaserScan:
         time_increment=scan.time_increment, scan_time=scan.scan_time,
         range_min=scan.range_min, range_max=scan.range_max,
         ranges=scan.ranges.astype(np.float32).tolist(), intensities=[])
+
+
+def scan_as_received(scan: Scan, stamp: Any) -> Scan:
+    """What a subscriber reads back from :func:`laser_scan` (``scan``, ``stamp``):
+    ``lowerbase.navigation.ros_msgs.scan_of`` of that message (the stamp in seconds, the
+    numbers as Python floats, the ranges through float32), made without the message
+    (tests/world/test_world_ros_msgs.py)."""
+    return Scan(frame_id=scan.frame_id, stamp=stamp.to_sec(), angle_min=float(scan.angle_min),
+                angle_max=float(scan.angle_max), angle_increment=float(scan.angle_increment),
+                time_increment=float(scan.time_increment), scan_time=float(scan.scan_time),
+                range_min=float(scan.range_min), range_max=float(scan.range_max),
+                ranges=scan.ranges.astype(np.float32))
+
+
+#: the key of a /scan message's LaserScan in a wire's conversions (lowerbase.roswire)
+SCAN = "scan"
 
 
 def image(array: np.ndarray, encoding: str, frame_id: str, stamp: Any) -> Image:

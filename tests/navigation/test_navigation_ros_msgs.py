@@ -74,3 +74,34 @@ def test_scan_and_poses_are_checked() -> None:
         stamped_pose(p, "goal", ("map",))
     with pytest.raises(WorldError, match="orientation"):
         stamped_pose(PoseStamped(), "goal", ("map",))  # w = 0: not a rotation
+
+
+def test_the_worlds_scan_as_received_is_what_navigation_reads_back_from_the_message() -> None:
+    """The lockstep robot hands navigation scan_as_received instead of scan_of(the message):
+    the same fields, types and range bits (a scan of the warehouse, with its +inf returns)."""
+    import dataclasses
+
+    import rospy
+
+    from lowerbase.navigation.ros_msgs import scan_of
+    from lowerbase.world.lidar import LidarRig
+    from lowerbase.world.maps import load_map
+    from lowerbase.world.raycast import Scene
+    from lowerbase.world.ros_msgs import laser_scan, scan_as_received
+    from lowerbase.world.sensors import sensors_from_profile_file
+
+    grid = load_map("warehouse")
+    rig = LidarRig(sensors_from_profile_file().lidars)
+    for k, pose in enumerate([(4.0, 4.0, 0.3), (9.5, 4.75, -2.0), (2.0, 6.0, 1.0)]):
+        scan = rig.scan(Scene(grid), pose, 10.0 + k)
+        stamp = rospy.Time.from_sec(12.345678 + k / 25.0)
+        back = scan_of(laser_scan(scan, stamp))
+        mine = scan_as_received(scan, stamp)
+        for f in dataclasses.fields(back):
+            a, b = getattr(back, f.name), getattr(mine, f.name)
+            if f.name == "ranges":
+                assert a.dtype == b.dtype == np.float32
+                assert a.tobytes() == b.tobytes()
+                assert b is not scan.ranges
+            else:
+                assert type(a) is type(b) and a == b, f.name

@@ -61,3 +61,26 @@ def test_the_batched_scan_is_the_per_lidar_scan(dropout: float, range_max: float
     for k, pose in enumerate(poses):
         sc = with_solids if k % 2 else scene
         _same(batched.scan(sc, pose, 0.04 * k), reference_scan(reference, sc, pose, 0.04 * k))
+
+
+def test_a_rig_standing_still_scans_as_a_fresh_one() -> None:
+    """The rig keeps its last map cast for the same grid and pose (bit for bit): standing,
+    turning by one ulp, -0.0 for 0.0, solids coming and going and another map give the scans
+    the rig without that cast gives, noise and all."""
+    grid = load_map("warehouse")
+    other = Scene(load_map("warehouse"))  # another grid: cast again
+    scene = Scene(grid)
+    person = scene.with_solids([Solid(1.7, circle=(5.0, 2.4, 0.25))])
+    lidars = _lidars(0.05, 40.0)
+    kept, fresh = LidarRig(lidars), LidarRig(lidars)
+    still = (4.0, 2.0, 0.0)
+    poses = [still, still, (4.0, 2.0, -0.0), still, (4.0, 2.0, math.nextafter(0.0, 1.0)),
+             still, still, (4.5, 2.0, 0.3), (4.5, 2.0, 0.3), still]
+    scenes = [scene, scene, scene, person, scene, other, other, scene, person, scene]
+    for k, (pose, sc) in enumerate(zip(poses, scenes, strict=True)):
+        draws = fresh.draw()
+        fresh._last_cast = None
+        _same(kept.scan(sc, pose, 0.04 * k, draws), fresh.scan(sc, pose, 0.04 * k, draws))
+        dist = kept.grid_distance(sc, pose)
+        assert not dist.flags.writeable
+        np.testing.assert_array_equal(dist, LidarRig(lidars).grid_distance(sc, pose))

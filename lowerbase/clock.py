@@ -9,6 +9,7 @@ tests are exact. :func:`real_seconds` turns a span of a clock's time into wall s
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -116,3 +117,91 @@ class SimClock:
     def sleep_until(self, deadline: float) -> None:
         if deadline > self._t:
             self._t = float(deadline)
+
+
+#: how far [s] a paced loop may run behind its reference clock and still catch up, period by
+#: period; beyond it the loop's time slips (:class:`PacedClock`)
+CATCH_UP = 0.1
+#: at most one slip warning per this many seconds of the reference clock
+SLIP_WARN_EVERY = 10.0
+
+
+class PacedClock:
+    """The time of a model run in real time (an emulator's control loop): ``now()`` is the
+    time of the period being run, moved only by :meth:`enter`, so everything the model reports
+    (uptime, the frames' cycles and counters) agrees with the time it integrated, however late
+    the host runs the loop.
+
+    The loop is paced to ``reference`` (a :class:`RealClock`; a :class:`ScaledClock` for
+    ``--speed K``): :meth:`wait_seconds` tells how long to wait for a period. A loop that falls
+    behind runs its late periods back to back until it has caught up, as long as it is at most
+    ``catch_up`` [s] behind; further behind (a host too busy, a suspended process), its time
+    slips instead: the model's time stops being the reference's by that much, the frames come
+    late but consistent. Each slip is counted (``overruns``, ``slipped`` [s]) and warned of at
+    most every :data:`SLIP_WARN_EVERY` s, through ``log`` (``logging.getLogger(name)``)."""
+
+    is_simulated = False
+
+    def __init__(self, reference: Clock, *, catch_up: float = CATCH_UP,
+                 name: str = "lowerbase") -> None:
+        if not catch_up > 0:
+            raise ValueError(f"catch_up must be > 0 s, not {catch_up}")
+        self.reference = reference
+        self.catch_up = float(catch_up)
+        self.name = name
+        self._t = reference.now()
+        self._offset = 0.0  # reference time - model time: the sum of the slips
+        self._warned: float | None = None
+        self.overruns = 0  #: slips: times the loop fell more than catch_up behind
+        self.slipped = 0.0  #: [s] the model's time lost against the reference, in all
+
+    def now(self) -> float:
+        return self._t
+
+    def resync(self) -> None:
+        """Pace from here: the reference's time now is the model's (a loop's start, after a
+        set-up that took its time); not a slip."""
+        self._offset = self.reference.now() - self._t
+
+    def behind(self) -> float:
+        """How far [s] the model's time is behind the paced reference right now."""
+        return self.reference.now() - self._offset - self._t
+
+    def wait_seconds(self, t: float) -> float:
+        """The wall seconds until model time ``t`` is due (<= 0: due already)."""
+        return real_seconds(self.reference, t + self._offset - self.reference.now())
+
+    def enter(self, t: float) -> float:
+        """Run the period that starts at model time ``t`` (>= now()): the returned seconds
+        [s] the time slipped, 0.0 unless the loop was more than ``catch_up`` behind."""
+        if t < self._t:
+            raise ValueError(f"cannot move a clock backwards ({t} < {self._t})")
+        self._t = float(t)
+        lag = self.behind()
+        if lag <= self.catch_up:
+            return 0.0
+        self._offset += lag
+        self.overruns += 1
+        self.slipped += lag
+        now = self.reference.now()
+        if self._warned is None or now - self._warned >= SLIP_WARN_EVERY:
+            self._warned = now
+            logging.getLogger(self.name).warning(
+                "%s fell %.3f s behind real time (a busy host); its time slipped: frames come "
+                "late, their times and the motion stay consistent (%d slips, %.3f s in all)",
+                self.name, lag, self.overruns, self.slipped)
+        return lag
+
+    def sleep_until(self, deadline: float) -> None:
+        """Wait for ``deadline`` on the reference, then enter it (a loop's own pacing)."""
+        if deadline <= self._t:
+            return
+        self.reference.sleep_until(deadline + self._offset)
+        self.enter(deadline)
+
+    def summary(self) -> str:
+        """One phrase for a stop line: '' when the loop kept real time."""
+        if not self.overruns:
+            return ""
+        return (f"fell behind real time {self.overruns} times, its time slipped "
+                f"{self.slipped:.3f} s in all (a busy host)")

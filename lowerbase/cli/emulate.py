@@ -214,8 +214,9 @@ def run(args: argparse.Namespace) -> int:
         feed = None
         mcu.shutdown()
         stats = ", ".join(f"{k} {v}" for k, v in sorted(mcu.stats.items()))
-        print(f"lowerbase emulate: stopped after {clock.now() - mcu.boot_time:.1f} s; {stats}",
-              file=sys.stderr)
+        slips = getattr(clock, "summary", lambda: "")()
+        print(f"lowerbase emulate: stopped after {clock.now() - mcu.boot_time:.1f} s; {stats}"
+              f"{'; ' + slips if slips else ''}", file=sys.stderr)
     finally:
         if feed is not None:
             feed.close()
@@ -296,12 +297,14 @@ def _chain(hooks: list[Any]) -> Any:
 
 def make_clock(args: argparse.Namespace, stop: threading.Event) -> Any:
     """The emulator's clock: simulated, real time, or real time x ``--speed``."""
-    from lowerbase.clock import RealClock, ScaledClock, SimClock
+    from lowerbase.clock import PacedClock, RealClock, ScaledClock, SimClock
 
     if args.simulated:
         return SimClock()
     speed = getattr(args, "speed", 1.0)
-    return RealClock(stop) if speed == 1.0 else ScaledClock(speed, stop)
+    wall = RealClock(stop) if speed == 1.0 else ScaledClock(speed, stop)
+    # the model's time: it slips (counted, warned of) where the host cannot keep the period
+    return PacedClock(wall, name="lowerbase emulate")
 
 
 def _timing(args: argparse.Namespace) -> str:
@@ -372,7 +375,9 @@ def _run_fleet(args: argparse.Namespace, profile: Any, faults: list[Any]) -> int
                 totals[key] = totals.get(key, 0) + value
         stats = ", ".join(f"{k} {v}" for k, v in sorted(totals.items()))
         print(f"lowerbase emulate: fleet stopped after {clock.now() - fleet[0].mcu.boot_time:.1f}"
-              f" s; all {args.fleet} together: {stats}", file=sys.stderr)
+              f" s; all {args.fleet} together: {stats}"
+              f"{'; ' + slips if (slips := getattr(clock, 'summary', lambda: '')()) else ''}",
+              file=sys.stderr)
     finally:
         close_fleet(fleet)
     return 0

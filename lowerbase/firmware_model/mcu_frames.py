@@ -84,7 +84,8 @@ class McuFrames(McuParts):
                 "BatteryVoltage": _clip(volts, msg, "BatteryVoltage")}]
         if name == "Heartbeat":
             return [{"Uptime": _clip(self.clock.now() - self.boot_time, msg, "Uptime"),
-                     "BootCounter": self.boot_counter, "ProtocolVersion": PROTOCOL_VERSION}]
+                     "BootCounter": self.boot_counter, "ProtocolVersion": PROTOCOL_VERSION,
+                     "Overruns": getattr(self.clock, "overruns", 0) % 16}]
         if name == "LedState":
             return [{"Strip": strip, "Submodule": sub, **led}
                     for (strip, sub), led in sorted(self.leds.items())]

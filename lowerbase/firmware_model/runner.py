@@ -1,8 +1,11 @@
 """Run an :class:`~lowerbase.firmware_model.mcu.Mcu` against a python-can bus.
 
-Real time: frames are handled as they arrive and the control loop keeps its period (the
-deadline advances by exactly one period per step, so periodic frames keep their cycle; on a
+Real time: frames are handled as they arrive and the control loop keeps its period on a
+:class:`~lowerbase.clock.PacedClock` (the MCU's time advances by exactly one period per step,
+so periodic frames keep their cycle and the model its time; on a
 :class:`~lowerbase.clock.ScaledClock`, ``emulate --speed K``, the waits are K times shorter).
+A loop the host runs late catches up period by period, up to ``CATCH_UP``; further behind,
+its time slips, counted (the Heartbeat's Overruns, ``PacedClock.overruns``) and warned of.
 Simulated time: each step drains what the bus holds, then the clock jumps one period.
 :func:`run_fleet` steps N chassis on one clock in one process, each on its own bus
 (:func:`fleet_bus_configs`): one ``epoll`` wait per period for all, then one step each.
@@ -28,7 +31,7 @@ from typing import Any
 
 import can
 
-from lowerbase.clock import Clock, SimClock, real_seconds
+from lowerbase.clock import Clock, PacedClock, SimClock
 from lowerbase.errors import ConfigError
 from lowerbase.firmware_model.bus_io import FULL_ID_MASK as FULL_ID_MASK
 from lowerbase.firmware_model.bus_io import bus_sender as bus_sender
@@ -92,30 +95,47 @@ def run(
     if catalog_filter:
         listen_to_upper(bus, mcu.codec)
     stop = stop or threading.Event()
-    start = clock.now()
-    deadline = start
-    while not stop.is_set():
-        if duration is not None and clock.now() - start >= duration - 1e-9:
-            break
-        deadline += mcu.dt
-        if isinstance(clock, SimClock):
+    if isinstance(clock, SimClock):
+        start = clock.now()
+        while not stop.is_set():
+            if duration is not None and clock.now() - start >= duration - 1e-9:
+                break
             _drain(mcu, bus, peers)
             mcu.step()
             clock.advance(mcu.dt)
-        else:
+            if on_step is not None:
+                on_step(mcu)
+        return
+    pace, owned = paced(clock), mcu.clock
+    mcu.clock = pace
+    try:
+        start = deadline = pace.now()
+        while not stop.is_set():
+            if duration is not None and pace.now() - start >= duration - 1e-9:
+                break
+            deadline += mcu.dt
             while True:
-                remaining = deadline - clock.now()
-                # the wait is in wall seconds: a ScaledClock (--speed K) runs K times as fast
-                msg = bus.recv(real_seconds(clock, remaining)) if remaining > 0 else \
-                    bus.recv(0.0)
+                remaining = pace.wait_seconds(deadline)
+                msg = bus.recv(remaining if remaining > 1e-9 else 0.0)
                 if msg is None:
                     break
                 _receive(mcu, msg, peers)
+            pace.enter(deadline)
             mcu.step()
-            if clock.now() - deadline > 1.0:  # overloaded (or suspended): do not burst-catch-up
-                deadline = clock.now()
-        if on_step is not None:
-            on_step(mcu)
+            if on_step is not None:
+                on_step(mcu)
+    finally:
+        if pace is not clock:
+            mcu.clock = owned
+
+
+def paced(clock: Clock, name: str = "lowerbase emulate") -> PacedClock:
+    """``clock`` when it is a :class:`PacedClock` (then paced from now on: a set-up before the
+    loop is not a slip), else a new one paced to it (a RealClock or ScaledClock)."""
+    if isinstance(clock, PacedClock):
+        clock.resync()
+        return clock
+    return PacedClock(clock, name=name)
 
 
 @dataclass
@@ -219,23 +239,30 @@ def run_fleet(
             drain(chassis)
 
     sim = clock if isinstance(clock, SimClock) else None
+    pace = None if sim is not None else paced(clock)
+    time = sim if sim is not None else pace
+    assert time is not None
+    owned = [c.mcu.clock for c in fleet]
+    if pace is not None:
+        for chassis in fleet:
+            chassis.mcu.clock = pace
     wait = min(dt / 4, 0.001) if polled else None  # buses without an fd: poll them
-    start = deadline = clock.now()
+    start = deadline = time.now()
     try:
         if sim is not None and on_step is None and block > 1:
             _run_blocks(fleet, sim, selector, drain, duration, stop, on_chassis_step, block)
             return
         while not stop.is_set():
-            if duration is not None and clock.now() - start >= duration - 1e-9:
+            if duration is not None and time.now() - start >= duration - 1e-9:
                 break
             deadline += dt
-            if sim is not None:
+            if pace is None:
                 receive(0.0)
             else:
-                while (remaining := deadline - clock.now()) > 0:
-                    span = real_seconds(clock, remaining)
-                    receive(span if wait is None else min(span, wait))
+                while (remaining := pace.wait_seconds(deadline)) > 1e-9:  # under: due
+                    receive(remaining if wait is None else min(remaining, wait))
                 receive(0.0)
+                pace.enter(deadline)
             for k, chassis in enumerate(fleet):
                 chassis.mcu.step()
                 send_held(chassis)
@@ -243,13 +270,13 @@ def run_fleet(
                     on_chassis_step(k, chassis)
             if sim is not None:
                 sim.advance(dt)
-            elif clock.now() - deadline > 1.0:  # overloaded: do not burst-catch-up
-                deadline = clock.now()
             if on_step is not None:
                 on_step()
     finally:
-        for chassis in fleet:
+        for chassis, mine in zip(fleet, owned, strict=True):
             send_held(chassis)
+            if pace is not clock:
+                chassis.mcu.clock = mine
         selector.close()
 
 

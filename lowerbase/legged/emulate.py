@@ -31,7 +31,7 @@ def _defects(faults: list[str]) -> tuple[str, ...]:
 
 def run_legged(args: argparse.Namespace) -> int:
     """Run the legged lower computer as ``lowerbase emulate`` was asked to."""
-    from lowerbase.clock import RealClock, SimClock
+    from lowerbase.clock import PacedClock, RealClock, SimClock
     from lowerbase.legged.lower import Send
     from lowerbase.legged.profile import load_legged_profile
     from lowerbase.legged.protocol import LEGS, legged_codec
@@ -50,7 +50,8 @@ def run_legged(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     configs = leg_bus_configs(config)
     stop = threading.Event()
-    clock = SimClock() if args.simulated else RealClock(stop)
+    clock = SimClock() if args.simulated else PacedClock(RealClock(stop),
+                                                         name="lowerbase emulate")
     codec = legged_codec()
 
     def printing(send: Send) -> Send:
@@ -84,8 +85,10 @@ def run_legged(args: argparse.Namespace) -> int:
         with contextlib.suppress(KeyboardInterrupt):
             run_legged(lower, buses, clock, duration=args.duration, stop=stop)
         stats = ", ".join(f"{k} {v}" for k, v in sorted(lower.stats.items()))
+        slips = clock.summary() if isinstance(clock, PacedClock) else ""
         print(f"lowerbase emulate: stopped after {clock.now() - lower.boot_time:.1f} s in "
-              f"state {lower.body.state.name}; {stats or 'nothing received'}", file=sys.stderr)
+              f"state {lower.body.state.name}; {stats or 'nothing received'}"
+              f"{'; ' + slips if slips else ''}", file=sys.stderr)
     finally:
         lower.shutdown()
         close_buses(buses)

@@ -332,7 +332,8 @@ class LeggedLower:
     def _heartbeat(self) -> dict[str, float | int]:
         uptime = min(self.clock.now() - self.boot_time, 4294967.295)
         return {"Uptime": uptime, "BootCounter": self.boot_counter % 65536,
-                "ProtocolVersion": PROTOCOL_VERSION}
+                "ProtocolVersion": PROTOCOL_VERSION,
+                "Overruns": getattr(self.clock, "overruns", 0) % 16}
 
     def _base_velocity(self) -> dict[str, float | int]:
         b = self.body

@@ -26,7 +26,7 @@ import can
 
 from lowerbase.clock import Clock, SimClock
 from lowerbase.errors import ConfigError
-from lowerbase.firmware_model.runner import FULL_ID_MASK, bus_sender, filters_in_kernel
+from lowerbase.firmware_model.runner import FULL_ID_MASK, bus_sender, filters_in_kernel, paced
 from lowerbase.legged.lower import LeggedLower
 from lowerbase.legged.profile import LeggedProfile
 from lowerbase.legged.protocol import BODY_BUS, COMMAND_MESSAGES, LEGS, N_BUSES, legged_codec
@@ -112,27 +112,34 @@ def run_legged(
             drain(k, bus)
 
     sim = clock if isinstance(clock, SimClock) else None
+    pace = None if sim is not None else paced(clock, "lowerbase emulate --robot legged")
+    time = sim if sim is not None else pace
+    assert time is not None
+    owned = lower.clock
+    if pace is not None:
+        lower.clock = pace
     wait = min(lower.dt / 4, 0.001) if polled else None
-    start = deadline = clock.now()
+    start = deadline = time.now()
     try:
         while not stop.is_set():
-            if duration is not None and clock.now() - start >= duration - 1e-9:
+            if duration is not None and time.now() - start >= duration - 1e-9:
                 break
             deadline += lower.dt
-            if sim is not None:
+            if pace is None:
                 receive(0.0)
             else:
-                while (remaining := deadline - clock.now()) > 0:
+                while (remaining := pace.wait_seconds(deadline)) > 1e-9:  # under: due
                     receive(remaining if wait is None else min(remaining, wait))
                 receive(0.0)
+                pace.enter(deadline)
             lower.step()
             if sim is not None:
                 sim.advance(lower.dt)
-            elif clock.now() - deadline > 1.0:  # overloaded (or suspended): no burst catch-up
-                deadline = clock.now()
             if on_step is not None:
                 on_step(lower)
     finally:
+        if pace is not clock:
+            lower.clock = owned
         selector.close()
 
 

@@ -35,6 +35,7 @@ $(STAMP): pyproject.toml
 	@if $(PY) -c 'import genpy' 2>/dev/null; then \
 	  $(PY) -m lowerbase.driver.msggen $(ROS_OUT) --pth "$$($(PY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"; \
 	else echo "genpy not available: woosh_msgs not generated (ROS tests will skip)"; fi
+	$(PY) -m lowerbase warm
 	touch $@
 
 env: system-deps $(STAMP)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import ast
 import hashlib
+import importlib
 import os
 import sys
 from collections.abc import Callable
@@ -42,6 +43,34 @@ def compiled(**options: Any) -> Callable[[F], F]:
         finally:
             numba_config.CACHE_DIR = saved
     return wrap
+
+
+#: every module with kernels (``lowerbase warm`` compiles them all; a test keeps the list whole)
+KERNEL_MODULES = (
+    "lowerbase.firmware_model.lean_frames",
+    "lowerbase.firmware_model.lean_kernel",
+    "lowerbase.firmware_model.lean_batch",
+    "lowerbase.firmware_model.imu_kernel",
+    "lowerbase.driver.ekf_kernels",
+    "lowerbase.world.raycast_kernel",
+    "lowerbase.world.scan_kernel",
+    "lowerbase.world.localization.pf_kernel",
+    "lowerbase.world.localization.likelihood_kernel",
+    "lowerbase.navigation.kernels",
+)
+
+
+def uncached() -> list[str]:
+    """The kernel modules with no compiled kernel in their cache yet (their first use compiles
+    them: seconds to minutes each)."""
+    missing = []
+    for module in KERNEL_MODULES:
+        importlib.import_module(module)  # its package's sources decide the cache's name
+        where = cache_dir(module)
+        tag = f"py{sys.version_info.major}{sys.version_info.minor}"  # numba's index: per Python
+        if not where or not any(Path(where).rglob(f"*.{tag}.nbi")):
+            missing.append(module)
+    return missing
 
 
 @cache

@@ -35,6 +35,7 @@ SUBCOMMANDS = (
     "record",
     "mcap",
     "ros-env",
+    "warm",
 )
 
 

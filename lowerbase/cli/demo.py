@@ -87,6 +87,11 @@ def run_tasks(scenario: Any, out: Path, *, debug: bool = False,
           "navigation and the task machine (exec_task, robot_status)")
     print(f"scenario {scenario.name} ({Path(scenario.source).name}): {scenario.description}; "
           f"{scenario.duration:g} s simulated, Ctrl-C stops")
+    from lowerbase.jit import uncached
+
+    if uncached():
+        print("compiling the numba kernels first (not cached yet: a few minutes, once; "
+              "`make env` or `lowerbase warm` does it ahead)")
     sys.stdout.flush()
     result, summary = run_and_report(scenario, out, TaskStatusLine(force=True, period=10.0),
                                      debug=debug, mcap=out / "run.mcap" if mcap else None,

@@ -107,6 +107,7 @@ class DriverCore(LinkLifecycle, StatusInput):
         self.reboots = 0
         self._uptime: tuple[float, float] | None = None  # (Uptime, receive time) of the last
         self._reboot_suspect: tuple[float, float, int] | None = None  # (Uptime, time, boot)
+        self._overruns = 0  # the last Heartbeat's Overruns (the lower computer's slips, mod 16)
         self._configured_ok = False
         self._control_can: bool | None = None  # ControlMode Can in the latest SystemStatus
         self._enable_wanted = False  # first contact or a confirmed reboot, not enabled yet

@@ -30,6 +30,7 @@ class LinkLifecycle(OdometryInput):
     _param_names: Any
     _uptime: tuple[float, float] | None
     _reboot_suspect: tuple[float, float, int] | None
+    _overruns: int
     _configured_ok: bool
     _enable_wanted: bool
     _last_enable: float
@@ -46,6 +47,8 @@ class LinkLifecycle(OdometryInput):
     def _on_Heartbeat(self, v: dict[str, Any], now: float) -> None:
         self._last_heartbeat = now
         boot, uptime = int(v["BootCounter"]), float(v["Uptime"])
+        overruns = int(v.get("Overruns", 0))
+        slipped, self._overruns = (overruns - self._overruns) % 16, overruns
         if self.boot_counter is None or self._uptime is None:
             self.boot_counter, self._uptime = boot, (uptime, now)
             self._enable_wanted = self.config.auto_enable
@@ -61,6 +64,16 @@ class LinkLifecycle(OdometryInput):
                 log.warning("a Heartbeat with BootCounter %d (not %d) but the Uptime still "
                             "counting: not a reboot, ignored (garbled or forged?)", boot,
                             self.boot_counter)
+            return
+        if slipped and boot == self.boot_counter and uptime > self._uptime[0]:
+            # the lower computer fell behind real time and says so (its Overruns moved): its
+            # time slipped, the same boot goes on; follow its timeline from here
+            gap = self._uptime[0] + (now - self._uptime[1]) - uptime
+            self._uptime = (uptime, now)
+            self._reboot_suspect = None
+            self.stats["lower_computer_slips"] += slipped
+            log.warning("the lower computer fell behind real time (Overruns +%d): its Uptime "
+                        "is %.3f s behind this clock's; following it", slipped, gap)
             return
         suspect = self._reboot_suspect
         if suspect is not None and _continues(suspect[:2], uptime, now, self.uptime_slack) \

@@ -49,6 +49,7 @@ class HeartbeatStream:
     last: float  #: receive time of the latest Heartbeat [s]
     count: int = 1
     duplicates: int = 0  #: Heartbeats heard twice: two lower computers in lockstep
+    overruns: int = 0  #: of the latest Heartbeat (its sender's slips behind real time, mod 16)
 
     def describe(self) -> str:
         return f"BootCounter {self.boot}, uptime {self.uptime:.1f} s"
@@ -90,16 +91,18 @@ class PeerMonitor:
         except ProtocolError:
             return False
         boot, counter = int(values["BootCounter"]), int(values["Counter"])
-        uptime = float(values["Uptime"])
+        uptime, overruns = float(values["Uptime"]), int(values.get("Overruns", 0))
         self.streams = [s for s in self.streams if stamp - s.last <= self.stale]
-        stream = next((s for s in self.streams if self._fits(s, boot, uptime, counter, stamp)),
-                      None)
+        stream = next((s for s in self.streams
+                       if self._fits(s, boot, uptime, counter, stamp, overruns)), None)
         if stream is None:
-            self.streams.append(HeartbeatStream(boot, uptime, counter, stamp, stamp))
+            self.streams.append(HeartbeatStream(boot, uptime, counter, stamp, stamp,
+                                                overruns=overruns))
         elif uptime == stream.uptime:  # the same Heartbeat twice: a second sender in step
             stream.duplicates += 1
         else:
             stream.uptime, stream.counter, stream.last = uptime, counter, stamp
+            stream.overruns = overruns
             stream.count += 1
         return self._check(stamp)
 
@@ -109,13 +112,16 @@ class PeerMonitor:
         return len(self._confirmed(self.streams[-1].last if self.streams else -math.inf))
 
     def _fits(self, s: HeartbeatStream, boot: int, uptime: float, counter: int,
-              stamp: float) -> bool:
+              stamp: float, overruns: int = 0) -> bool:
         if boot != s.boot:
             return False
         if uptime == s.uptime:
             return counter == s.counter
         du, dt = uptime - s.uptime, stamp - s.last
-        if du <= 0 or abs(du - dt) > self.tolerance + 0.05 * dt:
+        # a sender that fell behind real time says so (Overruns moved): its Uptime then
+        # advanced less than the receiver's clock
+        slipped = overruns != s.overruns and 0 < du < dt
+        if du <= 0 or (abs(du - dt) > self.tolerance + 0.05 * dt and not slipped):
             return False
         return (counter - s.counter) % 16 == round(du / self.period) % 16
 

@@ -77,7 +77,8 @@ def test_decode_reads_python_can_log_files(tmp_path: Path,
                                            capsys: pytest.CaptureFixture[str]) -> None:
     codec = default_codec()
     msg = codec.message("Heartbeat")
-    data = msg.encode({"Uptime": 12.5, "BootCounter": 3, "Counter": 1, "ProtocolVersion": 1})
+    data = msg.encode({"Uptime": 12.5, "BootCounter": 3, "Counter": 1,
+                       "ProtocolVersion": 1, "Overruns": 0})
     for suffix in (".log", ".asc", ".blf"):
         path = tmp_path / f"run{suffix}"
         with can.Logger(str(path)) as writer:

@@ -26,7 +26,7 @@ def _message(name: str, values: dict[str, object], t: float = 1.0,
 
 def _heartbeat(t: float) -> can.Message:
     return _message("Heartbeat", {"Uptime": t, "BootCounter": 3, "Counter": 1,
-                                  "ProtocolVersion": 1}, t)
+                                  "ProtocolVersion": 1, "Overruns": 0}, t)
 
 
 def _decode_stdin(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],

@@ -29,7 +29,7 @@ def _feed(core: DriverCore, clock: SimClock, uptimes: list[float], lags: list[fl
         clock.advance(handled - clock.now())
         core.on_frame(msg.frame_id, msg.encode({"Uptime": uptime, "BootCounter": boot,
                                                 "Counter": (round(uptime / 0.5)) % 16,
-                                                "ProtocolVersion": 1}))
+                                                "ProtocolVersion": 1, "Overruns": 0}))
         assert k == 0 or core.boot_counter == boot
 
 
@@ -71,3 +71,34 @@ def test_the_allowance_never_narrows_the_defaults() -> None:
     core, _ = _core()
     core.allow_receive_lag(0.1)
     assert core.uptime_slack == 0.5 and core.peers.tolerance == 0.3
+
+
+def _slipping(core: DriverCore, clock: SimClock, slip_at: int, slip: float,
+              overruns_move: bool) -> None:
+    """A lower computer whose time slipped ``slip`` s behind real time before its Heartbeat
+    ``slip_at`` (issue 22 item 3): it reports the slip in Overruns, or (a defect) does not."""
+    msg = core.codec.message("Heartbeat")
+    for k in range(12):
+        uptime = 10.0 + 0.5 * k
+        handled = uptime + (slip if k >= slip_at else 0.0)
+        clock.advance(handled - clock.now())
+        overruns = 1 if overruns_move and k >= slip_at else 0
+        core.on_frame(msg.frame_id, msg.encode({"Uptime": uptime, "BootCounter": 1,
+                                                "Counter": k % 16, "ProtocolVersion": 1,
+                                                "Overruns": overruns}))
+
+
+def test_a_slip_the_lower_computer_reports_is_followed_not_a_reboot() -> None:
+    core, clock = _core()
+    _slipping(core, clock, 5, 1.2, overruns_move=True)
+    assert core.reboots == 0 and core.boot_counter == 1
+    assert core.stats["lower_computer_slips"] == 1
+    assert core.stats["heartbeat_off_timeline"] == 0
+    assert core.stats["two_lower_computers"] == 0
+
+
+def test_the_same_lag_unreported_is_still_off_the_timeline() -> None:
+    core, clock = _core()
+    _slipping(core, clock, 5, 1.2, overruns_move=False)
+    assert core.stats["lower_computer_slips"] == 0
+    assert core.stats["heartbeat_off_timeline"] > 0

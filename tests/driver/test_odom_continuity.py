@@ -180,7 +180,8 @@ def test_a_suspected_reboot_makes_the_next_sample_a_baseline(stopped: SimLoop) -
     raw0, odom0 = poses(loop)
     hb = loop.driver.codec.message("Heartbeat")
     loop.driver.on_frame(hb.frame_id, hb.encode(
-        {"Uptime": 0.0, "BootCounter": 1, "Counter": 0, "ProtocolVersion": 1}), t + 0.01)
+        {"Uptime": 0.0, "BootCounter": 1, "Counter": 0,
+         "ProtocolVersion": 1, "Overruns": 0}), t + 0.01)
     wheels(loop, t + 0.02, c + 1, left - 10, right - 10)  # 10 pulses back: plausible motion
     assert poses(loop) == (raw0, odom0)
 

@@ -32,7 +32,8 @@ def restart(loop: SimLoop, gap: float) -> None:
 def heartbeat(loop: SimLoop, uptime: float, boot: int, counter: int = 0) -> None:
     msg = loop.driver.codec.message("Heartbeat")
     loop.driver.on_frame(msg.frame_id, msg.encode(
-        {"Uptime": uptime, "BootCounter": boot, "Counter": counter, "ProtocolVersion": 1}))
+        {"Uptime": uptime, "BootCounter": boot, "Counter": counter,
+         "ProtocolVersion": 1, "Overruns": 0}))
 
 
 def test_restarted_emulator_with_the_same_boot_counter_is_re_enabled_ten_times_of_ten() -> None:

@@ -160,7 +160,7 @@ def _heartbeats(path: Path, n: int) -> Path:
             logger.on_message_received(can.Message(
                 timestamp=1000.0, arbitration_id=hb.frame_id, is_extended_id=False,
                 data=hb.encode({"Uptime": float(k), "BootCounter": 3, "Counter": k & 0xF,
-                                "ProtocolVersion": 1})))
+                                "ProtocolVersion": 1, "Overruns": 0})))
     return path
 
 

@@ -84,7 +84,8 @@ def test_scenario_run_cli_options(tmp_path: Path, capsys: pytest.CaptureFixture[
 def test_record_mcap_writer(tmp_path: Path) -> None:
     codec = default_codec()
     hb = codec.message("Heartbeat")
-    data = hb.encode({"Uptime": 12.5, "BootCounter": 3, "Counter": 1, "ProtocolVersion": 1})
+    data = hb.encode({"Uptime": 12.5, "BootCounter": 3, "Counter": 1,
+                      "ProtocolVersion": 1, "Overruns": 0})
     path = tmp_path / "live.mcap"
     writer = McapFrames(path)
     writer.on_message_received(can.Message(timestamp=1700000000.25, arbitration_id=hb.frame_id,

@@ -99,7 +99,7 @@ def test_forged_heartbeats_are_not_a_second_lower_computer() -> None:
     bus.add()
     bus.run(10.0)
     forged = HEARTBEAT.encode({"Uptime": 10.2, "BootCounter": 7, "Counter": 3,
-                               "ProtocolVersion": 1})
+                               "ProtocolVersion": 1, "Overruns": 0})
     bus.frames.append((bus.clock.now(), HEARTBEAT.frame_id, forged, 9))
     bus.frames.append((bus.clock.now(), HEARTBEAT.frame_id, b"\x01\x02", 9))  # garbled
     bus.run(10.0)
@@ -123,9 +123,23 @@ def test_a_lower_computer_hears_itself_back_without_alarm_and_notices_another() 
     own = [(bus.clock.now() - 3.0 + i * 0.5) for i in range(6)]
     for stamp in own:  # it keeps sending its own Heartbeats meanwhile
         monitor.on_sent(HEARTBEAT.frame_id, HEARTBEAT.encode(
-            {"Uptime": stamp - 100.0, "BootCounter": 1, "Counter": 0, "ProtocolVersion": 1}),
+            {"Uptime": stamp - 100.0, "BootCounter": 1, "Counter": 0, "ProtocolVersion": 1,
+             "Overruns": 0}),
             stamp)
     assert start == len(bus.frames)
     hits = [stamp for stamp, fid, data, _ in other.frames if monitor.on_frame(fid, data, stamp)]
     assert len(hits) == 1
     assert "this one and one with" in monitor.warning
+
+
+def test_a_lower_computer_whose_time_slipped_stays_one_stream() -> None:
+    """Its Uptime fell 1.5 s behind the receiver's clock and its Overruns say so (issue 22
+    item 3): the same stream, not a new one that a second lower computer could start."""
+    monitor = PeerMonitor()
+    for k in range(12):
+        uptime = 10.0 + 0.5 * k
+        slipped = k >= 6
+        data = HEARTBEAT.encode({"Uptime": uptime, "BootCounter": 1, "Counter": k % 16,
+                                 "ProtocolVersion": 1, "Overruns": int(slipped)})
+        assert not monitor.on_frame(HEARTBEAT.frame_id, data, uptime + 1.5 * slipped)
+    assert len(monitor.streams) == 1 and monitor.streams[0].count == 12

@@ -148,6 +148,8 @@ class ActionServers:
             text = accepted
             if command is not None and command.status is Status.BLOCKED:
                 text = BLOCKED_TEXT + (command.reason or "an obstacle")
+            elif command is not None and command.status is Status.WAITING:
+                text = command.reason
             if text != shown:
                 shown = text
                 self._set_goal_text(text)

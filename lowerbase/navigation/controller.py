@@ -97,6 +97,7 @@ class Status(enum.Enum):
     APPROACHING = "approaching"  #: final approach: position, then yaw
     SUCCEEDED = "succeeded"
     BLOCKED = "blocked"  #: lethal cost ahead: braking to a stop
+    WAITING = "waiting"  #: stopped: the scan or the localization is out of date (Navigator)
 
 
 @dataclass(frozen=True)

@@ -56,6 +56,9 @@ class NavigatorConfig:
     max_replans: int = 5  #: replans while blocked per goal before ABORTED
     max_early_replans: int = 20  #: replans as new obstacles come into view, per goal
     stuck_timeout: float = 10.0  #: no progress this long (not waiting): ABORTED
+    #: the newest scan or localization older than this: stop and wait for them (not blind)
+    sensing_timeout: float = 0.5
+    sensing_patience: float = 10.0  #: out of date this long: ABORTED
     progress_distance: float = 0.05  #: moving this far counts as progress
     progress_angle: float = math.radians(5.0)  #: turning this far counts as progress
     default_max_speed: float = 0.6  #: cruise speed when the mode's max_speed <= 0
@@ -74,6 +77,7 @@ class NavigatorConfig:
 
     def __post_init__(self) -> None:
         for name in ("xy_tolerance", "yaw_tolerance", "blocked_patience", "stuck_timeout",
+                     "sensing_timeout", "sensing_patience",
                      "progress_distance", "progress_angle", "default_max_speed",
                      "goal_tolerance", "replan_interval", "local_size", "cost_scale",
                      "fuzzy_cost_scale", "clearance_margin"):

@@ -138,6 +138,7 @@ class Navigator:
         self._leg_ends: list[int] = []  # free mode: path index where each waypoint is
         self._need_plan = False
         self._blocked_since: float | None = None
+        self._blind_since: float | None = None  # sensing out of date since
         self._progress = ProgressWatch(self.config.progress_distance,
                                        self.config.progress_angle, self.config.stuck_timeout)
         self._last_early = -math.inf
@@ -290,13 +291,20 @@ class Navigator:
         return why
 
     # -- the control step ------------------------------------------------------------------------
-    def tick(self, now: float, pose: Sequence[float]) -> NavCommand:
-        """One control step (20 Hz) at the robot's map ``pose``: the twist and the state."""
+    def tick(self, now: float, pose: Sequence[float], sensed: float | None = None
+             ) -> NavCommand:
+        """One control step (20 Hz) at the robot's map ``pose``: the twist and the state.
+        ``sensed``: the time [s] of the older of the newest scan and the newest localization
+        (None: not known; not checked): older than ``sensing_timeout``, the robot stops and
+        waits (Status.WAITING), ``sensing_patience`` long: ABORTED."""
         p = _pose(pose, "robot pose")
         self.feedback_pose = p
         if self.state not in (GoalState.PENDING, GoalState.ACTIVE):
             state = self.state or GoalState.PENDING
             return NavCommand(0.0, 0.0, state, Status.IDLE, self.reason)
+        if sensed is not None and now - sensed > self.config.sensing_timeout:
+            return self._blind(p, now, now - sensed)
+        self._blind_since = None
         if self._need_plan:
             self._need_plan = False
             self.state = GoalState.ACTIVE
@@ -343,6 +351,19 @@ class Navigator:
         if stuck:
             return self._finish(GoalState.ABORTED, stuck, now)
         return NavCommand(command.linear, command.angular, GoalState.ACTIVE, command.status)
+
+    def _blind(self, p: Pose, now: float, age: float) -> NavCommand:
+        """Sensing is out of date: never drive blind; wait, then give up."""
+        if self._blind_since is None:
+            self._blind_since = now
+        if now - self._blind_since >= self.config.sensing_patience:
+            return self._finish(GoalState.ABORTED, f"sensing stopped: no fresh scan or "
+                                f"localization for {age:.1f} s", now)
+        self.controller.v = self.controller.w = 0.0
+        self._progress.restart(now, p)  # waiting for sensing is not being stuck
+        return NavCommand(0.0, 0.0, self.state or GoalState.PENDING, Status.WAITING,
+                          f"waiting for sensing: the newest scan or localization is "
+                          f"{age:.1f} s old")
 
     def _compute(self, p: Pose) -> NavCommand:
         if self._reverse:

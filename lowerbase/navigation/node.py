@@ -112,6 +112,7 @@ class NavigationNode:
         self.odom_stamp: float | None = None  #: /odom's header stamp [s, ROS time]
         self.map_to_odom: Pose | None = None
         self.scan: LaserScan | None = None  #: the newest /scan
+        self.scan_stamp: float | None = None  #: its header stamp [s, ROS time]
         #: /odom's poses by stamp, and the scans and clouds waiting for it to reach theirs
         self.odom_history = PoseHistory()
         self.tf = MapToOdom(self.rospy, setup.map_frame, setup.odom_frame)
@@ -217,6 +218,7 @@ class NavigationNode:
         stamp = self._stamp(msg.header.stamp.to_sec())
         with self.lock:
             self.scan = scan
+            self.scan_stamp = stamp
             self.sensors.add("scan", stamp, scan)
 
     def _on_cloud(self, msg: Any) -> None:
@@ -272,6 +274,14 @@ class NavigationNode:
                 return None
             return compose(self.map_to_odom, self.odom)
 
+    def _sensed(self) -> float | None:
+        """[s] the older of the newest /scan and the newest map -> odom (the Navigator stops
+        when it is out of date); None before the first scan (a robot without one)."""
+        if self.scan_stamp is None:
+            return None
+        localized = self.tf.newest()
+        return self.scan_stamp if localized is None else min(self.scan_stamp, localized)
+
     # -- the loop ------------------------------------------------------------------------------
     def tick(self, now: float | None = None) -> None:
         """One control period at ``now`` (None: :meth:`now`): sensors into the costmaps, one
@@ -296,7 +306,7 @@ class NavigationNode:
                     self.stats["no_pose"] += 1
                     command = (0.0, 0.0)
                 else:
-                    cmd = self.navigator.tick(now, pose)
+                    cmd = self.navigator.tick(now, pose, self._sensed())
                     self.last_command = cmd
                     command = (cmd.linear, cmd.angular)
                     if self.navigator.plans != self._plans_published:

@@ -8,7 +8,7 @@ FINISHED -> done. ``--cancel-after S`` sends the empty list S seconds (ROS time)
 RUNNING instead, and waits for IDLE. Every message is a protobuf message in a
 lowerbase_msgs/Protobuf (``type``, ``data``); nothing else of lowerbase is used.
 
-    python examples/business_node.py --route 6,1.2:11,1.2:16,1.2:21,1.2 --map warehouse
+    .venv/bin/python examples/business_node.py --route 6,1.2:11,1.2:16,1.2:21,1.2 --map warehouse
 
 Each report is printed as ``business: <topic> <STATUS> finished=<f0>,<f1>,...``; the exit code
 is 0 when the route finished (or the cancel was answered with IDLE), 1 otherwise.

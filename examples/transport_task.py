@@ -5,7 +5,7 @@ service and the robot_status topic.
 Start the virtual robot first (``lowerbase robot --map empty_room``), then, with the same
 ROS_MASTER_URI::
 
-    python3 examples/transport_task.py --mark R1 --direction 2
+    .venv/bin/python examples/transport_task.py --mark R1 --direction 2
 
 It waits until the robot is initialized, sends a transporting task (task_type 4) to the storage
 point ``--mark`` with an unloading (2) or loading (1) action, prints every robot_status as one

@@ -12,6 +12,7 @@ from pathlib import Path
 from benchmarks.common import Row
 
 MODULES = ("bench_protocol", "bench_emulator", "bench_fleet", "bench_bus", "bench_bms",
+           "bench_bms_modbus",
            "bench_driver", "bench_scenarios", "bench_world", "bench_localization",
            "bench_recording", "bench_world_loop", "bench_navigation", "bench_shift",
            "bench_legged", "bench_trace", "bench_robot_sim")

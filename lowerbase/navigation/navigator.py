@@ -27,7 +27,7 @@ target is reached within the tolerances).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -213,11 +213,18 @@ class Navigator:
         an obstacle's inflation is planned out of (the robot may be there after localization
         error); a NaN pose or bad tolerance: :class:`PlanningError`; a start off the map, or a
         goal off it by more than ``tolerance``: :class:`NavigationError`."""
+        return self.plan_job(start, goal, tolerance)()
+
+    def plan_job(self, start: Sequence[float], goal: Sequence[float],
+                 tolerance: float = 0.0) -> Callable[[], Plan]:
+        """:meth:`make_plan` in two halves (the ROS service's): this one checks the request
+        and copies the costs, under the node's lock; the returned call plans on the copy
+        outside it, so a long search never stalls the control loop. Errors as make_plan's."""
         s, g = _pose(start, "start"), _pose(goal, "goal")
         check_on_map(self.grid.extent, s[0], s[1], "start")
         if math.isfinite(tolerance):
             check_on_map(self.grid.extent, g[0], g[1], "goal", max(tolerance, 0.0))
-        return self.planning.make_plan(s, g, tolerance, self.mode, self._fp_forward)
+        return self.planning.plan_job(s, g, tolerance, self.mode, self._fp_forward)
 
     # -- goals -----------------------------------------------------------------------------------
     def send_goal(self, target: Sequence[float], poses: Sequence[Sequence[float]] = (),

@@ -12,7 +12,9 @@ a plan is driven backwards (the mode's ``nav_dir``).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+
+import numpy as np
 
 from lowerbase.navigation.combined import CombinedCosts
 from lowerbase.navigation.controller import wrap
@@ -40,10 +42,13 @@ class GoalPlanner:
         r = cm.inscribed_radius if mode.fuzzy else cm.circumscribed_radius
         return r + self.config.clearance_margin
 
-    def planner(self, mode: NavigationModeGoal, footprint: FootprintCells) -> GlobalPlanner:
+    def planner(self, mode: NavigationModeGoal, footprint: FootprintCells, *,
+                snapshot: bool = False) -> GlobalPlanner:
+        """A planner on the combined costs (``snapshot``: on a copy of them)."""
         fuzzy = mode.fuzzy
         cfg = self.config
-        planner = GlobalPlanner(self.combined.planning_costs(self.clearance(mode)),
+        costs = self.combined.planning_costs(self.clearance(mode))
+        planner = GlobalPlanner(np.array(costs) if snapshot else costs,
                                 self.resolution, self.combined.origin,
                                 cost_scale=cfg.fuzzy_cost_scale if fuzzy else cfg.cost_scale,
                                 narrow_cost=self.global_costmap.circumscribed_cost,
@@ -54,12 +59,25 @@ class GoalPlanner:
     def make_plan(self, start: Sequence[float], goal: Sequence[float], tolerance: float,
                   mode: NavigationModeGoal, footprint: FootprintCells) -> Plan:
         """/move_base/make_plan (see :meth:`Navigator.make_plan`)."""
-        planner = self.planner(mode, footprint)
+        return self.plan_job(start, goal, tolerance, mode, footprint)()
+
+    def plan_job(self, start: Sequence[float], goal: Sequence[float], tolerance: float,
+                 mode: NavigationModeGoal, footprint: FootprintCells) -> Callable[[], Plan]:
+        """:meth:`make_plan` in two halves: this one takes a copy of the costs (under the
+        caller's lock), the returned call plans on the copy (outside it: the controller goes
+        on meanwhile)."""
+        planner = self.planner(mode, footprint, snapshot=True)
         s = _pose(start, "start")
-        r, c = planner.cell(s[0], s[1])
-        if planner.inside(r, c) and planner.blocked[r, c]:
-            planner = unblocked_start(planner, s, self.global_costmap.inscribed_radius)
-        return planner.make_plan(s, goal, tolerance)
+        inscribed = self.global_costmap.inscribed_radius
+
+        def plan() -> Plan:
+            chosen = planner
+            r, c = chosen.cell(s[0], s[1])
+            if chosen.inside(r, c) and chosen.blocked[r, c]:
+                chosen = unblocked_start(chosen, s, inscribed)
+            return chosen.make_plan(s, goal, tolerance)
+
+        return plan
 
     def through(self, pose: Pose, goals: Sequence[Pose], mode: NavigationModeGoal,
                 footprint: FootprintCells) -> tuple[list[Pose], list[int]] | str:

@@ -40,8 +40,9 @@ class Services:
                                      "pose is unknown (no /odom or map -> odom yet)")
             else:
                 start = io.stamped_pose(req.start, "make_plan start", (frame,))
-            with node.lock:
-                plan = node.navigator.make_plan(start, goal, float(req.tolerance))
+            with node.lock:  # the check and a copy of the costs; the search without it
+                job = node.navigator.plan_job(start, goal, float(req.tolerance))
+            plan = job()
         except LowerbaseError as exc:
             log.warning("make_plan refused: %s", exc)
             return GetPlanResponse(plan=io.path_msg([], stamp, frame))

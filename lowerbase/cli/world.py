@@ -8,6 +8,7 @@ sensors see: give both commands the same ones.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -106,6 +107,10 @@ def add_subparser(subparsers: Any) -> None:
     p.add_argument("--ground-truth", action="store_true",
                    help="publish the true pose instead of the particle filter's (tests)")
     p.add_argument("--no-camera", action="store_true", help="no camera topics (saves CPU)")
+    p.add_argument("--camera-hz", type=_rate, metavar="HZ",
+                   help="the camera's frame rate (default: the profile's, 15 Hz); a frame "
+                   "costs tens of ms of CPU, so a busy host keeps a lower rate better (a rate "
+                   "it cannot keep is logged every 30 s with the rate achieved)")
     p.add_argument("--publish-clock", action="store_true",
                    help="be the simulator: publish /clock from the ground truth's time, for "
                    "nodes with /use_sim_time true (lowerbase robot --sim-time)")
@@ -114,6 +119,16 @@ def add_subparser(subparsers: Any) -> None:
     p.add_argument("ros_args", nargs="*", metavar="NAME:=VALUE",
                    help="ROS remappings and special keys")
     p.set_defaults(func=run)
+
+
+def _rate(text: str) -> float:
+    try:
+        hz = float(text)
+    except ValueError:
+        hz = 0.0
+    if not 0.1 <= hz <= 90.0:
+        raise argparse.ArgumentTypeError(f"must be a rate in Hz within 0.1..90, not {text!r}")
+    return hz
 
 
 def run(args: argparse.Namespace) -> int:
@@ -125,7 +140,11 @@ def run(args: argparse.Namespace) -> int:
     ros_args = split_ros_args(args.ros_args)
     host, port = parse_address(args.truth_udp)
     parts = world_parts(args)
-    setup = node.WorldSetup(parts.grid, sensors_from_profile_file(args.profile), parts.start,
+    sensors = sensors_from_profile_file(args.profile)
+    if args.camera_hz is not None and sensors.camera is not None:
+        sensors = dataclasses.replace(
+            sensors, camera=dataclasses.replace(sensors.camera, rate_hz=args.camera_hz))
+    setup = node.WorldSetup(parts.grid, sensors, parts.start,
                             parts.obstacles, ground_truth=args.ground_truth,
                             camera=not args.no_camera)
     node.import_ros()  # one clear line when ROS is missing, before binding anything

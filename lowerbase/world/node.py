@@ -33,7 +33,7 @@ from lowerbase.world.lidar import LidarRig
 from lowerbase.world.localization import Localizer
 from lowerbase.world.localization.poses import compose
 from lowerbase.world.obstacles import Obstacles
-from lowerbase.world.pacing import pace_for, paced_loop
+from lowerbase.world.pacing import RateWatch, pace_for, paced_loop
 from lowerbase.world.raycast import Scene, Solid
 from lowerbase.world.scan_odom import ScanOdom
 from lowerbase.world.sensors import SensorsConfig
@@ -348,19 +348,30 @@ class WorldNode:
         def running() -> bool:
             return not self.stop.is_set() and not self.rospy.is_shutdown()
 
+        pace = pace_for(self.rospy, self.stop)
+        watch = RateWatch("camera", rate_hz)  # the dropping loop says what rate it keeps
+
         def guarded() -> None:
             try:
                 work()
             except LowerbaseError as exc:  # e.g. a camera mounted above the walls
                 log.error("%s; stopping this sensor", exc)
                 failed.set()
+                return
+            if not catch_up:
+                now = pace.now()
+                watch.done(now)
+                line = watch.report(now)
+                if line is not None:
+                    log.warning("%s", line)
 
         def dropped(n: int) -> None:
             self.stats["frames_dropped"] += n
+            watch.dropped(n)
 
         failed = threading.Event()
-        paced_loop(pace_for(self.rospy, self.stop), guarded, rate_hz, catch_up,
-                   lambda: running() and not failed.is_set(), dropped)
+        paced_loop(pace, guarded, rate_hz, catch_up, lambda: running() and not failed.is_set(),
+                   dropped)
 
     def shutdown(self) -> None:
         self.stop.set()

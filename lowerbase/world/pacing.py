@@ -93,3 +93,41 @@ def paced_loop(pace: Pace, work: Callable[[], None], rate_hz: float, catch_up: b
             if not catch_up and dropped is not None:
                 dropped(int(late / period + 1e-6))
             due = now
+
+
+#: [s] how often a sensor that cannot keep its rate says what rate it achieves
+RATE_REPORT_EVERY = 30.0
+
+
+class RateWatch:
+    """The rate a dropping loop achieves (``paced_loop(..., catch_up=False)``: the camera):
+    :meth:`done` per work done, :meth:`dropped` per skipped tick; :meth:`report` gives, at most
+    every ``every`` s of the loop's time and only when ticks were dropped since the last
+    report, one line with the achieved rate (None otherwise)."""
+
+    def __init__(self, name: str, rate_hz: float, every: float = RATE_REPORT_EVERY) -> None:
+        self.name, self.rate_hz, self.every = name, rate_hz, every
+        self.total_done = self.total_dropped = 0
+        self._since: float | None = None
+        self._done = self._dropped = 0
+
+    def done(self, now: float) -> None:
+        if self._since is None:
+            self._since = now
+        self._done += 1
+        self.total_done += 1
+
+    def dropped(self, n: int) -> None:
+        self._dropped += n
+        self.total_dropped += n
+
+    def report(self, now: float) -> str | None:
+        if self._since is None or now - self._since < self.every:
+            return None
+        span, done, dropped = now - self._since, self._done, self._dropped
+        self._since, self._done, self._dropped = now, 0, 0
+        if not dropped:
+            return None
+        return (f"{self.name}: {done / span:.1f} Hz of {self.rate_hz:g} Hz over the last "
+                f"{span:.0f} s ({dropped} frames dropped: a frame takes longer than a period "
+                f"on this host); a lower rate keeps its period")

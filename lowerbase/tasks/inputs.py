@@ -11,7 +11,9 @@ The node's subscribers store the latest of each input here (with the rospy time 
 - ``driver_base/bms`` (woosh_msgs/BMS): ``BMSStatus`` CHARGER_CONNECTED is the charger contact;
 - ``/odom`` (nav_msgs/Odometry): the pose the step moves run on;
 - ``movebase_pose2d`` (geometry_msgs/Pose2D, the world's localization while it runs): the
-  robot on the map; localized while one arrived within ``pose_timeout`` s.
+  robot on the map; localized while one arrived within ``pose_timeout`` s;
+- ``lowerbase/localization`` (std_msgs/String, latched, the world's): ``lost: ...`` while the
+  estimate does not fit the scans (shown on robot_status, navigation goes on).
 """
 
 from __future__ import annotations
@@ -54,6 +56,7 @@ class ChassisInputs:
     pose: Pose | None = None
     pose_time: float | None = None
     pose_timeout: float = 1.0  #: [s] without a pose: localization lost
+    localization: str = ""  #: the world's lowerbase/localization line ("lost: ..."/"localized")
 
     def localized(self, now: float) -> bool:
         return self.pose_time is not None and now - self.pose_time <= self.pose_timeout
@@ -72,5 +75,6 @@ class ChassisInputs:
             charging=self.bms_status is not None
             and bool(self.bms_status & BmsStatus.CHARGER_CONNECTED),
             localized=localized,
+            uncertain=self.localization if self.localization.startswith("lost") else "",
             pose=self.pose,
             odom=self.odom)

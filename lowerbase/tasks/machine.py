@@ -83,6 +83,8 @@ class TaskMachine(Requests, Docking):
             note = f"battery low{pct(ch.soc)}"
         elif not note and not ch.localized:
             note = "localization lost"
+        elif not note and ch.uncertain:
+            note = f"localization {ch.uncertain}"
         if t is None:
             return Status(robot_state=rs, msg=note)
         kind = ActionType.WAITING if t.state == TaskState.WAITING else t.action.kind

@@ -133,6 +133,7 @@ class TasksNode:
             sub("driver_base/bms", BMS, self._on_bms, queue_size=2),
             sub("/odom", Odometry, self._on_odom, queue_size=5),
             sub("movebase_pose2d", Pose2D, self._on_pose, queue_size=5),
+            sub("lowerbase/localization", String, self._on_localization, queue_size=2),
         ]
         self._service = self.wire.service("exec_task", ExecTask, self._exec_task)
 
@@ -168,6 +169,10 @@ class TasksNode:
             return
         with self.lock:
             self.inputs.odom = pose
+
+    def _on_localization(self, msg: Any) -> None:
+        with self.lock:
+            self.inputs.localization = str(msg.data)[:200]
 
     def _on_pose(self, msg: Any) -> None:
         pose = finite_pose(msg.x, msg.y, msg.theta)

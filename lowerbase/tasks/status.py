@@ -22,6 +22,8 @@ class Chassis:
     critical_battery: bool = False
     charging: bool = False  #: the BMS reports a connected charger
     localized: bool = True  #: the localizer's estimate can be trusted
+    #: the localization's own doubt ("lost: the scan fits the map at 20 % ..."; "" none)
+    uncertain: str = ""
     pose: Pose | None = None  #: the robot on the map (localization)
     odom: Pose | None = None  #: /odom (the step moves run closed loop on it)
 

@@ -31,6 +31,7 @@ from lowerbase.world.footprint import validate_pose
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lidar import LidarRig
 from lowerbase.world.localization import Localizer
+from lowerbase.world.localization.lostwatch import LOCALIZED, LostWatch
 from lowerbase.world.localization.poses import compose
 from lowerbase.world.obstacles import Obstacles
 from lowerbase.world.pacing import RateWatch, pace_for, paced_loop
@@ -106,6 +107,7 @@ class WorldNode:
                                    seed=setup.seed,
                                    initial_pose=setup.start, truth=self._true_map_pose,
                                    ground_truth=setup.ground_truth)
+        self.lost_watch = LostWatch()  #: says when the estimate turns lost or found again
         self.odom: Pose | None = None
         self.scan_odom = ScanOdom()  #: each scan with /odom at its stamp, for the localizer
         self.stats: dict[str, int] = {"scans": 0, "frames": 0, "bad_odom": 0,
@@ -137,6 +139,8 @@ class WorldNode:
                       "amcl_pose": pub("/amcl_pose", io.PoseWithCovarianceStamped,
                                        queue_size=5, latch=True),
                       "pose2d": pub("movebase_pose2d", io.Pose2D, queue_size=5),
+                      "localization": pub("lowerbase/localization", io.String, queue_size=2,
+                                          latch=True),
                       "map": pub("/map", io.GridMsg, queue_size=1, latch=True)}
         if self.camera is not None:
             name = self.camera.config.name
@@ -302,6 +306,10 @@ class WorldNode:
                 self._pubs["amcl_pose"].publish(io.pose_with_covariance(
                     stamp, s.map_frame, est.pose, est.covariance))
                 self.stats["amcl_poses"] += 1
+                line = self.lost_watch.update(est)
+                if line is not None:
+                    (log.info if line == LOCALIZED else log.warning)("localization %s", line)
+                    self._pubs["localization"].publish(io.String(data=line))
             m2o = self.localizer.map_to_odom
             if m2o is None:
                 continue

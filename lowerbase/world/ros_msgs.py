@@ -18,7 +18,7 @@ import numpy as np
 from geometry_msgs.msg import Pose2D, PoseWithCovarianceStamped, TransformStamped
 from nav_msgs.msg import OccupancyGrid as GridMsg
 from sensor_msgs.msg import CameraInfo, Image, LaserScan, PointCloud2, PointField
-from std_msgs.msg import Header
+from std_msgs.msg import Header, String
 
 from lowerbase.errors import MapError, WorldError
 from lowerbase.world.camera import CameraConfig
@@ -28,7 +28,7 @@ from lowerbase.world.lidar import LaserScan as Scan
 Pose = tuple[float, float, float]
 
 __all__ = ["CameraInfo", "GridMsg", "Image", "LaserScan", "PointCloud2", "Pose2D",
-           "PoseWithCovarianceStamped", "TransformStamped"]
+           "PoseWithCovarianceStamped", "String", "TransformStamped"]
 
 
 def header(stamp: Any, frame_id: str) -> Header:

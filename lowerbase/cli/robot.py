@@ -20,6 +20,7 @@ from typing import Any
 
 from lowerbase.cli.args import positive_seconds
 from lowerbase.errors import ConfigError, LowerbaseError
+from lowerbase.text import clip
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -285,10 +286,16 @@ def run(args: argparse.Namespace) -> int:
         restore()
         for s, handler in previous.items():
             signal.signal(s, handler)
+    for child in sup.children:  # an emulator that could not keep real time says so at its end
+        for said in child.tail(3):
+            if "fell behind real time" in said:
+                print(f"lowerbase robot: {child.spec.name}: {said.rpartition('; ')[2]} (see "
+                      f"{child.log_path})", flush=True)
     if ended is not None:
+        last = " | ".join(ended.tail(3)) or ended.last_line or "no output"
         print(f"lowerbase robot: error: {ended.spec.name} ended (exit code "
-              f"{codes.get(ended.spec.name)}): {ended.last_line or 'no output'}; see "
-              f"{ended.log_path}", file=sys.stderr)
+              f"{codes.get(ended.spec.name)}): {clip(last, 600)}; see {ended.log_path}",
+              file=sys.stderr)
         return 1
     print(f"lowerbase robot: stopped; logs in {log_dir}", flush=True)
     return 0

@@ -118,6 +118,17 @@ class Child:
                 raise RobotError(f"{self.spec.name} not ready after {self.spec.start_timeout:g}"
                                  f" s; see {self.log_path}")
 
+    def tail(self, n: int = 3) -> list[str]:
+        """The last ``n`` non-empty lines of the child's log (a crash's own last words)."""
+        try:
+            with open(self.log_path, "rb") as f:
+                f.seek(0, os.SEEK_END)
+                f.seek(max(0, f.tell() - 16384))
+                text = f.read().decode("utf-8", "replace")
+        except OSError:
+            return []
+        return [line.strip() for line in text.splitlines() if line.strip()][-n:]
+
     def stop(self, grace: float = STOP_GRACE) -> int:
         """SIGINT (a Ctrl-C), then SIGKILL after ``grace`` s; the exit code."""
         if self.popen.poll() is None:

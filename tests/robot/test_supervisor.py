@@ -187,3 +187,18 @@ def test_a_part_the_robot_goes_on_without_is_reported_once_and_the_watch_goes_on
     sup.stop_all()
     assert lost == ["recorder disk full"]
     assert ended is not None and ended.spec.name == "dies"
+
+
+def test_a_crash_is_quoted_by_its_own_last_lines(tmp_path: Path) -> None:
+    """Issue 22 item 8: the end names the crash's traceback, not the last line the part
+    printed before it (a stale warning)."""
+    sup = Supervisor(tmp_path)
+    sup.start([script("print('ready', flush=True); print('warning: something stale'); "
+                      "import time; time.sleep(0.2); raise RuntimeError('navigation broke')",
+                      "crashes")])
+    ended = sup.watch(every=0.05)
+    sup.stop_all()
+    assert ended is not None
+    tail = ended.tail(3)
+    assert tail[-1] == "RuntimeError: navigation broke"
+    assert all("stale" not in line for line in tail)

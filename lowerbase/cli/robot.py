@@ -66,6 +66,10 @@ def add_subparser(subparsers: Any) -> None:
     p.add_argument("--paused", action="store_true",
                    help="with --sim-time: start paused; time moves only on /lowerbase/step "
                    "(lowerbase_sim_msgs/Step), for reproducible tests of your nodes")
+    p.add_argument("--respawn", action="store_true",
+                   help="start navigation and tasks again when they end (as roslaunch's "
+                   "respawn), so your software can be tested against a crashing part; "
+                   "without it one part ending ends the robot")
     p.add_argument("--robot", choices=("wheeled", "legged"), default="wheeled",
                    help="with --sim-time: the wheeled AMR (default) or seed 003's legged robot "
                    "(its lower computer and legged driver in lockstep; docs/legged.md)")
@@ -128,6 +132,14 @@ def _on_ready(child: Any) -> None:
             print(f"lowerbase robot: live view: Foxglove -> Open connection -> Foxglove "
                   f"WebSocket {url.group(0)} (layout: lowerbase/recording/"
                   f"foxglove-layout.json)", flush=True)
+
+
+def _on_respawn(old: Any, new: Any) -> None:
+    """An upper part ended and was started again (--respawn): its crash, in one line."""
+    print(f"lowerbase robot: warning: {old.spec.name} ended (exit code {old.poll()}): "
+          f"{clip(' | '.join(old.final_lines or []) or 'no output', 600)}; started again "
+          f"(respawn {new.respawns}; its log goes on in {new.log_path})", file=sys.stderr,
+          flush=True)
 
 
 def _on_lost(child: Any) -> None:
@@ -222,6 +234,9 @@ def run(args: argparse.Namespace) -> int:
                             (args.robot == "legged", "--robot legged")):
             if given:
                 raise ConfigError(f"{flag} goes with --sim-time (real time runs at 1 x)")
+    elif args.respawn:
+        raise ConfigError("--respawn restarts the parts of the real-time robot; with "
+                          "--sim-time the robot is one process: drop one of them")
     speed = (args.speed or DEFAULT_SPEED) if args.sim_time else None
     load_map(args.map)  # a wrong map is one line now, not a part ending later
     if args.mcap is not None and Path(args.mcap).suffix.lower() != ".mcap":
@@ -257,7 +272,8 @@ def run(args: argparse.Namespace) -> int:
         sup.start(robot_plan(RobotOptions(map=args.map, parts=parts, foxglove=args.foxglove,
                                           sim_speed=speed, truth=args.truth,
                                           mcap=args.mcap, soc=args.soc,
-                                          ground_truth=args.ground_truth)),
+                                          ground_truth=args.ground_truth,
+                                          respawn=args.respawn)),
                   on_ready=_on_ready)
         print(f"lowerbase robot: ready on ROS master {uri}; logs in {log_dir}; Ctrl-C stops",
               flush=True)
@@ -273,7 +289,7 @@ def run(args: argparse.Namespace) -> int:
             if deadline is not None and time.monotonic() >= deadline:
                 sup.request_stop()
 
-        ended = sup.watch(on_tick=tick, on_lost=_on_lost)
+        ended = sup.watch(on_tick=tick, on_lost=_on_lost, on_respawn=_on_respawn)
     except KeyboardInterrupt:
         pass
     finally:
@@ -292,7 +308,7 @@ def run(args: argparse.Namespace) -> int:
                 print(f"lowerbase robot: {child.spec.name}: {said.rpartition('; ')[2]} (see "
                       f"{child.log_path})", flush=True)
     if ended is not None:
-        last = " | ".join(ended.tail(3)) or ended.last_line or "no output"
+        last = " | ".join(ended.final_lines or ended.tail(3)) or ended.last_line or "no output"
         print(f"lowerbase robot: error: {ended.spec.name} ended (exit code "
               f"{codes.get(ended.spec.name)}): {clip(last, 600)}; see {ended.log_path}",
               file=sys.stderr)

@@ -49,6 +49,8 @@ class RobotOptions:
     soc: float | None = None
     #: --ground-truth: the world publishes the true pose as its localization (no amcl)
     ground_truth: bool = False
+    #: --respawn: the upper parts are started again when they end (roslaunch's respawn)
+    respawn: bool = False
 
 
 def _lowerbase(opts: RobotOptions, *args: str) -> list[str]:
@@ -87,7 +89,8 @@ def robot_plan(opts: RobotOptions) -> list[ChildSpec]:
     ]
     for part in UPPER:
         if part in opts.parts:
-            specs.append(ChildSpec(part, _lowerbase(opts, part, "--map", map_ref), ON_MASTER))
+            specs.append(ChildSpec(part, _lowerbase(opts, part, "--map", map_ref), ON_MASTER,
+                                   respawn=opts.respawn))
     return specs
 
 

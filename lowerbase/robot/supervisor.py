@@ -7,7 +7,8 @@ into a log file of its own. A reader thread copies the output to the log and not
 line that contains the child's ready text. :class:`Supervisor` starts the children one after
 the other (a child that ends or stays silent past its start timeout is an error naming it and
 its log), then watches them: one child ending ends the run, and every other child is stopped
-(SIGINT, then SIGKILL after a grace period).
+(SIGINT, then SIGKILL after a grace period), unless it is to be respawned (``--respawn``: the
+upper parts, started again as roslaunch's respawn does) or is not essential (the recorder).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from typing import IO
 from lowerbase.errors import LowerbaseError
 
 STOP_GRACE = 8.0  #: [s] after SIGINT before a child is killed
+RESPAWN_DELAY = 1.0  #: [s] after a respawned part ended before it starts again
 
 
 class RobotError(LowerbaseError):
@@ -44,6 +46,8 @@ class ChildSpec:
     env: dict[str, str] = field(default_factory=dict)
     #: False: the robot goes on without it when it ends after its start (the recorder)
     essential: bool = True
+    #: started again when it ends after its start (roslaunch's respawn), after RESPAWN_DELAY
+    respawn: bool = False
 
 
 def guarded(argv: Sequence[str]) -> list[str]:
@@ -56,14 +60,18 @@ def guarded(argv: Sequence[str]) -> list[str]:
 class Child:
     """A running :class:`ChildSpec`, its output copied to ``log_path``."""
 
-    def __init__(self, spec: ChildSpec, log_path: Path) -> None:
+    def __init__(self, spec: ChildSpec, log_path: Path, *, append: bool = False) -> None:
         self.spec = spec
         self.log_path = log_path
         self._ready = threading.Event()
         self._ended = threading.Event()
         self.last_line = ""
+        self.respawns = 0  #: times this part was started again (ChildSpec.respawn)
+        #: the log's last lines when it was stopped (a respawned part's log goes on)
+        self.final_lines: list[str] | None = None
         log_path.parent.mkdir(parents=True, exist_ok=True)
-        self._log: IO[str] = open(log_path, "w", encoding="utf-8", errors="replace")  # noqa: SIM115
+        self._log: IO[str] = open(log_path, "a" if append else "w",  # noqa: SIM115
+                                  encoding="utf-8", errors="replace")
         import shutil
 
         if shutil.which(spec.argv[0]) is None:  # the guard would only say so in the log
@@ -142,6 +150,8 @@ class Child:
                 self.popen.wait()
         self._reader.join(2.0)
         self._log.close()
+        if self.final_lines is None:
+            self.final_lines = self.tail(3)
         return self.popen.returncode
 
 
@@ -170,18 +180,38 @@ class Supervisor:
             on_ready(child)
 
     def watch(self, every: float = 0.5, on_tick: Callable[[], None] = lambda: None,
-              on_lost: Callable[[Child], None] = lambda child: None) -> Child | None:
+              on_lost: Callable[[Child], None] = lambda child: None,
+              on_respawn: Callable[[Child, Child], None] = lambda old, new: None
+              ) -> Child | None:
         """Until an essential child ends (returned) or a stop is requested (None); a child
-        that is not essential ending is handed to ``on_lost`` once and the watch goes on."""
+        that is not essential ending is handed to ``on_lost`` once and the watch goes on; a
+        child to respawn is started again (its log goes on) after :data:`RESPAWN_DELAY` and
+        handed to ``on_respawn(old, new)`` (one that cannot start again ends the run)."""
         lost: set[str] = set()
         while not self._stop.wait(every):
-            for child in self.children:
-                if child.poll() is not None:
-                    if child.spec.essential:
-                        return child
-                    if child.spec.name not in lost:
-                        lost.add(child.spec.name)
-                        on_lost(child)
+            for i, child in enumerate(self.children):
+                if child.poll() is None:
+                    continue
+                if child.spec.respawn:
+                    if self._stop.wait(RESPAWN_DELAY):
+                        return None
+                    child.stop()  # its reader and log closed
+                    try:
+                        new = Child(child.spec, child.log_path, append=True)
+                        new.respawns = child.respawns + 1
+                        self.children[i] = new
+                        new.wait_ready(lambda: self._stop.is_set())
+                    except KeyboardInterrupt:
+                        return None
+                    except RobotError:
+                        return self.children[i]
+                    on_respawn(child, new)
+                    continue
+                if child.spec.essential:
+                    return child
+                if child.spec.name not in lost:
+                    lost.add(child.spec.name)
+                    on_lost(child)
             on_tick()
         return None
 

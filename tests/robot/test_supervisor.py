@@ -3,9 +3,11 @@ order, readiness, a part ending, Ctrl-C and a part that ignores it."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -108,6 +110,7 @@ def test_a_command_that_does_not_exist_is_one_line(tmp_path: Path) -> None:
 SUPERVISE = '''
 import sys, time
 from pathlib import Path
+from typing import Any
 from lowerbase.robot.supervisor import ChildSpec, Supervisor
 sup = Supervisor(Path(sys.argv[1]))
 sup.start([ChildSpec("part", [sys.executable, "-u", "-c",
@@ -202,3 +205,30 @@ def test_a_crash_is_quoted_by_its_own_last_lines(tmp_path: Path) -> None:
     tail = ended.tail(3)
     assert tail[-1] == "RuntimeError: navigation broke"
     assert all("stale" not in line for line in tail)
+
+
+def test_a_part_to_respawn_is_started_again_and_the_others_go_on(tmp_path: Path) -> None:
+    """``lowerbase robot --respawn`` (issue 22 item 8): the upper part that crashes is started
+    again (its log goes on), the run does not end."""
+    sup = Supervisor(tmp_path)
+    marker = tmp_path / "crashed-once"
+    crash_once = (f"import pathlib, time; m = pathlib.Path({str(marker)!r}); "
+                  "print('ready', flush=True); time.sleep(0.2)\n"
+                  "if not m.exists():\n    m.touch(); raise RuntimeError('navigation broke')\n"
+                  "time.sleep(600)")
+    sup.start([serving("keeps", tmp_path / "m")])
+    spec = script(crash_once, "nav")
+    sup.start([dataclasses.replace(spec, respawn=True)])
+    seen: list[tuple[int, list[str]]] = []
+
+    def respawned(old: Any, new: Any) -> None:
+        seen.append((new.respawns, (old.final_lines or [])[-1:]))
+        sup.request_stop()
+
+    assert sup.watch(every=0.05, on_respawn=respawned) is None
+    assert seen == [(1, ["RuntimeError: navigation broke"])]
+    nav = sup.children[1]
+    assert nav.poll() is None and nav.ready  # running again
+    sup.stop_all()
+    log = nav.log_path.read_text()
+    assert "navigation broke" in log and log.count("ready") == 2  # one log, both runs

@@ -4,6 +4,9 @@
   start: the first points marked ``starter`` (none marked: the first segment). A list with some
   ``finished > 0`` (a remainder, e.g. from ObstacleNavigate) resumes at the first segment with
   ``finished < 1``, from that fraction on. Segments before the start keep their ``finished``.
+  A robot farther than ``APPROACH`` from that start point first drives straight to it and
+  turns along the segment (the approach counts as no segment's progress), so the route is
+  driven from its start, never cut into at the nearest point.
 - **Driving**: consecutive segments that join (within 5 cm) and turn by at most
   ``JOIN_TURN`` are one plan for the navigation's PathController (no stop between them); at a
   sharper joint the robot stops and turns in place. A segment is driven at its first point's
@@ -31,6 +34,7 @@ from lowerbase.trace.base import Navigator, Pose, sample_segment
 JOIN_TURN = math.radians(15.0)  #: joints turning more than this stop and rotate in place
 JOIN_GAP = 0.05  #: [m] a segment joins the previous one if it starts this close to its end
 STEP = 0.05  #: [m] plan resolution
+APPROACH = 0.10  #: [m] farther than this from the route's start: drive to it first
 
 
 class TraceNavigate(Navigator):
@@ -47,7 +51,29 @@ class TraceNavigate(Navigator):
         if not self.runs:
             self.end(m.FINISHED)  # nothing left to drive
             return
+        self._approach: bool | None = None  # decided at the first step, from the pose
         self._plan_run()
+
+    def _start_pose(self) -> tuple[float, float, float]:
+        assert self.route is not None
+        i = self.runs[0][0]
+        x, y, yaw = sample_segment(self.route.segments[i], self.finished[i], STEP)[0]
+        return float(x), float(y), float(yaw)
+
+    def _plan_approach(self, pose: Pose) -> bool:
+        """A straight plan from ``pose`` to the route's start, when it is farther than
+        APPROACH; whether one was set."""
+        sx, sy, syaw = self._start_pose()
+        d = math.hypot(sx - pose[0], sy - pose[1])
+        if d <= APPROACH:
+            return False
+        n = max(1, math.ceil(d / STEP))
+        toward = math.atan2(sy - pose[1], sx - pose[0])
+        plan = [(pose[0] + (sx - pose[0]) * k / n, pose[1] + (sy - pose[1]) * k / n, toward)
+                for k in range(n + 1)]
+        plan[-1] = (sx, sy, syaw)
+        self.ctl.set_plan(plan)
+        return True
 
     def _nearest_starter(self, route: m.Route) -> int:
         starters = [i for i, s in enumerate(route.segments) if s.starter] or [0]
@@ -84,6 +110,16 @@ class TraceNavigate(Navigator):
 
     def step(self, pose: Pose) -> None:
         assert self.route is not None
+        if self._approach is None:
+            self._approach = self._plan_approach(pose)
+        if self._approach:
+            cmd = self.drive(self.params.default_speed, pose)
+            if cmd.status is Status.SUCCEEDED:
+                self._approach = False
+                self._plan_run()
+            elif self.blocked_for >= self.params.blocked_timeout:
+                self.end(m.BLOCKED)
+            return
         run = self.runs[0]
         current = next((i for i in run if self.finished[i] < 1.0), run[-1])
         speed = self.route.segments[current].speed or self.params.default_speed

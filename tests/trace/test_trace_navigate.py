@@ -122,3 +122,32 @@ def test_a_point_off_the_map_is_refused_by_both_modules() -> None:
         mods.tick()
     assert sent == []
     assert mods.trace.stats["refused"] == mods.obstacle.stats["refused"] == 1
+
+
+def test_a_robot_off_the_route_drives_to_its_start_first_and_reports_only_what_it_drove(
+        ) -> None:
+    """Issue 22 item 17: a route from x = 4 while the robot stands at x = 6 on its line. It
+    used to cut in at 6 and report the first 40 % as driven; it drives back to 4, turns along
+    the route and drives all of it; no report is ever ahead of the robot."""
+    sim = trace_sim(start_x=6.0)
+    sim.publish(ROUTE, route([4.0, 9.0]))
+    seen: list[tuple[float, float]] = []  # (time, true x)
+
+    def idle() -> bool:
+        seen.append((sim.now, sim.world.true_pose()[0]))
+        return sim.trace.status == m.IDLE
+
+    assert sim.run_until(idle, 80.0)
+    assert min(x for _, x in seen) < 4.1  # it went to the start
+    assert abs(seen[-1][1] - 9.0) < 0.06
+    reports = sim.published[STATUS]
+    assert reports[-1][1].lists[0].finished == 1.0  # type: ignore[attr-defined]
+    at_start = next(ts for ts, x in seen if x < 4.1)
+    for t, msg in reports:
+        done = msg.lists[0].finished  # type: ignore[attr-defined]
+        if t < at_start:
+            assert done == 0.0, (t, done)  # nothing driven on the way to the start
+        else:
+            x = [x for ts, x in seen if ts <= t + 1e-9][-1]
+            assert 4.0 + 5.0 * done <= x + 0.1, (t, done, x)
+    assert len(reports) >= 4  # on the 5 s grid while it drove back and along

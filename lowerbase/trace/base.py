@@ -204,9 +204,14 @@ class Navigator:
         """One control period."""
         if self.status != m.RUNNING:
             return
-        if self.clock.now() + 1e-9 >= self._next_report:
+        now = self.clock.now()
+        if now + 1e-9 >= self._next_report:
             self.report(m.RUNNING)
-            self._next_report += self.params.status_period
+            # on the grid of the acceptance time: a late tick skips the slots it missed
+            # (one report, not a burst of them)
+            period = self.params.status_period
+            self._next_report += period * (1 + math.floor((now + 1e-9 - self._next_report)
+                                                          / period))
         if self.pose is None:
             self.speed(0.0, 0.0)
             return

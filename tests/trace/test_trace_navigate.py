@@ -151,3 +151,22 @@ def test_a_robot_off_the_route_drives_to_its_start_first_and_reports_only_what_i
             x = [x for ts, x in seen if ts <= t + 1e-9][-1]
             assert 4.0 + 5.0 * done <= x + 0.1, (t, done, x)
     assert len(reports) >= 4  # on the 5 s grid while it drove back and along
+
+
+def test_reports_stay_on_the_5s_grid_after_a_stall() -> None:
+    """Issue 22 item 18: the 5 s reports drifted to 2.8-16 s under load. A tick 12 s late gives
+    one report (not three in a burst) and the next ones stay on the acceptance time's grid."""
+    from lowerbase.trace.trace_navigate import TraceNavigate
+
+    clock = SimClock(100.0)
+    nav = TraceNavigate(clock, lambda msg: None, lambda msg: None,
+                        extent=load_map("warehouse").extent)
+    nav.on_route(route([6.0, 11.0]))
+    nav.pose = (6.0, Y, 0.0)
+    times = []
+    for t in (100.0, 105.0, 117.0, 117.05, 119.95, 120.0, 125.0):
+        clock.sleep_until(t)
+        before = len(nav.reports)
+        nav.tick()
+        times += [clock.now() - 100.0] * (len(nav.reports) - before)
+    assert times == [5.0, 17.0, 20.0, 25.0]  # acceptance's report at 0 is on_route's

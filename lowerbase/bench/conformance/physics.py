@@ -223,16 +223,44 @@ def _firmware_span(ctx: Context, samples: list[WheelSample]) -> float:
     return span
 
 
+def _one_cycle_pairs(ctx: Context, samples: list[WheelSample]
+                     ) -> tuple[int, float, float] | None:
+    """(pulses, integrated Velocity [m], span [s]) over the consecutive samples exactly one
+    cycle apart on the sender's own time base: the Counter advanced by 1 and the frame
+    arrived within 1.5 cycles of the last (a pair across skipped cycles, or one the host
+    delivered late, is left out; leaving a pair out biases nothing). The lower computer's
+    own clock, whatever the receiving host's delays and bursts; None when the Counter is
+    absent or fewer than a quarter of the pairs (or 10) qualify."""
+    msg = ctx.codec.message("WheelFeedback")
+    cycle = msg.cycle_time
+    if not cycle or len(samples) < 2 or any(s.counter < 0 for s in samples):
+        return None
+    modulo = 1 << msg.signal("Counter").length
+    pulses, metres, n = 0, 0.0, 0
+    for a, b in itertools.pairwise(samples):
+        if (b.counter - a.counter) % modulo == 1 and b.t - a.t <= 1.5 * cycle:
+            pulses += _int32_delta(b.count, a.count)
+            metres += 0.5 * (a.velocity + b.velocity) * cycle
+            n += 1
+    if n < max(10, (len(samples) - 1) // 4):
+        return None
+    return pulses, metres, n * cycle
+
+
 def check_wheel_count(ctx: Context) -> Outcome:
     segments = _cached(ctx, "motions", _measure_motions)
     geo = geometry(ctx)
     problems, measured = [], {}
     for seg in segments:
         for side, samples in seg.wheels.items():
-            pulses = _int32_delta(samples[-1].count, samples[0].count)
+            pairs = _one_cycle_pairs(ctx, samples)
+            if pairs is not None:
+                pulses, by_velocity, span = pairs
+            else:
+                pulses = _int32_delta(samples[-1].count, samples[0].count)
+                span = _firmware_span(ctx, samples)
+                by_velocity = fmean(s.velocity for s in samples) * span
             by_count = pulses * geo.metres_per_pulse(side)
-            span = _firmware_span(ctx, samples)
-            by_velocity = fmean(s.velocity for s in samples) * span
             measured[f"{seg.name}_{side}_count_m"] = round(by_count, 4)
             measured[f"{seg.name}_{side}_velocity_m"] = round(by_velocity, 4)
             tol = (SPEED_TOLERANCE * abs(by_velocity) + VELOCITY_LSB * span

@@ -44,15 +44,14 @@ def _moving(delays: dict[int, float], skip_at: int | None = None) -> list[WheelS
     """75 frames of a wheel at 0.5 m/s, 1 pulse per mm: frame k sent at its cycle, received
     ``delays[k]`` s late (a busy host: later frames of a burst arrive together); at
     ``skip_at`` the sender skips 4 cycles (the count moves on, the Counter does not)."""
-    out, t, count, c = [], 0.0, 0, 0
+    out, t, count = [], 0.0, 0
     for k in range(75):
         if k == skip_at:
             t += 4 * CYCLE
             count += round(4 * CYCLE * 500)
-        out.append(WheelSample(t + delays.get(k, 0.0), count, 0.5, c % 16))
+        out.append(WheelSample(t + delays.get(k, 0.0), count, 0.5, k % 16))
         t += CYCLE
         count += round(CYCLE * 500)
-        c += 1
     return out
 
 

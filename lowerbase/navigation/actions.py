@@ -18,8 +18,9 @@ period): feedback every period, the result when the controller says so.
   end and carries its result. An actionlib cancel brakes and ends the list (result -2). A
   refused goal (empty list, NaN, out of range, LATERAL/DIAGONALIZE, or PAUSE/RESUM/CANCEL with
   nothing running) is ABORTED with ``result`` -1 and the reason as the status text; it also
-  brakes a list that was running, so the robot stands still. A step still more than 1 cm /
-  0.5 deg off after its corrections ends the list ABORTED with ``result`` -3 and the error.
+  brakes a list that was running, so the robot stands still. A step still more than 2 cm /
+  1 deg off after its corrections, or stalled (no progress for 4 s), ends the list ABORTED with
+  ``result`` -3 and the reason. A RESUM goal's step list replaces the remaining steps.
 - /navigation_mode (woosh_msgs/NavigationModeAction): SUCCEEDED with ``result`` 1, or ABORTED
   with ``result`` 0 and the reason.
 

@@ -17,11 +17,20 @@ robot stops and the step waits until /odom stands still for ``settle`` s plus th
 latency (first command to first motion on /odom), measures what is left, and corrects it with a
 short move at creep speed whose length is counted on the commands sent (so late /odom or late
 commands do not change it), stop, settle, measure again, until within ``tolerance`` (3 mm) /
-``angle_tolerance`` (0.15 deg) or ``max_corrections`` (5) moves; a step still more than 1 cm /
-0.5 deg off then ends the list with ``result`` -3. An empty list, a NaN or infinite value, a
-distance, angle or speed out of range, an unknown mode: rejected before any motion, with a
-result saying why (``result`` -1). ``useAvoid`` with an ``obstacle_ahead`` check: the robot
-waits (zero command) while the check says the way is blocked and continues when it clears.
+``angle_tolerance`` (0.15 deg) or ``max_corrections`` (5) moves. A step then within
+``accept_tolerance`` (2 cm) / ``accept_angle`` (1 deg) is done and the list goes on; one still
+further off ends the list with ``result`` -3. A step that makes no progress (its remaining
+distance not 5 mm / 0.5 deg shorter) for ``stall_timeout`` (4 s) while driving (not paused, not
+waiting for an obstacle), e.g. pushing into a rack, stops: within the accept tolerance it is
+measured and finished as above, else the list ends with ``result`` -3 and the reason. ``RESUM``
+with a step list (the vendor: after a pause the remaining steps are sent again): the list is
+checked like an EXCUTE list and replaces the paused step and those after it, the first new step
+measured from where the robot stands; the same remaining list as running (the paused step
+included, unchanged) continues the paused step where it is. An empty list, a NaN or
+infinite value, a distance, angle or speed out of range, an unknown mode: rejected before any
+motion, with a result saying why (``result`` -1). ``useAvoid`` with an ``obstacle_ahead``
+check: the robot waits (zero command) while the check says the way is blocked and continues
+when it clears.
 """
 
 from __future__ import annotations
@@ -45,7 +54,7 @@ DEFAULT_ROTATION = 0.1  #: [rad/s]
 SUCCEEDED = 1
 REJECTED = -1
 CANCELLED = -2
-FAILED = -3  #: a step still off by more than 1 cm / 0.5 deg after max_corrections
+FAILED = -3  #: a step still off by more than accept_tolerance after its corrections, or stalled
 #: braking onto the end uses this share of the deceleration limit, and starts as if the robot
 #: were LAG seconds further on (command period, driver, motor lag)
 BRAKE = 0.5
@@ -53,6 +62,9 @@ LAG = 0.15
 #: /odom "stands still" while it stays within these of where it stopped
 STILL_DISTANCE = 0.0003  #: [m]
 STILL_ANGLE = math.radians(0.02)  #: [rad]
+#: a driving step makes progress while its remaining distance gets this much shorter
+PROGRESS_DISTANCE = 0.005  #: [m]
+PROGRESS_ANGLE = math.radians(0.5)  #: [rad]
 MAX_LATENCY = 2.0  #: [s] the measured latency is capped here
 # the phases of a step
 DRIVE, SETTLE, CORRECT = "drive", "settle", "correct"
@@ -100,6 +112,8 @@ class StepController:
                  settle: float = 0.3, settle_timeout: float = 3.0, tolerance: float = 0.003,
                  angle_tolerance: float = math.radians(0.15), max_corrections: int = 5,
                  creep: float = 0.03, creep_rotation: float = 0.1,
+                 accept_tolerance: float = 0.02, accept_angle: float = math.radians(1.0),
+                 stall_timeout: float = 4.0,
                  obstacle_ahead: ObstacleCheck | None = None) -> None:
         self.limits = limits or Limits()
         self.period = period
@@ -110,9 +124,14 @@ class StepController:
         self.max_corrections = max_corrections  #: creeping moves per step, at most
         self.creep = creep  #: correction speed [m/s]
         self.creep_rotation = creep_rotation  #: correction speed [rad/s]
+        #: after max_corrections a step this near its target on /odom is done [m, rad]
+        self.accept_tolerance = accept_tolerance
+        self.accept_angle = accept_angle
+        self.stall_timeout = stall_timeout  #: a driving step without progress this long stops [s]
         self.obstacle_ahead = obstacle_ahead
         for name in ("period", "settle", "settle_timeout", "tolerance", "angle_tolerance",
-                     "creep", "creep_rotation"):
+                     "creep", "creep_rotation", "accept_tolerance", "accept_angle",
+                     "stall_timeout"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"StepController {name} = {value!r}: expected a number > 0")
@@ -141,6 +160,7 @@ class StepController:
         self._settle_from: tuple[float, float | None] = (0.0, None)
         self._creep_speed = 0.0
         self._left = 0.0
+        self._progress: tuple[float, float] | None = None  # (clock, best remaining) driving
 
     @property
     def active(self) -> bool:
@@ -162,6 +182,14 @@ class StepController:
             self.paused = True
             return None
         if mode == RESUM:
+            if steps and self.active and list(steps) != self.steps[self._k:]:
+                why = self.check(steps)
+                if why:
+                    return StepResult(REJECTED, steps[0].execute_mode, 0.0, why)
+                # the resent list replaces what was left: the paused step's rest and the
+                # steps after it; the first new step starts from where the robot stands
+                self.steps = self.steps[:self._k] + list(steps)
+                self.use_avoid, self._start = bool(use_avoid), None
             self.paused = False
             return None
         if mode == CANCEL:
@@ -213,6 +241,7 @@ class StepController:
         if self._start is None:
             self._start, self._turned, self._last_yaw = (x, y, yaw), 0.0, yaw
             self._phase, self.corrections, self._go = DRIVE, 0, None
+            self._progress = None
         self._turned += wrap(yaw - self._last_yaw)
         self._last_yaw = yaw
         self._measure_latency((x, y, yaw))
@@ -220,6 +249,7 @@ class StepController:
         self.feedback = StepFeedback(2 if self.paused else 1, step.execute_mode,
                                      100.0 * min(max(progress, 0.0), 1.0))
         if self.paused:
+            self._progress = None
             if self._phase != DRIVE:
                 self._to_settle((x, y, yaw))
             return self._ramp(0.0, 0.0)
@@ -227,21 +257,30 @@ class StepController:
             if remaining <= self._tolerance(step):
                 self._to_settle((x, y, yaw))
                 return self._ramp(0.0, 0.0)
-            return self._drive(step, (x, y, yaw), remaining)
+            if self._stalled(step, remaining):
+                if abs(remaining) <= self._accept(step):
+                    self._to_settle((x, y, yaw))  # measured and finished (or corrected)
+                    return self._ramp(0.0, 0.0)
+                self.result = StepResult(FAILED, step.execute_mode, self.percent,
+                                         f"step {self._k + 1}: no progress for "
+                                         f"{self.stall_timeout:g} s while driving (blocked or "
+                                         f"stalled?), {self._off(step, remaining)} left")
+                return self._ramp(0.0, 0.0)
+            command = self._drive(step, (x, y, yaw), remaining)
+            if self.feedback is not None and self.feedback.feedback == 3:
+                self._progress = None  # waiting for an obstacle: not a stall
+            return command
         if self._phase == SETTLE:
             if not self._still((x, y, yaw)):
                 return self._ramp(0.0, 0.0)
             if abs(remaining) <= self._tolerance(step):
                 return self._next(step, remaining)
             if self.corrections >= self.max_corrections:
-                limit = 0.01 if step.execute_mode == STRAIGHT else math.radians(0.5)
-                if abs(remaining) <= limit:
+                if abs(remaining) <= self._accept(step):
                     return self._next(step, remaining)
-                unit = (1000.0, "mm") if step.execute_mode == STRAIGHT else \
-                    (math.degrees(1.0), "deg")
                 self.result = StepResult(FAILED, step.execute_mode, self.percent,
-                                         f"step {self._k + 1}: still {abs(remaining) * unit[0]:.1f}"
-                                         f" {unit[1]} off after {self.corrections} corrections")
+                                         f"step {self._k + 1}: still {self._off(step, remaining)}"
+                                         f" off after {self.corrections} corrections")
                 return self._ramp(0.0, 0.0)
             self._plan_correction(step, remaining)
         return self._correct(step, (x, y, yaw), dt)
@@ -286,6 +325,29 @@ class StepController:
 
     def _tolerance(self, step: Step) -> float:
         return self.tolerance if step.execute_mode == STRAIGHT else self.angle_tolerance
+
+    def _accept(self, step: Step) -> float:
+        return self.accept_tolerance if step.execute_mode == STRAIGHT else self.accept_angle
+
+    @staticmethod
+    def _off(step: Step, remaining: float) -> str:
+        if step.execute_mode == STRAIGHT:
+            return f"{abs(remaining) * 1000:.1f} mm"
+        return f"{math.degrees(abs(remaining)):.2f} deg"
+
+    def _stalled(self, step: Step, remaining: float) -> bool:
+        """Whether the driving step's remaining distance has not got PROGRESS_DISTANCE /
+        PROGRESS_ANGLE shorter (less for a step slower than that in a quarter of the time) for
+        ``stall_timeout`` s."""
+        if step.execute_mode == STRAIGHT:
+            need, speed = PROGRESS_DISTANCE, step.speed or DEFAULT_SPEED
+        else:
+            need, speed = PROGRESS_ANGLE, step.speed or DEFAULT_ROTATION
+        need = min(need, 0.25 * speed * self.stall_timeout)  # a slow step is no stall
+        if self._progress is None or remaining <= self._progress[1] - need:
+            self._progress = (self._clock, remaining)
+            return False
+        return self._clock - self._progress[0] >= self.stall_timeout - 1e-9
 
     def _blocked(self, step: Step, pose: Pose, v: float, w: float) -> bool:
         if not (self.use_avoid and self.obstacle_ahead is not None
@@ -382,8 +444,7 @@ class StepController:
     def _next(self, step: Step, remaining: float) -> tuple[float, float]:
         self._k += 1
         self._start = None
-        off = f"{abs(remaining) * 1000:.1f} mm" if step.execute_mode == STRAIGHT else \
-            f"{math.degrees(abs(remaining)):.2f} deg"
+        off = self._off(step, remaining)
         self.summary = (f"step {self._k} ended {off} off on /odom after {self.corrections} "
                         f"correction(s); latency {self.latency:.2f} s")
         if self._k == len(self.steps):

@@ -132,7 +132,7 @@ class Docking:
             return twist
         self.steps.steps = []
         short = res.result == FAILED and (t.action.kind == ActionType.DOCK_IN or not ch.charging)
-        if short:  # a step ended off by > 1 cm / 0.5 deg by /odom: the localization decides
+        if short:  # a step ended off (> 2 cm / 1 deg) or stalled: the localization decides
             log.info("docking: %s: going on from where the robot stands", res.message)
         if res.result != SUCCEEDED and not short:
             self._fail(t, f"docking: {res.message}")

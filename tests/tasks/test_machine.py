@@ -154,9 +154,9 @@ def test_dock_correction_moves_along_the_heading_without_turning_to_the_charger(
 
 def test_docking_moves_held_by_a_wall_are_stopped_and_corrected() -> None:
     # odometry reports 85 % of the travel, so the 1 m dock drive goes on past the charger into
-    # the wall 8 cm behind it, which holds the robot: /odom never arrives, StepControl never
-    # ends (it has no stall check). The machine stops the moves after dock_move_timeout and
-    # corrects from the localized pose
+    # the wall 8 cm behind it, which holds the robot: /odom never arrives. StepControl's stall
+    # check ends the list (-3, no progress for 4 s), or at the latest the machine stops the
+    # moves after dock_move_timeout; it corrects from the localized pose
     b = Bench(TaskConfig(dock_timeout=1.0, dock_move_timeout=30.0))
     b.tick()
     b.odom_scale, b.wall_y = 0.85, -2.08

@@ -58,7 +58,7 @@ def test_select_by_patterns() -> None:
     chosen = [c.id for c in select(checks, ["frame.Heartbeat.*,safety.watchdog", "param.read"])]
     assert chosen == ["param.read", "frame.Heartbeat.present", "frame.Heartbeat.dlc",
                       "frame.Heartbeat.range", "frame.Heartbeat.cycle",
-                      "frame.Heartbeat.counter", "safety.watchdog"]
+                      "frame.Heartbeat.counter", "frame.Heartbeat.uptime", "safety.watchdog"]
     assert select(checks, ["nothing.*"]) == []
 
 

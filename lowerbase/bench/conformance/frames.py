@@ -9,6 +9,7 @@ from typing import Any
 from lowerbase.bench.conformance.catalog import (
     CONDITIONAL,
     ROW_KEYS,
+    control_period,
     periodic_lower_messages,
     shared_counter,
 )
@@ -189,6 +190,53 @@ def check_counter(msg: MessageCodec) -> CheckFunc:
     return run
 
 
+def check_uptime(ctx: Context) -> Outcome:
+    """Heartbeat Uptime advances by one Heartbeat cycle per cycle between two frames: the lower
+    computer's clock against its own schedule. The cycles between two frames are the Counter's
+    step; where it disagrees with the reception times rounded to whole cycles (a stuck
+    Counter, a sender that skips cycles: the counter and cycle checks' findings) the rounded
+    reception times are used, and a pair across which the lower computer reports a slip
+    (Overruns changed: its time fell behind real time) is not judged. A frame may go out up to
+    one control period off its slot: the allowance per step is two control periods plus the
+    resolution of Uptime."""
+    msg = ctx.codec.message("Heartbeat")
+    cycle = msg.cycle_time or 0.0
+    require(cycle > 0 and msg.has_counter, "Heartbeat has no cycle time or no Counter")
+    allowance = 2 * control_period(ctx.codec) + 2 * msg.signal("Uptime").scale
+    frames = [(f.stamp, dict(msg.decode(f.data, strict=False)))
+              for f in _frames_or_skip(ctx, msg) if len(f.data) == msg.length]
+    problems: list[str] = []
+    judged, overruns, counted, advanced = 0, 0, 0.0, 0.0
+    for (ta, a), (tb, b) in itertools.pairwise(frames):
+        if a["BootCounter"] != b["BootCounter"]:
+            continue  # a reboot restarts Uptime
+        slipped = (int(b.get("Overruns", 0)) - int(a.get("Overruns", 0))) % 16
+        overruns += slipped
+        if slipped:
+            continue
+        by_counter = (int(b["Counter"]) - int(a["Counter"])) % 16
+        by_clock = round((tb - ta) / cycle)
+        n = by_counter if by_counter and by_counter == by_clock % 16 else by_clock
+        got = float(b["Uptime"]) - float(a["Uptime"])
+        judged, counted, advanced = judged + 1, counted + n * cycle, advanced + got
+        if abs(got - n * cycle) > allowance and not problems:
+            problems.append(f"Uptime {float(a['Uptime']):.3f} -> {float(b['Uptime']):.3f} s "
+                            f"over {n} Heartbeat cycle{'s' if n != 1 else ''} "
+                            f"({n * cycle:g} s +- {allowance:.3f})")
+    measured = {"steps": judged, "counted_s": round(counted, 3),
+                "uptime_advanced_s": round(advanced, 3), "overruns": overruns}
+    if judged < 2:
+        return skipped(f"fewer than 2 Heartbeat steps without a reboot or a slip in "
+                       f"{ctx.settings.observe:g} s (raise --observe)", **measured)
+    if problems:
+        return failed(f"{problems[0]}: the Uptime clock does not run at 1 s/s against the "
+                      "Heartbeat schedule", **measured)
+    slips = (f"; {overruns} slip{'s' if overruns != 1 else ''} (Overruns) not judged"
+             if overruns else "")
+    return passed(f"Uptime advanced {advanced:.3f} s over {counted:g} s of Heartbeat "
+                  f"cycles{slips}", **measured)
+
+
 def frame_checks(codec: Codec) -> list[Check]:
     """The per-frame checks of every periodic message the lower computer sends."""
     checks = []
@@ -207,4 +255,7 @@ def frame_checks(codec: Codec) -> list[Check]:
                 f"{msg.name} counter +1 mod 16 per "
                 + ("cycle, shared by the cycle's frames" if shared_counter(msg) else "frame"),
                 check_counter(msg)))
+        if msg.name == "Heartbeat" and "Uptime" in msg.signal_names:
+            checks.append(Check("frame.Heartbeat.uptime", "Heartbeat Uptime advances one "
+                                f"cycle ({cycle}) per Counter step", check_uptime))
     return checks

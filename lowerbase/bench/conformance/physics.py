@@ -55,6 +55,12 @@ KINEMATIC_TOLERANCE = 0.02
 #: the gyro's scale error (datasheets: +-1..3 %); on blocks the body does not turn at all
 GYRO_TOLERANCE = 0.10
 GYRO_BIAS_DRIFT = 0.01  #: [rad/s] bias change allowed between the rest window and a motion
+#: the Odometer's rate vs the centre speed from the wheel Counts: both integrate the same
+#: encoders, sampled in different frames of one steady motion (windows overlapping but for a
+#: cycle at each end): the sampling skew of KINEMATIC_TOLERANCE, of the wheel speed ...
+ODOMETER_TOLERANCE = KINEMATIC_TOLERANCE
+#: [m] ... plus the resolution of Distance: the difference of two readings is within one
+ODOMETER_LSB = 0.001
 
 
 @dataclass(frozen=True)
@@ -67,6 +73,8 @@ class Segment:
     wheels: dict[str, list[WheelSample]]
     motion: list[tuple[float, float]]  #: MotionState (Linear, Angular)
     gyro_z: list[float]  #: ImuGyro Z [rad/s]
+    #: Odometer (reception time, Counter, Distance [m])
+    odometer: tuple[tuple[float, int, float], ...] = ()
 
     @property
     def duration(self) -> float:
@@ -150,10 +158,12 @@ def _measure_motions(ctx: Context) -> list[Segment]:
             motion = [(float(v["Linear"]), float(v["Angular"]))
                       for v in _between(ctx, "MotionState", t0, t1)]
             gyro = [float(v["Z"]) for v in _between(ctx, "ImuGyro", t0, t1)]
+            odometer = tuple((f.t, int(f.values["Counter"]), float(f.values["Distance"]))
+                             for f in ctx.client.frames("Odometer", t0) if f.t <= t1)
             require(all(len(s) >= 2 for s in wheels.values()) and motion and gyro,
                     f"{name}: no WheelFeedback of both wheels, MotionState or ImuGyro in "
                     f"{MEASURE_WINDOW:g} s")
-            segments.append(Segment(name, linear, angular, wheels, motion, gyro))
+            segments.append(Segment(name, linear, angular, wheels, motion, gyro, odometer))
     finally:
         ctx.client.send("MotionCommand", Linear=0.0, Angular=0.0, Mode="Raw")
         ctx.control("Standby")
@@ -201,12 +211,13 @@ def _int32_delta(new: int, old: int) -> int:
     return (new - old + (1 << 31)) % (1 << 32) - (1 << 31)
 
 
-def _firmware_span(ctx: Context, samples: list[WheelSample]) -> float:
+def _firmware_span(ctx: Context, samples: list[WheelSample], message: str = "WheelFeedback"
+                   ) -> float:
     """The time [s] between the first and last sample on the lower computer's own time base:
-    the WheelFeedback cycles counted by the rolling Counter (gaps under 16 cycles resolved)
+    the cycles of ``message`` counted by the rolling Counter (gaps under 16 cycles resolved)
     times the catalog cycle. Reception times would add the host's scheduling jitter, which a
     firmware is not to blame for; without a Counter they are all there is."""
-    msg = ctx.codec.message("WheelFeedback")
+    msg = ctx.codec.message(message)
     cycle = msg.cycle_time
     if not cycle or any(s.counter < 0 for s in samples):
         return samples[-1].t - samples[0].t
@@ -216,9 +227,11 @@ def _firmware_span(ctx: Context, samples: list[WheelSample]) -> float:
     span = sum(steps) * cycle
     # a counter that stalls or disagrees with the clock by more than reception jitter (a
     # sender that skipped cycles: its Counter counts frames sent, not the time between them;
-    # a 16-cycle gap wraps it) is the counter check's finding (frame.WheelFeedback.counter),
-    # not this one's: fall back to reception times
-    if 0 in steps or abs(span - received) > SPAN_DISAGREEMENT * received:
+    # a 16-cycle gap wraps it) is the counter check's finding (frame.<message>.counter), not
+    # this one's: fall back to reception times. For a slow message a skipped cycle is more
+    # than the relative allowance, and so is the reception jitter of a loaded host: half a
+    # cycle tells them apart
+    if 0 in steps or abs(span - received) > max(SPAN_DISAGREEMENT * received, cycle / 2):
         return received
     return span
 
@@ -318,3 +331,44 @@ def check_gyro(ctx: Context) -> Outcome:
     where = "on blocks" if stands == {"blocks"} else "on the floor"
     return _report(problems, f"integrated gyro z consistent with MotionState ({where})",
                    **measured)
+
+
+def check_odometer(ctx: Context) -> Outcome:
+    """Odometer Distance (the centre's distance travelled, |ds| summed) grows at the centre
+    speed the wheel Counts give: (left + right) / 2 over the straight motion, about 0 in the
+    spin in place (the wheels' distances cancel). Both rates are taken on the lower
+    computer's own time base (each message's Counter x its catalog cycle)."""
+    segments = _cached(ctx, "motions", _measure_motions)
+    geo = geometry(ctx)
+    problems, measured = [], {}
+    for seg in segments:
+        odo = [WheelSample(t, 0, distance, counter) for t, counter, distance in seg.odometer]
+        require(len(odo) >= 3, f"{seg.name}: {len(odo)} Odometer frames in "
+                f"{MEASURE_WINDOW:g} s (see frame.Odometer.present)")
+        distances = [s.velocity for s in odo]
+        drops = [f"{a:.3f} -> {b:.3f}" for a, b in itertools.pairwise(distances) if b < a]
+        if drops:
+            problems.append(f"{seg.name}: Odometer Distance decreased ({drops[0]} m) with no "
+                            "OdometerReset")
+        odo_span = _firmware_span(ctx, odo, "Odometer")
+        odo_rate = (distances[-1] - distances[0]) / odo_span
+        wheel_rates = []
+        for side, samples in seg.wheels.items():
+            pulses = _int32_delta(samples[-1].count, samples[0].count)
+            wheel_rates.append(pulses * geo.metres_per_pulse(side)
+                               / _firmware_span(ctx, samples))
+        centre = abs(fmean(wheel_rates))
+        measured[f"{seg.name}_odometer_m_s"] = round(odo_rate, 4)
+        measured[f"{seg.name}_counts_m_s"] = round(centre, 4)
+        # the relative allowance scales with the wheels' speed (not the centre's: the spin's
+        # centre speed is a difference of two wheel speeds), the resolutions of Distance and
+        # of Count at both ends of their windows
+        wheel_speed = fmean(abs(r) for r in wheel_rates)
+        span = min(odo_span, *(_firmware_span(ctx, s) for s in seg.wheels.values()))
+        tol = (ODOMETER_TOLERANCE * wheel_speed + ODOMETER_LSB / odo_span
+               + 2 * max(geo.metres_per_pulse(s) for s in seg.wheels) / span)
+        if abs(odo_rate - centre) > tol:
+            problems.append(f"{seg.name}: Odometer Distance grows at {odo_rate:.4f} m/s, the "
+                            f"wheel Counts move the centre at {centre:.4f} +- {tol:.4f} m/s")
+    return _report(problems, "Odometer Distance grows at the centre speed of the wheel Counts "
+                   f"({', '.join(s.name for s in segments)})", **measured)

@@ -28,6 +28,7 @@ from lowerbase.bench.conformance.physics import (
     check_gravity,
     check_gyro,
     check_motion_state,
+    check_odometer,
     check_wheel_count,
     check_wheel_velocity,
 )
@@ -104,6 +105,8 @@ def registry(codec: Codec | None = None) -> list[Check]:
               check_motion_state),
         Check("physics.gyro", "the integrated gyro z agrees with MotionState (or is 0 on "
               "blocks)", check_gyro),
+        Check("physics.odometer", "Odometer Distance grows at the centre speed of the wheel "
+              "Counts", check_odometer),
         Check("robust.unknown_id", "frames on unknown IDs are ignored", check_unknown_ids),
         Check("robust.extended_id", "extended frames on catalog IDs are ignored",
               check_extended_ids),

@@ -124,6 +124,8 @@ class SimClock:
 CATCH_UP = 0.1
 #: at most one slip warning per this many seconds of the reference clock
 SLIP_WARN_EVERY = 10.0
+#: [s] a wait shorter than this is due (:meth:`PacedClock.until_due`)
+DUE_WITHIN = 1e-9
 
 
 class PacedClock:
@@ -170,6 +172,13 @@ class PacedClock:
     def wait_seconds(self, t: float) -> float:
         """The wall seconds until model time ``t`` is due (<= 0: due already)."""
         return real_seconds(self.reference, t + self._offset - self.reference.now())
+
+    def until_due(self, t: float) -> float:
+        """:meth:`wait_seconds` for a loop's wait: 0.0 once ``t`` is due, and a wait under
+        :data:`DUE_WITHIN` counts as due (at large times a float sum can leave a wait of a
+        few ulps that no sleep can serve: a loop would spin on it)."""
+        remaining = self.wait_seconds(t)
+        return remaining if remaining > DUE_WITHIN else 0.0
 
     def enter(self, t: float) -> float:
         """Run the period that starts at model time ``t`` (>= now()): the returned seconds

@@ -115,8 +115,7 @@ def run(
                 break
             deadline += mcu.dt
             while True:
-                remaining = pace.wait_seconds(deadline)
-                msg = bus.recv(remaining if remaining > 1e-9 else 0.0)
+                msg = bus.recv(pace.until_due(deadline))
                 if msg is None:
                     break
                 _receive(mcu, msg, peers)
@@ -259,7 +258,7 @@ def run_fleet(
             if pace is None:
                 receive(0.0)
             else:
-                while (remaining := pace.wait_seconds(deadline)) > 1e-9:  # under: due
+                while remaining := pace.until_due(deadline):
                     receive(remaining if wait is None else min(remaining, wait))
                 receive(0.0)
                 pace.enter(deadline)

@@ -128,7 +128,7 @@ def run_legged(
             if pace is None:
                 receive(0.0)
             else:
-                while (remaining := pace.wait_seconds(deadline)) > 1e-9:  # under: due
+                while remaining := pace.until_due(deadline):
                     receive(remaining if wait is None else min(remaining, wait))
                 receive(0.0)
                 pace.enter(deadline)

@@ -65,6 +65,19 @@ def test_a_stall_beyond_catch_up_slips_the_time_and_counts(
     assert "2 times" in clock.summary() and "0.690 s" in clock.summary()
 
 
+def test_until_due_is_the_wait_and_zero_once_due() -> None:
+    fake, clock = _paced()
+    t0 = clock.now()
+    assert clock.until_due(t0 + 0.005) == pytest.approx(0.005)
+    fake.t += 0.02
+    assert clock.until_due(t0 + 0.005) == 0.0  # late: due, no negative wait
+    # a wait of a few ulps at a large time is due, not a spin on an unservable sleep
+    fake.t = 1e6
+    clock.resync()
+    late = clock.now() + 1e-10
+    assert 0 < clock.wait_seconds(late) <= 1e-9 and clock.until_due(late) == 0.0
+
+
 def test_time_never_moves_back() -> None:
     _, clock = _paced()
     clock.enter(clock.now() + 1.0)

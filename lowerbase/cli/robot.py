@@ -142,6 +142,23 @@ def _on_respawn(old: Any, new: Any) -> None:
           flush=True)
 
 
+def _report_down(report: Any, sup: Any, child: Any) -> None:
+    """A part that ended (to be respawned, or ending the run): on robot_status first, while
+    the others still run; one line on how that went."""
+    def tasks_alive() -> bool:
+        return any(c.spec.name == "tasks" and c.poll() is None for c in sup.children)
+
+    try:
+        shown = child.spec.name != "tasks" and report.down(child, tasks_alive)
+    except (OSError, LowerbaseError) as exc:
+        print(f"lowerbase robot: warning: cannot tell robot_status that {child.spec.name} "
+              f"ended ({exc})", file=sys.stderr, flush=True)
+        return
+    if shown:
+        print(f"lowerbase robot: robot_status reports that {child.spec.name} ended",
+              file=sys.stderr, flush=True)
+
+
 def _on_lost(child: Any) -> None:
     """A part the robot goes on without (the recorder) ended: one line saying what to do."""
     what = ""
@@ -224,6 +241,7 @@ def run(args: argparse.Namespace) -> int:
         running_robot,
         wait_for_master,
     )
+    from lowerbase.robot.partdown import PartReport
     from lowerbase.robot.plan import UPPER, RobotOptions, robot_plan
     from lowerbase.robot.supervisor import Supervisor
     from lowerbase.world.maps import load_map
@@ -254,6 +272,7 @@ def run(args: argparse.Namespace) -> int:
     ended = None
     restore: Any = lambda: None  # noqa: E731
     watch, unwatch = None, None
+    report: PartReport | None = None
     try:
         if not master_answers(uri):
             sup.start([own_master(uri)])
@@ -269,6 +288,8 @@ def run(args: argparse.Namespace) -> int:
         parts = tuple(p for p in UPPER if p not in args.without)
         if speed is not None:
             return _run_lockstep(args, sup, speed, parts, line, log_dir, uri)
+        report = PartReport(uri)
+        report.clear()
         sup.start(robot_plan(RobotOptions(map=args.map, parts=parts, foxglove=args.foxglove,
                                           sim_speed=speed, truth=args.truth,
                                           mcap=args.mcap, soc=args.soc,
@@ -289,7 +310,14 @@ def run(args: argparse.Namespace) -> int:
             if deadline is not None and time.monotonic() >= deadline:
                 sup.request_stop()
 
-        ended = sup.watch(on_tick=tick, on_lost=_on_lost, on_respawn=_on_respawn)
+        def down(child: Any) -> None:
+            _report_down(report, sup, child)
+
+        def respawned(old: Any, new: Any) -> None:
+            _on_respawn(old, new)
+            report.up()
+
+        ended = sup.watch(on_tick=tick, on_lost=_on_lost, on_respawn=respawned, on_down=down)
     except KeyboardInterrupt:
         pass
     finally:
@@ -299,6 +327,8 @@ def run(args: argparse.Namespace) -> int:
         if unwatch is not None:
             unwatch()
         codes = sup.stop_all()
+        if report is not None:
+            report.close()
         restore()
         for s, handler in previous.items():
             signal.signal(s, handler)

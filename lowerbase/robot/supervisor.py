@@ -181,17 +181,21 @@ class Supervisor:
 
     def watch(self, every: float = 0.5, on_tick: Callable[[], None] = lambda: None,
               on_lost: Callable[[Child], None] = lambda child: None,
-              on_respawn: Callable[[Child, Child], None] = lambda old, new: None
-              ) -> Child | None:
+              on_respawn: Callable[[Child, Child], None] = lambda old, new: None,
+              on_down: Callable[[Child], None] = lambda child: None) -> Child | None:
         """Until an essential child ends (returned) or a stop is requested (None); a child
         that is not essential ending is handed to ``on_lost`` once and the watch goes on; a
         child to respawn is started again (its log goes on) after :data:`RESPAWN_DELAY` and
-        handed to ``on_respawn(old, new)`` (one that cannot start again ends the run)."""
+        handed to ``on_respawn(old, new)`` (one that cannot start again ends the run). A child
+        to respawn or an essential one that ended is handed to ``on_down`` first, while the
+        others still run (to report it)."""
         lost: set[str] = set()
         while not self._stop.wait(every):
             for i, child in enumerate(self.children):
                 if child.poll() is None:
                     continue
+                if child.spec.respawn or child.spec.essential:
+                    on_down(child)
                 if child.spec.respawn:
                     if self._stop.wait(RESPAWN_DELAY):
                         return None

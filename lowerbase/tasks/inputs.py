@@ -13,7 +13,11 @@ The node's subscribers store the latest of each input here (with the rospy time 
 - ``movebase_pose2d`` (geometry_msgs/Pose2D, the world's localization while it runs): the
   robot on the map; localized while one arrived within ``pose_timeout`` s;
 - ``lowerbase/localization`` (std_msgs/String, latched, the world's): ``lost: ...`` while the
-  estimate does not fit the scans (shown on robot_status, navigation goes on).
+  estimate does not fit the scans (shown on robot_status, navigation goes on);
+- the parameter ``/lowerbase/part_down`` (string, set by ``lowerbase robot``'s supervisor):
+  ``"navigation ended (exit code 1): ..."`` while a part of the robot is down ("" none): the
+  robot is abnormal, a running task fails. Once robot_status carries it, the node writes it to
+  ``/lowerbase/part_reported``, so the supervisor stops the robot only after that.
 """
 
 from __future__ import annotations
@@ -29,6 +33,11 @@ from lowerbase.tasks.status import Chassis
 #: the status bits that stop the motors (a task fails on them)
 FAULT_BITS = (StatusBit.LEFT_MOTOR_FAULT, StatusBit.RIGHT_MOTOR_FAULT, StatusBit.BMS_PROTECTION)
 ESTOP_BITS = StatusBit.ESTOP_BUTTON | StatusBit.ESTOP_COMMAND
+#: the ROS parameters of a crashed part (see the module docstring)
+PART_DOWN_PARAM = "/lowerbase/part_down"
+PART_REPORTED_PARAM = "/lowerbase/part_reported"
+#: [characters] of a part's crash kept for robot_status
+PART_NOTE_MAX = 600
 
 
 def faults_of(code: int) -> str:
@@ -57,6 +66,7 @@ class ChassisInputs:
     pose_time: float | None = None
     pose_timeout: float = 1.0  #: [s] without a pose: localization lost
     localization: str = ""  #: the world's lowerbase/localization line ("lost: ..."/"localized")
+    part_down: str = ""  #: /lowerbase/part_down: a part of the robot that ended ("" none)
 
     def localized(self, now: float) -> bool:
         return self.pose_time is not None and now - self.pose_time <= self.pose_timeout
@@ -76,5 +86,6 @@ class ChassisInputs:
             and bool(self.bms_status & BmsStatus.CHARGER_CONNECTED),
             localized=localized,
             uncertain=self.localization if self.localization.startswith("lost") else "",
+            part_down=self.part_down,
             pose=self.pose,
             odom=self.odom)

@@ -198,7 +198,7 @@ class TaskMachine(Requests, Docking):
     def _watch(self, t: Task, ch: Chassis) -> None:
         if t.action.kind == ActionType.CHARGING:
             return  # on the charger: nothing moves; e-stop and faults only show in robot_state
-        if ch.link_lost or ch.fault:
+        if ch.link_lost or ch.fault or ch.part_down:
             return self._fail(t, f"{ch.abnormal()}: clear it and send the task again")
         if ch.e_stopped:
             if t.state == TaskState.EXECUTING:

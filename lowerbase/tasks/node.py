@@ -25,7 +25,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from lowerbase.errors import LowerbaseError, WorldError
-from lowerbase.tasks.inputs import ChassisInputs, finite_pose
+from lowerbase.tasks.inputs import (
+    PART_DOWN_PARAM,
+    PART_NOTE_MAX,
+    PART_REPORTED_PARAM,
+    ChassisInputs,
+    finite_pose,
+)
 from lowerbase.tasks.model import Pose, Status, TaskRequest, TaskResponse
 from lowerbase.tasks.plan import TaskConfig
 from lowerbase.text import clip
@@ -117,6 +123,7 @@ class TasksNode:
                                    on_status=self._publish, steps=self.steps)
         self._subs: list[Any] = []
         self._service: Any = None
+        self._part_noted = self._part_reported = ""
 
     def advertise(self) -> None:
         from geometry_msgs.msg import Pose2D
@@ -213,11 +220,30 @@ class TasksNode:
         with self.lock:
             self.machine.tick(now, self.inputs.chassis(now))
 
+    def read_part_down(self) -> None:
+        """The supervisor's /lowerbase/part_down (cached by rospy, updated by the master), and,
+        once robot_status carries it, its acknowledgement in /lowerbase/part_reported."""
+        value = self.rospy.get_param_cached(PART_DOWN_PARAM, "")
+        note = value[:PART_NOTE_MAX] if isinstance(value, str) else ""  # unset: {}
+        with self.lock:
+            self.inputs.part_down = note
+            shown = self.machine.tracker.current
+        if note != self._part_noted:
+            self._part_noted = note
+            if note:
+                log.error("%s: robot_status shows the robot ABNORMAL", note)  # and /rosout
+        if note and note != self._part_reported and shown is not None and note in shown.msg:
+            self._part_reported = note
+            self.rospy.set_param(PART_REPORTED_PARAM, note)
+
     def spin(self) -> None:
         rospy = self.rospy
         rate = rospy.Rate(1.0 / self.setup.config.period)
         while not rospy.is_shutdown():
+            self.read_part_down()
             self.tick()
+            if self.inputs.part_down and self.inputs.part_down != self._part_reported:
+                self.read_part_down()  # the tick published it: acknowledge at once
             try:
                 rate.sleep()
             except rospy.ROSInterruptException:

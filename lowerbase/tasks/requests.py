@@ -108,6 +108,8 @@ class Requests:
 
     def _execute(self, req: TaskRequest, own: bool = False) -> str:
         ch = self.chassis
+        if ch.part_down:
+            raise TaskRefused(f"{ch.part_down}: the robot needs it, restart the robot")
         if not ch.initialized:
             raise TaskRefused("the chassis is not initialized: wait until driver_base has "
                               "configured the lower computer")

@@ -14,6 +14,8 @@ class Chassis:
     """What the task machine reads of the chassis (driver_base, localization) each tick."""
 
     initialized: bool = True  #: the lower computer's link is up and configured
+    #: a part of the robot that ended, in words from its supervisor ("" none)
+    part_down: str = ""
     link_lost: bool = False  #: no Heartbeat within the driver's link timeout
     e_stopped: bool = False
     fault: str = ""  #: a fault that stops the motors, in words ("" none)
@@ -29,6 +31,8 @@ class Chassis:
 
     def abnormal(self) -> str:
         """Why the chassis cannot move on its own ("" when it can)."""
+        if self.part_down:
+            return self.part_down
         if self.link_lost:
             return "the lower computer's link is lost"
         if self.e_stopped:
@@ -39,11 +43,13 @@ class Chassis:
 
 
 def robot_state(ch: Chassis, task_type: int | None, warning: bool) -> RobotState:
-    """robot_state (and ExecTask's statusCode), in this order: uninitialized; abnormal (link
-    lost, e-stop, fault); charging (the BMS sees the charger); abnormal (critical battery);
-    warning (low battery, localization lost, a warning of the running action); parking (a
-    parking task runs); on a task (any other task runs); idle. ``task_type`` is the running
-    task's type, None when no task runs."""
+    """robot_state (and ExecTask's statusCode), in this order: abnormal (a part of the robot
+    ended); uninitialized; abnormal (link lost, e-stop, fault); charging (the BMS sees the
+    charger); abnormal (critical battery); warning (low battery, localization lost, a warning
+    of the running action); parking (a parking task runs); on a task (any other task runs);
+    idle. ``task_type`` is the running task's type, None when no task runs."""
+    if ch.part_down:
+        return RobotState.ABNORMAL
     if not ch.initialized:
         return RobotState.UNINITIALIZED
     if ch.abnormal():

@@ -240,3 +240,42 @@ def test_a_second_robot_on_a_master_that_has_one_is_refused_and_sighup_stops_the
             raise
     assert robot.popen.returncode == 0, err
     assert "lowerbase robot: stopped" in out
+
+
+@pytest.mark.ros
+@pytest.mark.process
+def test_a_crashed_part_is_on_robot_status_before_the_robot_stops(
+        ros_master: Any, tmp_path: Path) -> None:  # noqa: F811
+    """Issue 22 item 8: kill -9 of the world; before the robot stops, robot_status (latched)
+    says ABNORMAL with the part and its exit code, so a customer's task software sees why."""
+    env = {k: v for k, v in ros_master.env.items() if k != "ROS_IP"}
+    robot = Robot(env, tmp_path / "logs", "--without", "navigation")
+    probe = None
+    try:
+        robot.wait_for("ready on ROS master")
+        script = tmp_path / "probe.py"
+        script.write_text(PROBE)
+        probe = Probe(script, ros_master.env, {"robot_status": "woosh_msgs/RobotStatus"})
+        probe.wait_for(lambda s: s["robot_status"]["count"] >= 1, 60.0, "robot_status")
+        world = [p for p in robot.children() if "world" in _args(p)]
+        assert len(world) == 1
+        os.kill(world[0], signal.SIGKILL)
+        status = probe.wait_for(
+            lambda s: "world ended (exit code -9)" in s["robot_status"]["msg"]["msg"], 30.0,
+            "robot_status naming the crash")["robot_status"]["msg"]
+        assert status["robot_state"] == 6  # ABNORMAL (seed 000)
+        _, err = robot.popen.communicate(timeout=60)  # it stops by itself
+        code = robot.popen.returncode
+    finally:
+        if probe is not None:
+            probe.close()
+        if robot.popen.poll() is None:
+            robot.ctrl_c()
+    assert code == 1
+    assert "robot_status reports that world ended" in err, err
+    assert "error: world ended (exit code -9)" in err and "Traceback" not in err
+
+
+def _args(pid: int) -> str:
+    out = subprocess.run(["ps", "-o", "args=", "-p", str(pid)], capture_output=True, text=True)
+    return out.stdout

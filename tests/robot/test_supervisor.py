@@ -199,9 +199,10 @@ def test_a_crash_is_quoted_by_its_own_last_lines(tmp_path: Path) -> None:
     sup.start([script("print('ready', flush=True); print('warning: something stale'); "
                       "import time; time.sleep(0.2); raise RuntimeError('navigation broke')",
                       "crashes")])
-    ended = sup.watch(every=0.05)
+    downs: list[Any] = []
+    ended = sup.watch(every=0.05, on_down=downs.append)
     sup.stop_all()
-    assert ended is not None
+    assert ended is not None and downs == [ended]  # told before the run ends
     tail = ended.tail(3)
     assert tail[-1] == "RuntimeError: navigation broke"
     assert all("stale" not in line for line in tail)
@@ -225,8 +226,13 @@ def test_a_part_to_respawn_is_started_again_and_the_others_go_on(tmp_path: Path)
         seen.append((new.respawns, (old.final_lines or [])[-1:]))
         sup.request_stop()
 
-    assert sup.watch(every=0.05, on_respawn=respawned) is None
-    assert seen == [(1, ["RuntimeError: navigation broke"])]
+    downs: list[tuple[str, bool]] = []
+
+    def down(child: Any) -> None:  # before the respawn, the others still running
+        downs.append((child.spec.name, sup.children[0].poll() is None))
+
+    assert sup.watch(every=0.05, on_respawn=respawned, on_down=down) is None
+    assert seen == [(1, ["RuntimeError: navigation broke"])] and downs == [("nav", True)]
     nav = sup.children[1]
     assert nav.poll() is None and nav.ready  # running again
     sup.stop_all()

@@ -82,6 +82,22 @@ def test_link_lost_fails_the_task() -> None:
     assert b.status.task_state == TS.FAILED and "link is lost" in b.status.msg
 
 
+def test_a_part_that_ended_fails_the_task_and_shows_until_it_is_back() -> None:
+    """Issue 22 item 8: a crashed part of the robot (the supervisor's note) is on robot_status
+    at once: ABNORMAL, the task failed with the crash's own words; a respawned part clears it."""
+    b = moving(ready())
+    note = "navigation ended (exit code 1): RuntimeError: navigation broke"
+    b.set(part_down=note)
+    b.tick()
+    s = b.status
+    assert (s.task_state, s.action_state, s.robot_state) == (TS.FAILED, AS.FAILED, RS.ABNORMAL)
+    assert note in s.msg and b.nav.cancels
+    b.set(part_down="")
+    b.tick()
+    assert b.status.robot_state == RS.IDLE
+    assert b.send(EXEC, 2, PARK, mark_no="S1").success
+
+
 def test_low_battery_warns_finishes_the_task_then_charges() -> None:
     b = moving(ready(), task_type=TRANSPORT, direction=1)
     b.set(low_battery=True, soc=18.0)

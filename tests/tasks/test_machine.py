@@ -341,6 +341,10 @@ def test_cancel_stops_a_running_task() -> None:
     (dict(e_stopped=True), RS.ABNORMAL, "emergency stop"),
     (dict(fault="left motor fault"), RS.ABNORMAL, "left motor fault"),
     (dict(link_lost=True), RS.ABNORMAL, "link is lost"),
+    (dict(part_down="navigation ended (exit code -9): no output"), RS.ABNORMAL,
+     "navigation ended (exit code -9)"),
+    (dict(initialized=False, part_down="driver ended (exit code 1): boom"), RS.ABNORMAL,
+     "driver ended"),
     (dict(critical_battery=True, low_battery=True, soc=3.0), RS.ABNORMAL,
      "battery is critical (3 %)"),
 ])

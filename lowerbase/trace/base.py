@@ -13,13 +13,20 @@ a list that cannot be driven (a point off the map included) is refused
 answered once with the list as received and IDLE); a list while
 one RUNS is refused the same way but answered with the running list, RUNNING. A scan or pose
 with NaN where a number is needed is dropped and counted.
+
+A scan is put on the costmaps from the pose of its own time, as tf's message filter does: the
+first pose stamped at or after the scan's stamp (poses are kept for
+:data:`POSE_HISTORY`); a scan newer than every pose waits for the next one. A scan that arrives
+late on a busy host is so marked where the robot was, not smeared along where it has turned
+since (issue 22 item 18). A scan older than every kept pose is dropped and counted
+(``scan_too_old``); unstamped messages (stamp 0) pair with the latest pose.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
@@ -41,6 +48,8 @@ from lowerbase.world.footprint import DEFAULT_FOOTPRINT, DEFAULT_PADDING, Footpr
 from lowerbase.world.lidar import LaserScan
 
 log = logging.getLogger(__name__)
+#: poses kept to pair a late scan with the pose of its time (20 Hz: 5 s)
+POSE_HISTORY = 100
 
 Pose = tuple[float, float, float]
 Publish = Callable[[m.GTraceList], None]
@@ -100,6 +109,9 @@ class Navigator:
         self._next_report = math.inf
         self._blocked_since: float | None = None
         self._latest: tuple[Pose, LaserScan] | None = None  #: the last scan and its pose
+        #: (stamp, pose) of the last poses, oldest first
+        self._poses: deque[tuple[float, Pose]] = deque(maxlen=POSE_HISTORY)
+        self._waiting: LaserScan | None = None  #: a scan newer than every pose so far
 
     # -- inputs ---------------------------------------------------------------------------------
     def on_pose(self, msg: m.RobotPose2D) -> None:
@@ -109,6 +121,14 @@ class Navigator:
             log.warning("%s: dropped a RobotPose2D with NaN/inf %r", self.name, pose)
             return
         self.pose = pose
+        stamp = float(msg.stamp)
+        if self._poses and stamp < self._poses[-1][0]:
+            self._poses.clear()  # time went back (a simulation started again)
+        self._poses.append((stamp, pose))
+        waiting = self._waiting
+        if waiting is not None and stamp >= waiting.stamp:
+            self._waiting = None
+            self._take_scan(pose, waiting)
 
     def on_scan(self, msg: m.GLaserScan) -> None:
         if self.pose is None:
@@ -119,7 +139,34 @@ class Navigator:
             self.stats["scan_dropped"] += 1
             log.warning("%s: dropped a scan: %s", self.name, exc)
             return
-        self._latest = (self.pose, scan)
+        if scan.stamp <= 0.0 or self._poses[-1][0] <= 0.0:  # unstamped: the latest pose
+            self._take_scan(self.pose, scan)
+            return
+        pose = self._pose_at(scan.stamp)
+        if pose is None:
+            self._waiting = scan  # for the pose of its time (a newer scan replaces it)
+        elif isinstance(pose, str):  # too old
+            self.stats["scan_too_old"] += 1
+            n = self.stats["scan_too_old"]
+            if n in (1, 10, 100) or n % 1000 == 0:
+                log.warning("%s: dropped a scan %.2f s older than every pose kept (a busy "
+                            "host; %d so far)", self.name, self._poses[0][0] - scan.stamp, n)
+        else:
+            self._take_scan(pose, scan)
+
+    def _pose_at(self, stamp: float) -> Pose | str | None:
+        """The first kept pose stamped at or after ``stamp``; None: none yet; "too old": the
+        scan is older than the history kept."""
+        poses = self._poses
+        if stamp < poses[0][0] and len(poses) == poses.maxlen:
+            return "too old"
+        for t, pose in poses:
+            if t >= stamp:
+                return pose
+        return None
+
+    def _take_scan(self, pose: Pose, scan: LaserScan) -> None:
+        self._latest = (pose, scan)
         if self.status == m.RUNNING:  # an idle module only keeps the latest scan
             self._use_scan()
 

@@ -213,7 +213,8 @@ class TraceNode:
             return
         tr, q = t.transform.translation, t.transform.rotation
         yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-        self._send(POSE, pose_to_pb((tr.x, tr.y, yaw), self.clock.now()))
+        # stamped with the transform's own time: a scan is paired with the pose of its time
+        self._send(POSE, pose_to_pb((tr.x, tr.y, yaw), t.header.stamp.to_sec()))
 
     # -- the loop ------------------------------------------------------------------------------
     def tick(self) -> None:

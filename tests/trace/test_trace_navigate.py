@@ -10,6 +10,7 @@ import pytest
 from lowerbase.clock import SimClock
 from lowerbase.trace import messages as m
 from lowerbase.trace import modules
+from lowerbase.trace.base import POSE_HISTORY
 from lowerbase.trace.sim import ROUTE, SPEED, STATUS, TraceSim
 from lowerbase.world.maps import load_map
 from tests.trace.routes import Y, route, trace_sim
@@ -170,3 +171,34 @@ def test_reports_stay_on_the_5s_grid_after_a_stall() -> None:
         nav.tick()
         times += [clock.now() - 100.0] * (len(nav.reports) - before)
     assert times == [5.0, 17.0, 20.0, 25.0]  # acceptance's report at 0 is on_route's
+
+
+def _scan(stamp: float) -> m.GLaserScan:
+    return m.GLaserScan(stamp=stamp, frame_id="base_link", angle_min=-0.5, angle_max=0.5,
+                        angle_increment=0.5, time_increment=0.0, scan_time=0.1,
+                        range_min=0.05, range_max=20.0, ranges=[2.0, 2.0, 2.0])
+
+
+def test_a_late_scan_is_paired_with_the_pose_of_its_time() -> None:
+    """Issue 22 item 18: on a busy host a scan arrives after the robot has turned on; it is
+    marked from the pose of its stamp (tf's message filter), not the latest one (which smeared
+    obstacles over the route, so ObstacleNavigate found no clear rejoin point). A scan newer
+    than every pose waits for the next; one older than every pose kept is dropped, counted."""
+    mods = modules.TraceModules(SimClock(), load_map("empty_room"), lambda t, msg: None)
+    nav = mods.obstacle
+    poses = [(1.0 + 0.05 * k, (2.0 + 0.01 * k, 2.0, 0.1 * k)) for k in range(6)]
+    for stamp, (x, y, yaw) in poses:
+        mods.deliver(modules.POSE, m.RobotPose2D(stamp=stamp, x=x, y=y, theta=yaw))
+    mods.deliver(modules.LASER, _scan(1.1))  # arrives at 1.25: the robot turned 0.3 rad since
+    assert nav._latest is not None and nav._latest[0] == poses[2][1]
+    mods.deliver(modules.LASER, _scan(1.27))  # newer than every pose: waits
+    assert nav._latest[0] == poses[2][1] and nav._latest[1].stamp == pytest.approx(1.1)
+    mods.deliver(modules.POSE, m.RobotPose2D(stamp=1.3, x=2.2, y=2.0, theta=0.6))
+    assert nav._latest[0] == (2.2, 2.0, 0.6) and nav._latest[1].stamp == pytest.approx(1.27)
+    for k in range(POSE_HISTORY):
+        mods.deliver(modules.POSE, m.RobotPose2D(stamp=2.0 + 0.05 * k, x=2.0, y=2.0))
+    mods.deliver(modules.LASER, _scan(1.5))  # older than every pose kept
+    assert nav.stats["scan_too_old"] == 1 and nav._latest[1].stamp == pytest.approx(1.27)
+    # unstamped messages keep the old pairing: the latest pose
+    mods.deliver(modules.LASER, _scan(0.0))
+    assert nav._latest[1].stamp == 0.0 and nav._latest[0] == (2.0, 2.0, 0.0)

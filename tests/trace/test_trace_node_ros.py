@@ -85,9 +85,13 @@ class Bag:
 
 def business(master: Any, *args: str, timeout: float = 150.0) -> list[str]:
     """Run the example to its end; its report lines (asserting exit code 0)."""
-    done = subprocess.run([sys.executable, str(BUSINESS), *args], env={**os.environ,
-                          **master.env}, capture_output=True, text=True, timeout=timeout,
-                          cwd=ROOT)
+    try:
+        done = subprocess.run([sys.executable, str(BUSINESS), *args], env={**os.environ,
+                              **master.env}, capture_output=True, text=True, timeout=timeout,
+                              cwd=ROOT)
+    except subprocess.TimeoutExpired as exc:  # what it saw until then, not only "timed out"
+        raise AssertionError(f"the business node did not end in {timeout:g} s: "
+                             f"{exc.stdout!r} {exc.stderr!r}") from None
     assert done.returncode == 0, (done.stdout, done.stderr)
     return [line.split(" ", 1)[1] for line in done.stdout.splitlines()
             if line.startswith("business: msg_")]

@@ -85,7 +85,7 @@ def _legged(sc: Any) -> tuple[list[tuple[str, bool]], dict[str, Any]]:
 
     result = run_legged_scenario(sc)
     metrics: dict[str, Any] = {"sim_s": _r(result.trace.end, 3)}
-    if len(result.trace) and "soc" in result.trace.columns():
+    if len(result.trace) and "soc" in result.trace.columns:
         metrics["soc_final"] = _r(result.trace["soc"][-1], 3)
     return [(e.title(), o.status != "failed") for e, o in result.outcomes], metrics
 

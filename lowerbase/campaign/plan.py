@@ -55,7 +55,7 @@ def _set(doc: Any, key: str, value: Any, where: str) -> None:
         if isinstance(node, list):
             try:
                 j = int(part)
-                node[j]  # noqa: B018  (IndexError below)
+                node[j]
             except (ValueError, IndexError):
                 raise CampaignError(f"{where}: {'.'.join(parts[:i]) or key} has "
                                     f"{len(node)} item(s); {part!r} is not one of them "

@@ -38,6 +38,9 @@ def add_subparser(subparsers: Any) -> None:
                      help="only runs A..B (inclusive), e.g. 0-9, to try a campaign out")
     run.add_argument("--progress", action="store_true",
                      help="show the progress bar even when stderr is not a terminal")
+    run.add_argument("--strict", action="store_true",
+                     help="exit 1 when a run failed (default: 0 once every run finished; "
+                     "failing runs are the campaign's findings)")
     run.set_defaults(func=run_command)
 
     check = sub.add_parser("check", help="validate a campaign file without running it")
@@ -115,7 +118,9 @@ def run_command(args: argparse.Namespace) -> int:
     if len(summary["failing_runs"]) > 5:
         print(f"  ... {len(summary['failing_runs']) - 5} more in {out / 'index.html'}")
     print(f"report: {out / 'index.html'} (results.csv, plots)")
-    return 130 if result.interrupted else 0 if not summary["failed"] else 1
+    if result.interrupted:
+        return 130
+    return 1 if args.strict and summary["failed"] else 0
 
 
 def check_command(args: argparse.Namespace) -> int:

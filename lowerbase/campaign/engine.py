@@ -14,7 +14,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from lowerbase.campaign.execute import run_one
+from lowerbase.campaign.execute import run_one, warm
 from lowerbase.campaign.plan import plan_run
 from lowerbase.campaign.progress import CampaignProgress
 from lowerbase.campaign.spec import Campaign
@@ -82,6 +82,18 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         cluster.close()
 
 
+def warm_workers(client: Any) -> None:
+    """Warm every worker now, and each that joins later (a restarted one), before its runs:
+    a plugin whose setup runs :func:`lowerbase.campaign.execute.warm`."""
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class Warm(WorkerPlugin):
+        def setup(self, worker: Any) -> None:
+            warm()
+
+    client.register_plugin(Warm(), name="lowerbase-warm")
+
+
 def _failed_row(index: int, scenario: str, values: dict[str, Any], error: str
                 ) -> dict[str, Any]:
     return {"run": index, "scenario": scenario, "passed": False, "error": error, **values}
@@ -90,11 +102,14 @@ def _failed_row(index: int, scenario: str, values: dict[str, Any], error: str
 def run_campaign(campaign: Campaign, client: Any, *,
                  indices: Sequence[int] | None = None,
                  on_row: Callable[[dict[str, Any]], None] | None = None,
-                 progress: CampaignProgress | None = None) -> Outcome:
+                 progress: CampaignProgress | None = None, warm: bool = True) -> Outcome:
     """Submit every run (or ``indices``) to ``client``; call ``on_row`` with each row as it
-    arrives. Ctrl-C cancels the runs not finished and returns what finished."""
+    arrives. Ctrl-C cancels the runs not finished and returns what finished. ``warm``: warm
+    the workers first (:func:`warm_workers`)."""
     from distributed import as_completed
 
+    if warm:
+        warm_workers(client)
     token = uuid.uuid4().hex[:8]
     wanted = list(range(campaign.total)) if indices is None else list(indices)
     specs = {i: plan_run(campaign, i) for i in wanted}

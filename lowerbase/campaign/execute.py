@@ -100,6 +100,19 @@ def _trace(sc: Any) -> tuple[list[tuple[str, bool]], dict[str, Any]]:
 
 RUNNERS = {"wheeled": _wheeled, "tasks": _tasks, "legged": _legged, "trace": _trace}
 
+#: a second of driving: imports the runner and loads the wheeled numba kernels from their cache
+WARM = {"scenario": {"name": "warm", "duration": 1.0},
+        "timeline": [{"at": 0.1, "action": "twist", "linear": 0.3, "duration": 0.5}]}
+
+
+def warm() -> None:
+    """Make a fresh worker's first run as fast as its next (~5 s of imports and cache loads
+    otherwise land in the first run's time)."""
+    from lowerbase.bench.scenario import scenario_from_dict
+
+    with _quiet():
+        _wheeled(scenario_from_dict(WARM, source="warm"))
+
 
 @contextlib.contextmanager
 def _quiet() -> Iterator[None]:

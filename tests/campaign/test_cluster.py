@@ -69,13 +69,12 @@ def cluster(tmp_path: Path) -> Iterator[tuple[str, list[subprocess.Popen[bytes]]
                    for i in (1, 2)]
         procs += workers
         yield address, workers
-    finally:
-        for p in procs:
+    finally:  # workers first, then the scheduler they would wait for
+        for p in reversed(procs):
             if p.poll() is None:
                 p.terminate()
-        for p in procs:
             try:
-                p.wait(timeout=20)
+                p.wait(timeout=15)
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()

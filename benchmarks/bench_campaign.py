@@ -106,6 +106,7 @@ def overhead(runs: int, tmp: Path) -> list[Row]:
         t2 = time.perf_counter()
     assert len(result.rows) == c.total
     ideal = single / 2
+    on_workers = sum(float(r["wall_s"]) for r in result.rows.values())
     note = f"{c.total} runs; sum of single runs {single:.1f} s, ideal on 2 = {ideal:.1f} s"
     return [
         Row("campaign", "sum of single-run times", single, "s", f"{c.total} runs in 1 process"),
@@ -114,6 +115,10 @@ def overhead(runs: int, tmp: Path) -> list[Row]:
             "target <= 1.15"),
         Row("campaign", "LocalCluster(2): overhead with cluster start", (t2 - t0) / ideal, "x",
             f"cluster start and warm-up {t1 - t0:.1f} s"),
+        Row("campaign", "LocalCluster(2): overhead vs the runs' times on the workers",
+            (t2 - t1) / (on_workers / 2), "x",
+            f"sum of wall_s on the workers {on_workers:.1f} s (a busy host slows the runs "
+            "themselves; this is what Dask adds)"),
     ]
 
 

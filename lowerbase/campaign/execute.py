@@ -84,9 +84,11 @@ def _legged(sc: Any) -> tuple[list[tuple[str, bool]], dict[str, Any]]:
     from lowerbase.bench.legged_sim import run_legged_scenario
 
     result = run_legged_scenario(sc)
-    metrics: dict[str, Any] = {"sim_s": _r(result.trace.end, 3)}
-    if len(result.trace) and "soc" in result.trace.columns:
-        metrics["soc_final"] = _r(result.trace["soc"][-1], 3)
+    tr = result.trace
+    metrics: dict[str, Any] = {"sim_s": _r(tr.end, 3)}
+    if len(tr):  # the driver's base position against the model's truth; the pack voltage
+        metrics.update(_errors(tr["truth_x"], tr["truth_y"], tr["x"], tr["y"], "position"))
+        metrics["voltage_final"] = _r(tr["voltage"][-1], 3)
     return [(e.title(), o.status != "failed") for e, o in result.outcomes], metrics
 
 

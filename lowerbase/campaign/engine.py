@@ -8,6 +8,8 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import signal
+import threading
 import time
 import uuid
 from collections.abc import Callable, Iterator, Sequence
@@ -51,6 +53,20 @@ def quiet_dask(debug: bool = False) -> Iterator[None]:
 
 
 @contextlib.contextmanager
+def _children_ignore_sigint() -> Iterator[None]:
+    """Worker processes started meanwhile ignore SIGINT: Ctrl-C reaches the whole process
+    group, and the campaign (this process) is what stops them, quietly."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    saved = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, saved)
+
+
+@contextlib.contextmanager
 def open_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[Any]:
     """A Dask client: of ``scheduler`` (``tcp://HOST:8786``), or of a LocalCluster with
     ``workers`` single-threaded processes (default: one per core) listening on 127.0.0.1."""
@@ -72,9 +88,10 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
             client.close()
         return
     n = workers or os.cpu_count() or 1
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           host="127.0.0.1", dashboard_address=None,
-                           silence_logs=logging.CRITICAL)
+    with _children_ignore_sigint():
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", dashboard_address=None,
+                               silence_logs=logging.CRITICAL)
     try:
         with Client(cluster) as client:
             yield client
@@ -115,7 +132,9 @@ def run_campaign(campaign: Campaign, client: Any, *,
     specs = {i: plan_run(campaign, i) for i in wanted}
     futures = {client.submit(run_one, spec, key=f"lowerbase-run-{i}-{token}", pure=False,
                              retries=RETRIES): i for i, spec in specs.items()}
-    out = Outcome(workers=len(client.scheduler_info().get("workers", {})))
+    info = client.scheduler_info().get("workers", {})
+    out = Outcome(workers=len(info))
+    w_threads = {w: int(i.get("nthreads", 1)) for w, i in info.items()}
     passed = failed = 0
     seen = [-1.0, 0.0]  # when the scheduler was last asked, what it said
 
@@ -125,7 +144,9 @@ def run_campaign(campaign: Campaign, client: Any, *,
             seen[0] = now
             # the scheduler busy or gone: the line shows the last count
             with contextlib.suppress(Exception):
-                seen[1] = sum(len(keys) for keys in client.processing().values())
+                # a worker holds a few runs ahead; only its threads' worth are running
+                seen[1] = sum(min(len(keys), w_threads.get(w, 1))
+                              for w, keys in client.processing().items())
         return int(seen[1])
 
     try:

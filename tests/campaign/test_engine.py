@@ -3,10 +3,16 @@
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
 
+import lowerbase
 from lowerbase.campaign.execute import run_one
 from lowerbase.campaign.plan import plan_run
 from lowerbase.campaign.spec import load_campaign
@@ -70,3 +76,37 @@ def test_run_on_a_local_cluster_then_replay(tmp_path: Path,
     assert got["final"]["odom_error_m"] == pytest.approx(local["odom_error_m"], abs=1e-6)
     assert (rep / "run.mcap").stat().st_size > 0
     assert json.loads((rep / "run.json").read_text())["values"] == plan_run(c, 1).values
+
+
+@pytest.mark.process
+def test_ctrl_c_keeps_the_runs_that_finished(tmp_path: Path) -> None:
+    """SIGINT to the process group (a terminal's Ctrl-C) after 3 rows: exit 130, the table
+    and report of what finished, no traceback from the workers."""
+    path = tmp_path / "long.toml"
+    path.write_text(SMALL.replace("runs = 3", "runs = 200"), encoding="utf-8")
+    out = tmp_path / "out"
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(
+        p for p in (str(Path(lowerbase.__file__).resolve().parents[1]),
+                    env.get("PYTHONPATH")) if p)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "lowerbase", "campaign", "run", str(path), "--workers", "2",
+         "--out", str(out)], env=env, start_new_session=True, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    rows = out / "runs.jsonl"
+    try:
+        while not (rows.exists() and len(rows.read_text().splitlines()) >= 3):
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.05)
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, stderr
+    assert "INTERRUPTED" in stdout and "Traceback" not in stderr, stderr
+    table = read_csv(out / "results.csv")
+    assert 3 <= len(table) < 200
+    assert json.loads((out / "summary.json").read_text())["interrupted"] is True

@@ -45,13 +45,31 @@ def _number(v: Any) -> float | None:
 
 def plot_variation(v: Variation, rows: Sequence[Mapping[str, Any]], metric: str,
                    threshold: float | None, path: Path) -> bool:
-    """The plot of ``v`` (False when it is not numeric: nothing written)."""
-    xs = [_number(r.get(v.key)) for r in rows]
-    if any(x is None for x in xs) or not xs:
+    """The plot of ``v`` (numbers: the metric over them and the failed share per bin;
+    other values: the failed share per value). False when there are no rows."""
+    if not rows:
         return False
     from lowerbase.bench.report import _pyplot
 
     plt = _pyplot()
+    xs = [_number(r.get(v.key)) for r in rows]
+    if any(x is None for x in xs):
+        labels = [json.dumps(r.get(v.key)) for r in rows]
+        names = list(dict.fromkeys(labels))
+        share = [sum(1 for lab, r in zip(labels, rows, strict=True)
+                     if lab == n and not r.get("passed")) / labels.count(n) for n in names]
+        fig, ax = plt.subplots(figsize=(7, 3.5))
+        ax.bar(range(len(names)), share, color="tab:red", alpha=0.6, edgecolor="k", lw=0.5)
+        ax.set_xticks(range(len(names)), [f"{n}\n({labels.count(n)} runs)" for n in names],
+                      fontsize=8)
+        ax.set_ylim(0, 1)
+        ax.set_ylabel("failed share")
+        ax.set_title(f"{v.key}: {v.describe()}", fontsize=10)
+        ax.grid(alpha=0.3, axis="y")
+        fig.tight_layout()
+        fig.savefig(path, dpi=90)
+        plt.close(fig)
+        return True
     x = np.array(xs, dtype=float)
     ok = np.array([bool(r.get("passed")) for r in rows])
     y = np.array([_number(r.get(metric)) if _number(r.get(metric)) is not None else np.nan

@@ -77,7 +77,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
                             ) from None
     if scheduler is not None:
         try:
-            client = Client(scheduler, timeout=20)
+            client = Client(scheduler, timeout=10)
         except OSError as e:
             raise CampaignError(f"--scheduler {scheduler}: cannot connect ({e}); start one "
                                 "with `dask scheduler` and workers with `dask worker "

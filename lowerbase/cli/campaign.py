@@ -93,14 +93,14 @@ def run_command(args: argparse.Namespace) -> int:
     where = args.scheduler or f"a LocalCluster of {args.workers or 'one process per core'}"
     print(f"campaign {campaign.name}: {n} run(s) of {len(campaign.scenarios)} scenario(s) "
           f"on {where}", file=sys.stderr)
-    log = RowLog(out / "runs.jsonl")
     t0 = time.monotonic()
-    try:
-        with quiet_dask(args.debug), open_client(args.scheduler, args.workers) as client:
+    with quiet_dask(args.debug), open_client(args.scheduler, args.workers) as client:
+        log = RowLog(out / "runs.jsonl")  # once there is a cluster to run on
+        try:
             result = run_campaign(campaign, client, indices=indices, on_row=log,
                                   progress=CampaignProgress(n, force=args.progress))
-    finally:
-        log.close()
+        finally:
+            log.close()
     rows = list(result.rows.values())
     write_csv(out / "results.csv", campaign, rows)
     summary = write_report(campaign, rows, out, campaign_arg=args.campaign,

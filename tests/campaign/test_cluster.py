@@ -22,6 +22,7 @@ from lowerbase.campaign.plan import plan_run
 from lowerbase.campaign.spec import load_campaign
 from lowerbase.campaign.table import read_csv
 from lowerbase.cli import main
+from tests.conftest import free_tcp_port
 
 CAMPAIGN = """
 [campaign]
@@ -122,3 +123,17 @@ def test_a_killed_worker_costs_no_row(tmp_path: Path,
     for r in rows[:3]:
         local = run_one(plan_run(campaign, int(r["run"])))
         assert r["odom_error_m"] == pytest.approx(local["odom_error_m"], abs=1e-6)
+
+
+@pytest.mark.process
+def test_no_scheduler_is_one_error_line(tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "c.toml"
+    path.write_text(CAMPAIGN, encoding="utf-8")
+    address = f"tcp://127.0.0.1:{free_tcp_port()}"
+    code = main(["campaign", "run", str(path), "--scheduler", address,
+                 "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert f"--scheduler {address}: cannot connect" in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()

@@ -61,3 +61,7 @@ class MapError(ConfigError):
 
 class WorldError(LowerbaseError):
     """A world request that cannot be met: a pose inside a wall, a sensor outside the base, ..."""
+
+
+class CampaignError(ConfigError):
+    """A campaign file (lowerbase.campaign) is invalid, or one of its runs cannot be built."""

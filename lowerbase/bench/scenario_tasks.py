@@ -223,11 +223,18 @@ def _expect(t: Any, where: str) -> Expect:
 
 def load_tasks_scenario(path: str | Path) -> TasksScenario:
     """A task scenario file; every mistake is one ConfigError line."""
+    path = Path(path)
+    return tasks_scenario_from_dict(read_toml(path, "scenario"), path, path.parent)
+
+
+def tasks_scenario_from_dict(data: Mapping[str, Any], path: str | Path,
+                             base: Path) -> TasksScenario:
+    """A task scenario from parsed TOML (``path``: its name in messages and its default name;
+    ``base``: where relative map paths start)."""
     from lowerbase.bench.scenario_world import parse_world
     from lowerbase.tasks.plan import TaskConfig
 
     path = Path(path)
-    data = read_toml(path, "scenario")
     unknown = sorted(set(data) - {"scenario", "initial", "world", "tasks", "timeline", "expect"})
     if unknown:
         raise ConfigError(f"{path}: unknown table {unknown[0]!r}")
@@ -235,7 +242,7 @@ def load_tasks_scenario(path: str | Path) -> TasksScenario:
     duration = _num(head, "duration", "[scenario]", None, 0.1, MAX_DURATION)
     if "world" not in data or "tasks" not in data:
         raise ConfigError(f"{path}: a task scenario needs [world] and [tasks] tables")
-    world = parse_world(data["world"], path.parent)
+    world = parse_world(data["world"], base)
     tasks = data["tasks"]
     bad = sorted(set(tasks) - TASK_KEYS)
     if bad:

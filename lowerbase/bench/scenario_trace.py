@@ -25,7 +25,7 @@ import argparse
 import itertools
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -86,11 +86,18 @@ def _route(points: Any, speed: Any, map_name: str) -> m.GTraceList:
 
 def load_trace_scenario(path: str | Path) -> TraceScenario:
     """A trace scenario file; every mistake is one ConfigError line."""
+    path = Path(path)
+    return trace_scenario_from_dict(read_toml(path, "scenario"), path, path.parent)
+
+
+def trace_scenario_from_dict(data: Mapping[str, Any], path: str | Path,
+                             base: Path) -> TraceScenario:
+    """A trace scenario from parsed TOML (``path``: its name in messages and its default
+    name; ``base``: where relative map paths start)."""
     from lowerbase.bench.scenario_world import parse_world
     from lowerbase.trace.base import TraceParams
 
     path = Path(path)
-    data = read_toml(path, "scenario")
     unknown = sorted(set(data) - {"scenario", "world", "trace", "expect"})
     if unknown:
         raise ConfigError(f"{path}: unknown table {unknown[0]!r}")
@@ -98,7 +105,7 @@ def load_trace_scenario(path: str | Path) -> TraceScenario:
     duration = float(head.get("duration", 300.0))
     if not 0.1 <= duration <= MAX_DURATION:
         raise ConfigError(f"[scenario] duration {duration}: expected 0.1 .. {MAX_DURATION} s")
-    world = parse_world(data.get("world", {}), path.parent)
+    world = parse_world(data.get("world", {}), base)
     trace = dict(data.get("trace", {}))
     route, speed = trace.pop("route", None), trace.pop("speed", 0)
     known = set(TraceParams.__dataclass_fields__) - {"map_name"}

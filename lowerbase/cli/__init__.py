@@ -28,6 +28,7 @@ SUBCOMMANDS = (
     "trace",
     "robot",
     "scenario",
+    "campaign",
     "conformance",
     "dbc",
     "decode",

@@ -212,7 +212,6 @@ def print_outcomes(result: Any, out: Path | None, *, stream: Any = None) -> None
 
 
 def run_command(args: argparse.Namespace) -> int:
-    from lowerbase.bench.demo import ProgressBar, StatusLine
     from lowerbase.bench.scenario import find_scenario, load_any_scenario
 
     if args.foxglove is not None:  # a bad address is refused before anything is said
@@ -221,6 +220,13 @@ def run_command(args: argparse.Namespace) -> int:
         parse_address(args.foxglove)
     scenario = load_any_scenario(find_scenario(args.scenario))
     out = Path(args.out) if args.out else default_out(scenario.name)
+    return run_loaded(args, scenario, out)
+
+
+def run_loaded(args: argparse.Namespace, scenario: Any, out: Path) -> int:
+    """``lowerbase scenario run`` of a scenario already built (``lowerbase campaign replay``
+    builds one run's); its report goes to ``out``."""
+    from lowerbase.bench.demo import ProgressBar, StatusLine
     from lowerbase.bench.scenario_legged import LeggedScenario
     from lowerbase.bench.scenario_tasks import TasksScenario
 

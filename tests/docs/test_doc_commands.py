@@ -192,6 +192,21 @@ CHECKS: dict[str, Check] = {
     "lowerbase demo": Check("start", "lowerbase demo:"),
     "lowerbase demo --chassis": Check("start", "lowerbase demo:"),
     "lowerbase scenario run tasks/transport": Check("run", "scenario tasks_transport: PASSED"),
+    "lowerbase campaign run campaigns/wheel_tolerance.toml": Check(
+        "run", "campaign wheel_tolerance: ", (("campaigns/wheel_tolerance.toml",
+                                               f"{ROOT}/campaigns/wheel_tolerance.toml "
+                                               "--runs 0-5 --workers 2"),),
+        why="the repository's campaign from the scratch directory; 6 of its 100 runs on "
+        "two workers (the same path, a tenth of the time)"),
+    "lowerbase campaign replay campaigns/wheel_tolerance.toml --run 0": Check(
+        "run", "scenario loop: PASSED", (("campaigns/", f"{ROOT}/campaigns/"),),
+        why="the repository's campaign from the scratch directory"),
+    "lowerbase campaign check campaigns/wheel_tolerance.toml": Check(
+        "run", "ok (100 runs", (("campaigns/", f"{ROOT}/campaigns/"),),
+        why="the repository's campaign from the scratch directory"),
+    "lowerbase campaign run campaigns/wheel_tolerance.toml --scheduler tcp://10.0.0.5:8786":
+        Check("skip", why="needs a Dask cluster at 10.0.0.5 (tests/campaign/test_cluster.py "
+              "runs one on 127.0.0.1)"),
 }
 
 MY_SCENARIO = """[scenario]

@@ -1,0 +1,155 @@
+"""Campaigns on Dask (docs/campaigns.md).
+
+* overhead: 200 library scenario runs (loop, wheel_slip, estop, watchdog, 50 each, a wheel's
+  radius error varied) one after another in this process, then as a campaign on a LocalCluster
+  of 2 worker processes; overhead = campaign time / (sum of single-run times / 2), with and
+  without starting the cluster. Target: at most 1.15.
+* scaling: `dask scheduler` and 1, 2, 4 `dask worker` processes on 127.0.0.1 started here;
+  the same runs through the scheduler; runs/s per size, and whether the tables (wall times
+  aside) are identical on 1 and 4 workers.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from benchmarks.common import Row
+
+CAMPAIGN = """
+[campaign]
+name = "bench"
+scenarios = ["loop", "wheel_slip", "estop", "watchdog"]
+runs = {runs}
+seed = 1
+[vary]
+"profile.truth.right_radius_error" = {{ uniform = [-0.02, 0.02] }}
+"""
+
+
+def _campaign(tmp: Path, runs: int) -> Any:
+    from lowerbase.campaign.spec import load_campaign
+
+    path = tmp / f"bench-{runs}.toml"
+    path.write_text(CAMPAIGN.format(runs=runs), encoding="utf-8")
+    return load_campaign(path)
+
+
+def _table(rows: dict[int, dict[str, Any]]) -> list[dict[str, Any]]:
+    return [{k: v for k, v in rows[i].items() if k != "wall_s"} for i in sorted(rows)]
+
+
+def _dask(*args: str) -> list[str]:
+    script = Path(sys.executable).parent / "dask"
+    return [str(script), *args] if script.exists() else [sys.executable, "-m", "dask", *args]
+
+
+@contextmanager
+def _cluster(workers: int, tmp: Path) -> Iterator[str]:
+    """`dask scheduler` and ``workers`` single-threaded `dask worker` processes on loopback."""
+    import lowerbase
+
+    env = dict(os.environ)
+    root = str(Path(lowerbase.__file__).resolve().parents[1])
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    info = tmp / f"scheduler-{workers}.json"
+    quiet = {"env": env, "stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    procs = [subprocess.Popen(_dask("scheduler", "--host", "127.0.0.1", "--port", "0",
+                                    "--no-dashboard", "--scheduler-file", str(info)),
+                              **quiet)]  # type: ignore[call-overload]
+    try:
+        while not info.exists() or not info.read_text().strip():
+            if procs[0].poll() is not None:
+                raise RuntimeError("dask scheduler exited")
+            time.sleep(0.1)
+        address = json.loads(info.read_text())["address"]
+        procs += [subprocess.Popen(_dask("worker", address, "--nthreads", "1", "--no-nanny",
+                                         "--host", "127.0.0.1", "--no-dashboard"),
+                                   **quiet)  # type: ignore[call-overload]
+                  for _ in range(workers)]
+        yield address
+    finally:  # workers first, then the scheduler they would wait for
+        for p in reversed(procs):
+            p.terminate()
+            try:
+                p.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+
+
+def overhead(runs: int, tmp: Path) -> list[Row]:
+    from lowerbase.campaign.engine import open_client, quiet_dask, run_campaign, warm_workers
+    from lowerbase.campaign.execute import run_one
+    from lowerbase.campaign.plan import plan_run
+
+    c = _campaign(tmp, runs)
+    run_one(plan_run(c, 0))  # JIT caches warm, as a worker's first run finds them
+    single = 0.0
+    for i in range(c.total):
+        t0 = time.perf_counter()
+        run_one(plan_run(c, i))
+        single += time.perf_counter() - t0
+    t0 = time.perf_counter()
+    with quiet_dask(), open_client(workers=2) as client:
+        warm_workers(client)
+        t1 = time.perf_counter()
+        result = run_campaign(c, client, warm=False)
+        t2 = time.perf_counter()
+    assert len(result.rows) == c.total
+    ideal = single / 2
+    on_workers = sum(float(r["wall_s"]) for r in result.rows.values())
+    note = f"{c.total} runs; sum of single runs {single:.1f} s, ideal on 2 = {ideal:.1f} s"
+    return [
+        Row("campaign", "sum of single-run times", single, "s", f"{c.total} runs in 1 process"),
+        Row("campaign", "LocalCluster(2): runs only", t2 - t1, "s", note),
+        Row("campaign", "LocalCluster(2): overhead, runs only", (t2 - t1) / ideal, "x",
+            "target <= 1.15"),
+        Row("campaign", "LocalCluster(2): overhead with cluster start", (t2 - t0) / ideal, "x",
+            f"cluster start and warm-up {t1 - t0:.1f} s"),
+        Row("campaign", "LocalCluster(2): overhead vs the runs' times on the workers",
+            (t2 - t1) / (on_workers / 2), "x",
+            f"sum of wall_s on the workers {on_workers:.1f} s (a busy host slows the runs "
+            "themselves; this is what Dask adds)"),
+    ]
+
+
+def scaling(runs: int, tmp: Path) -> list[Row]:
+    from lowerbase.campaign.engine import open_client, quiet_dask, run_campaign, warm_workers
+
+    c = _campaign(tmp, runs)
+    rows: list[Row] = []
+    tables: dict[int, list[dict[str, Any]]] = {}
+    for n in (1, 2, 4):
+        with _cluster(n, tmp) as address, quiet_dask(), open_client(address) as client:
+            client.wait_for_workers(n, timeout=120)
+            warm_workers(client)
+            t0 = time.perf_counter()
+            result = run_campaign(c, client, warm=False)
+            dt = time.perf_counter() - t0
+        tables[n] = _table(result.rows)
+        rows.append(Row("campaign", f"dask scheduler + {n} worker(s)", c.total / dt, "runs/s",
+                        f"{c.total} runs in {dt:.1f} s on {os.cpu_count()} cores"))
+    same = tables[1] == tables[4]
+    rows.append(Row("campaign", "tables identical on 1 and 4 workers", float(same), "bool",
+                    "wall_s left out"))
+    return rows
+
+
+def run(quick: bool = False) -> list[Row]:
+    with tempfile.TemporaryDirectory(prefix="bench-campaign-") as d:
+        tmp = Path(d)
+        return overhead(5 if quick else 50, tmp) + scaling(2 if quick else 10, tmp)
+
+
+if __name__ == "__main__":
+    for r in run(quick="--quick" in sys.argv):
+        print(r)

@@ -1,0 +1,175 @@
+"""Run a campaign's runs on Dask: a LocalCluster of processes on this machine (one per core,
+on 127.0.0.1, no dashboard), or an existing scheduler by address. Rows stream back as runs
+finish; Ctrl-C cancels what is left and keeps what finished. A worker that dies costs only
+the runs it had: the scheduler gives them to another worker."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import signal
+import threading
+import time
+import uuid
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from lowerbase.campaign.execute import run_one, warm
+from lowerbase.campaign.plan import plan_run
+from lowerbase.campaign.progress import CampaignProgress
+from lowerbase.campaign.spec import Campaign
+from lowerbase.errors import CampaignError
+
+#: retries of a run whose worker raised (a run's own exceptions are rows, not raised)
+RETRIES = 2
+_NOISY = ("distributed", "tornado", "bokeh")
+
+
+@dataclass
+class Outcome:
+    """What came back: rows by run index, and whether Ctrl-C cut the campaign short."""
+
+    rows: dict[int, dict[str, Any]] = field(default_factory=dict)
+    interrupted: bool = False
+    workers: int = 0
+
+
+@contextlib.contextmanager
+def quiet_dask(debug: bool = False) -> Iterator[None]:
+    """Dask's own log lines (a worker lost, a nanny restarting it) only with ``debug``."""
+    import distributed  # noqa: F401  (its loggers exist once it is imported)
+
+    names = [n for n in list(logging.root.manager.loggerDict) if n.split(".")[0] in _NOISY]
+    saved = {n: logging.getLogger(n).level for n in {*names, *_NOISY}}
+    for n in saved:
+        logging.getLogger(n).setLevel(logging.DEBUG if debug else logging.CRITICAL)
+    try:
+        yield
+    finally:
+        for n, level in saved.items():
+            logging.getLogger(n).setLevel(level)
+
+
+@contextlib.contextmanager
+def _children_ignore_sigint() -> Iterator[None]:
+    """Worker processes started meanwhile ignore SIGINT: Ctrl-C reaches the whole process
+    group, and the campaign (this process) is what stops them, quietly."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    saved = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, saved)
+
+
+@contextlib.contextmanager
+def open_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[Any]:
+    """A Dask client: of ``scheduler`` (``tcp://HOST:8786``), or of a LocalCluster with
+    ``workers`` single-threaded processes (default: one per core) listening on 127.0.0.1."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError as e:  # pragma: no cover - a dependency
+        raise CampaignError(f"campaigns need Dask: pip install 'dask[distributed]' ({e})"
+                            ) from None
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout=10)
+        except OSError as e:
+            raise CampaignError(f"--scheduler {scheduler}: cannot connect ({e}); start one "
+                                "with `dask scheduler` and workers with `dask worker "
+                                f"{scheduler}`") from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    n = workers or os.cpu_count() or 1
+    with _children_ignore_sigint():
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", dashboard_address=None,
+                               silence_logs=logging.CRITICAL)
+    try:
+        with Client(cluster) as client:
+            yield client
+    finally:
+        cluster.close()
+
+
+def warm_workers(client: Any) -> None:
+    """Warm every worker now, and each that joins later (a restarted one), before its runs:
+    a plugin whose setup runs :func:`lowerbase.campaign.execute.warm`."""
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class Warm(WorkerPlugin):
+        def setup(self, worker: Any) -> None:
+            warm()
+
+    client.register_plugin(Warm(), name="lowerbase-warm")
+
+
+def _failed_row(index: int, scenario: str, values: dict[str, Any], error: str
+                ) -> dict[str, Any]:
+    return {"run": index, "scenario": scenario, "passed": False, "error": error, **values}
+
+
+def run_campaign(campaign: Campaign, client: Any, *,
+                 indices: Sequence[int] | None = None,
+                 on_row: Callable[[dict[str, Any]], None] | None = None,
+                 progress: CampaignProgress | None = None, warm: bool = True) -> Outcome:
+    """Submit every run (or ``indices``) to ``client``; call ``on_row`` with each row as it
+    arrives. Ctrl-C cancels the runs not finished and returns what finished. ``warm``: warm
+    the workers first (:func:`warm_workers`)."""
+    from distributed import as_completed
+
+    if warm:
+        warm_workers(client)
+    token = uuid.uuid4().hex[:8]
+    wanted = list(range(campaign.total)) if indices is None else list(indices)
+    specs = {i: plan_run(campaign, i) for i in wanted}
+    futures = {client.submit(run_one, spec, key=f"lowerbase-run-{i}-{token}", pure=False,
+                             retries=RETRIES): i for i, spec in specs.items()}
+    info = client.scheduler_info().get("workers", {})
+    out = Outcome(workers=len(info))
+    w_threads = {w: int(i.get("nthreads", 1)) for w, i in info.items()}
+    passed = failed = 0
+    seen = [-1.0, 0.0]  # when the scheduler was last asked, what it said
+
+    def running() -> int:
+        now = time.monotonic()
+        if now - seen[0] >= 0.25:  # at most 4 questions a second
+            seen[0] = now
+            # the scheduler busy or gone: the line shows the last count
+            with contextlib.suppress(Exception):
+                # a worker holds a few runs ahead; only its threads' worth are running
+                seen[1] = sum(min(len(keys), w_threads.get(w, 1))
+                              for w, keys in client.processing().items())
+        return int(seen[1])
+
+    try:
+        for future in as_completed(list(futures)):
+            i = futures[future]
+            if future.status == "finished":
+                row = future.result()
+            else:  # exhausted its retries, or its workers kept dying (KilledWorker)
+                exc = future.exception()
+                row = _failed_row(i, specs[i].scenario, specs[i].values,
+                                  f"{type(exc).__name__}: {exc}".splitlines()[0][:300])
+            out.rows[i] = row
+            passed, failed = passed + bool(row["passed"]), failed + (not row["passed"])
+            if on_row is not None:
+                on_row(row)
+            if progress is not None:
+                progress.update(done=passed, failed=failed,
+                                running=running() if len(out.rows) < len(futures) else 0)
+    except KeyboardInterrupt:
+        out.interrupted = True
+        client.cancel([f for f, i in futures.items() if i not in out.rows])
+    finally:
+        if progress is not None:
+            progress.update(done=passed, failed=failed, running=0, force=True)
+            progress.close()
+    return out

@@ -1,0 +1,112 @@
+"""`lowerbase campaign run` on a LocalCluster of two processes, and `replay` of a run."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import lowerbase
+from lowerbase.campaign.execute import run_one
+from lowerbase.campaign.plan import plan_run
+from lowerbase.campaign.spec import load_campaign
+from lowerbase.campaign.table import WALL, read_csv
+from lowerbase.cli import main
+
+SMALL = """
+[campaign]
+name = "small"
+scenario = "wheel_slip"
+runs = 3
+seed = 11
+[vary]
+"timeline.1.fraction" = { uniform = [0.0, 0.6] }
+"profile.truth.right_radius_error" = { normal = [0.0, 0.01], min = -0.02, max = 0.02 }
+[[expect]]
+kind = "pose"
+estimate = "odom"
+within = 0.08
+[report]
+metric = "odom_error_m"
+threshold = 0.08
+"""
+
+
+def _same(a: dict, b: dict) -> bool:
+    return {k: v for k, v in a.items() if k not in WALL} == \
+        {k: v for k, v in b.items() if k not in WALL}
+
+
+@pytest.mark.process
+def test_run_on_a_local_cluster_then_replay(tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "small.toml"
+    path.write_text(SMALL, encoding="utf-8")
+    out = tmp_path / "out"
+    code = main(["campaign", "run", str(path), "--workers", "2", "--out", str(out),
+                 "--progress"])
+    text = capsys.readouterr()
+    assert code in (0, 1), text.err
+    assert "3/3" in text.err and "done" in text.err  # the progress line
+    rows = read_csv(out / "results.csv")
+    assert [r["run"] for r in rows] == [0, 1, 2]
+    assert all(r["error"] is None for r in rows)
+    assert {"odom_error_m", "odom_error_p95_m", "soc_final",
+            "expect: /odom within 0.08 m of the truth at the end"} <= set(rows[0])
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["finished"] == 3 and len(summary["plots"]) == 2
+    assert (out / "vary-0.png").stat().st_size > 1000
+    assert "replay" in (out / "index.html").read_text() or summary["failed"] == 0
+    # a row from a worker equals the same run in this process
+    c = load_campaign(path)
+    local = run_one(plan_run(c, 1))
+    jsonl = [json.loads(line) for line in (out / "runs.jsonl").read_text().splitlines()]
+    assert _same(next(r for r in jsonl if r["run"] == 1), local)
+    # replay: the same run with the full report and an MCAP
+    rep = tmp_path / "replay"
+    code = main(["campaign", "replay", str(path), "--run", "1", "--out", str(rep)])
+    assert code == (0 if local["passed"] else 1)
+    got = json.loads((rep / "summary.json").read_text())
+    assert got["final"]["odom_error_m"] == pytest.approx(local["odom_error_m"], abs=1e-6)
+    assert (rep / "run.mcap").stat().st_size > 0
+    assert json.loads((rep / "run.json").read_text())["values"] == plan_run(c, 1).values
+
+
+@pytest.mark.process
+def test_ctrl_c_keeps_the_runs_that_finished(tmp_path: Path) -> None:
+    """SIGINT to the process group (a terminal's Ctrl-C) after 3 rows: exit 130, the table
+    and report of what finished, no traceback from the workers."""
+    path = tmp_path / "long.toml"
+    path.write_text(SMALL.replace("runs = 3", "runs = 200"), encoding="utf-8")
+    out = tmp_path / "out"
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(
+        p for p in (str(Path(lowerbase.__file__).resolve().parents[1]),
+                    env.get("PYTHONPATH")) if p)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "lowerbase", "campaign", "run", str(path), "--workers", "2",
+         "--out", str(out)], env=env, start_new_session=True, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    rows = out / "runs.jsonl"
+    try:
+        while not (rows.exists() and len(rows.read_text().splitlines()) >= 3):
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.05)
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, stderr
+    assert "INTERRUPTED" in stdout and "Traceback" not in stderr, stderr
+    table = read_csv(out / "results.csv")
+    assert 3 <= len(table) < 200
+    assert json.loads((out / "summary.json").read_text())["interrupted"] is True

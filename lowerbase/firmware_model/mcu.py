@@ -303,8 +303,9 @@ class Mcu(McuCommands, McuStatus, McuFrames):
         rim_accel = (accel["left"], accel["right"])
         slip = self.slip.step(now - self.boot_time, truth.v * dt, rim_accel)
         truth.step(angles["left"] / dt, angles["right"] / dt, dt, slip, now + dt)
-        pressed = saved is not None and truth.blocked
-        if pressed:
+        pressed = False
+        if saved is not None and truth.blocked:
+            pressed = True
             for side, motor in self._motors.items():
                 angles[side] = motor.press(saved[side], targets[side], dt, brake=brake)
         ds = 0.0

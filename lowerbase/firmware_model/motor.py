@@ -30,6 +30,10 @@ from dataclasses import dataclass
 from lowerbase.firmware_model.kinematics import Side, motor_rpm_to_wheel_rad_s
 from lowerbase.firmware_model.profile import STANDARD_GRAVITY, ChassisParams, MotorParams
 
+#: what :meth:`WheelMotor.save` keeps: omega, setpoint, current, over_current, stalled, the two
+#: fault timers and the steady-step cache
+MotorState = tuple[float, float, float, bool, bool, float, float, "float | None", float, float]
+
 STATUS_OVER_CURRENT = 0x1  # WheelFeedback.Left/RightDriverStatus bit 0
 STATUS_STALLED = 0x2  # bit 1 (bit 2, encoder fault, belongs to the encoder)
 
@@ -110,19 +114,19 @@ class WheelMotor:
         """Pressed, does the floor hold the wheel (the motor cannot overcome the traction)?"""
         return self.stall_force <= self.traction_force
 
-    def save(self) -> tuple[object, ...]:
+    def save(self) -> MotorState:
         """The state a step changes, for :meth:`restore` (a period redone as pressed)."""
         return (self.omega, self.setpoint, self.current, self.over_current, self.stalled,
                 self._over_time, self._stall_time, self._steady, self._steady_omega,
                 self._steady_angle)
 
-    def restore(self, state: tuple[object, ...]) -> None:
+    def restore(self, state: MotorState) -> None:
         """Back to a state from :meth:`save`."""
-        (self.omega, self.setpoint, self.current, self.over_current, self.stalled,  # type: ignore[assignment]
+        (self.omega, self.setpoint, self.current, self.over_current, self.stalled,
          self._over_time, self._stall_time, self._steady, self._steady_omega,
          self._steady_angle) = state
 
-    def press(self, state: tuple[object, ...], target: float, dt: float, *, brake: bool) -> float:
+    def press(self, state: MotorState, target: float, dt: float, *, brake: bool) -> float:
         """Redo the step made from ``state`` as pressed against the world (module docstring):
         the angle [rad] the wheel really turned."""
         self.restore(state)

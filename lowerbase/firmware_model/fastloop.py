@@ -119,24 +119,34 @@ class LeanLoop:
         else:
             t_r = v_r * 2.0 * math.pi / c.wheel_perimeter * c.ratio_right / mr.geometry.ratio
         before_l, before_r = ml.omega, mr.omega
+        truth = mcu.truth
+        pressable = truth.surroundings is not None  # Mcu.step: a refused move, redone pressed
+        if pressable:
+            saved_l, saved_r = ml.save(), mr.save()
         a_l = ml.step(t_l, dt, brake=brake)
         a_r = mr.step(t_r, dt, brake=brake)
         rim_accel = ((ml.omega - before_l) / dt * ml.geometry.radius,
                      (mr.omega - before_r) / dt * mr.geometry.radius)
-        truth = mcu.truth
         slip = mcu.slip.step(now - mcu.boot_time, truth.v * dt, rim_accel)
         truth.step(a_l / dt, a_r / dt, dt, slip, now + dt)
+        held_l = held_r = False
+        if pressable and truth.blocked:
+            a_l = ml.press(saved_l, t_l, dt, brake=brake)
+            a_r = mr.press(saved_r, t_r, dt, brake=brake)
+            held_l, held_r = ml.held, mr.held
         moved_l = el.add(a_l)
         moved_r = er.add(a_r)
         ds = 0.0
         ds += 0.5 * moved_l * self.bpp_l
         ds += 0.5 * moved_r * self.bpp_r
         stuck = mcu._enc_stuck  # Mcu._check_encoder, both sides
-        if abs(ml.setpoint) * ml.geometry.radius > self.stall_speed and moved_l == 0:
+        if abs(ml.setpoint) * ml.geometry.radius > self.stall_speed and moved_l == 0 \
+                and not held_l:
             stuck["left"] += dt
         else:
             stuck["left"] = 0.0
-        if abs(mr.setpoint) * mr.geometry.radius > self.stall_speed and moved_r == 0:
+        if abs(mr.setpoint) * mr.geometry.radius > self.stall_speed and moved_r == 0 \
+                and not held_r:
             stuck["right"] += dt
         else:
             stuck["right"] = 0.0

@@ -292,20 +292,29 @@ class Mcu(McuCommands, McuStatus, McuFrames):
         targets = {"left": self._wheel_target("left", v_l),
                    "right": self._wheel_target("right", v_r)}
         angles, accel = {}, {}
+        truth = self.truth
+        # with surroundings, a refused move is redone as pressed (motor.py: traction)
+        saved = None if truth.surroundings is None else {
+            side: motor.save() for side, motor in self._motors.items()}
         for side, motor in self._motors.items():
             before = motor.omega
             angles[side] = motor.step(targets[side], dt, brake=brake)
             accel[side] = (motor.omega - before) / dt * motor.geometry.radius  # real rim
         rim_accel = (accel["left"], accel["right"])
-        slip = self.slip.step(now - self.boot_time, self.truth.v * dt, rim_accel)
-        self.truth.step(angles["left"] / dt, angles["right"] / dt, dt, slip, now + dt)
+        slip = self.slip.step(now - self.boot_time, truth.v * dt, rim_accel)
+        truth.step(angles["left"] / dt, angles["right"] / dt, dt, slip, now + dt)
+        pressed = False
+        if saved is not None and truth.blocked:
+            pressed = True
+            for side, motor in self._motors.items():
+                angles[side] = motor.press(saved[side], targets[side], dt, brake=brake)
         ds = 0.0
         for side, enc in self._encoders.items():
             before = enc.total
             enc.add(angles[side])
             moved = enc.total - before
             ds += 0.5 * moved * self._belief_per_pulse(side)
-            self._check_encoder(side, moved, dt)
+            self._check_encoder(side, moved, dt, held=pressed and self._motors[side].held)
         self.odometer += abs(ds)
         if now >= self._imu_due:
             self._sample_imu()
@@ -401,10 +410,12 @@ class Mcu(McuCommands, McuStatus, McuFrames):
             self.imu.bias_step(gyro=(0.0, 0.0, want - self._imu_bias_applied))
             self._imu_bias_applied = want
 
-    def _check_encoder(self, side: str, moved: int, dt: float) -> None:
+    def _check_encoder(self, side: str, moved: int, dt: float, held: bool = False) -> None:
+        """Commanded without pulses: the encoder's fault timer (not while the wheel is blocked
+        or ``held`` by the floor against a refused move: that is a stall, not the encoder)."""
         motor = self._motors[side]
         commanded = abs(motor.setpoint) * motor.geometry.radius > self.profile.motor.stall_speed
-        if commanded and moved == 0 and not motor.blocked:
+        if commanded and moved == 0 and not motor.blocked and not held:
             self._enc_stuck[side] += dt
         else:
             self._enc_stuck[side] = 0.0

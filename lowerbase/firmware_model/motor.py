@@ -9,6 +9,17 @@ viscous friction and an external load, through the gear ratio and efficiency, pl
 current. Faults: an injected block (the wheel does not turn; a commanded motor draws
 ``stall_current``), stall detection, over-current (modelled or injected) which latches and
 makes the driver brake to zero until :meth:`WheelMotor.clear_faults`.
+
+Pressed against the world (:attr:`WheelMotor.pressed`, set by the MCU for a period whose body
+move the world refused: a wall, a rack, a person): the base stands, so the tyre meets the
+floor's traction ``F_t = mu * (robot_mass / 2) * g`` [N] at the rim (``mu`` = MotorParams.traction).
+The driver's velocity loop saturates at ``stall_current``, i.e. a rim force
+``F_m = stall_current * torque_constant * ratio * gear_efficiency / radius`` [N]. If
+``F_m <= F_t`` the floor holds the wheel (:attr:`WheelMotor.held`): it does not turn, the motor
+draws ``stall_current`` while commanded, and stall (and over-current) detection follow as for an
+injected block. Otherwise the tyre slips: the wheel turns as the velocity loop drives it and the
+motor carries the sliding friction ``F_t`` (kinetic taken equal to static), whose current is
+``F_t * radius / (ratio * gear_efficiency * torque_constant)`` plus the idle current.
 """
 
 from __future__ import annotations
@@ -18,6 +29,10 @@ from dataclasses import dataclass
 
 from lowerbase.firmware_model.kinematics import Side, motor_rpm_to_wheel_rad_s
 from lowerbase.firmware_model.profile import STANDARD_GRAVITY, ChassisParams, MotorParams
+
+#: what :meth:`WheelMotor.save` keeps: omega, setpoint, current, over_current, stalled, the two
+#: fault timers and the steady-step cache
+MotorState = tuple[float, float, float, bool, bool, float, float, "float | None", float, float]
 
 STATUS_OVER_CURRENT = 0x1  # WheelFeedback.Left/RightDriverStatus bit 0
 STATUS_STALLED = 0x2  # bit 1 (bit 2, encoder fault, belongs to the encoder)
@@ -61,6 +76,7 @@ class WheelMotor:
         self.setpoint = 0.0  # [rad/s] the driver's ramped setpoint
         self.current = 0.0  # [A] phase current, sign of the torque
         self.blocked = False  # injected: the wheel cannot turn
+        self.pressed = False  # the world refused the body's move: the tyre meets the traction
         self.over_current = False  # latched until clear_faults()
         self.stalled = False  # latched until clear_faults()
         self._over_time = 0.0  # [s] how long |current| has exceeded the limit
@@ -80,6 +96,45 @@ class WheelMotor:
     def motor_rpm(self) -> float:
         """Motor speed [rpm] = omega * ratio * 60 / 2pi."""
         return self.omega * self.geometry.ratio * 60.0 / (2.0 * math.pi)
+
+    @property
+    def traction_force(self) -> float:
+        """[N] the most the floor holds at the rim: mu * (robot_mass / 2) * g."""
+        p = self.params
+        return p.traction * 0.5 * p.robot_mass * STANDARD_GRAVITY
+
+    @property
+    def stall_force(self) -> float:
+        """[N] the rim force of the motor at ``stall_current`` (the driver's saturation)."""
+        p, g = self.params, self.geometry
+        return p.stall_current * p.torque_constant * g.ratio * p.gear_efficiency / g.radius
+
+    @property
+    def held(self) -> bool:
+        """Pressed, does the floor hold the wheel (the motor cannot overcome the traction)?"""
+        return self.stall_force <= self.traction_force
+
+    def save(self) -> MotorState:
+        """The state a step changes, for :meth:`restore` (a period redone as pressed)."""
+        return (self.omega, self.setpoint, self.current, self.over_current, self.stalled,
+                self._over_time, self._stall_time, self._steady, self._steady_omega,
+                self._steady_angle)
+
+    def restore(self, state: MotorState) -> None:
+        """Back to a state from :meth:`save`."""
+        (self.omega, self.setpoint, self.current, self.over_current, self.stalled,
+         self._over_time, self._stall_time, self._steady, self._steady_omega,
+         self._steady_angle) = state
+
+    def press(self, state: MotorState, target: float, dt: float, *, brake: bool) -> float:
+        """Redo the step made from ``state`` as pressed against the world (module docstring):
+        the angle [rad] the wheel really turned."""
+        self.restore(state)
+        self.pressed = True
+        try:
+            return self.step(target, dt, brake=brake)
+        finally:
+            self.pressed = False
 
     @property
     def status_bits(self) -> int:
@@ -121,7 +176,8 @@ class WheelMotor:
         target = min(max(target, -limit), limit)
         omega0 = self.omega
         steady = (target == self._steady and omega0 == self._steady_omega
-                  and self.setpoint == target and not self.blocked and load_force == 0.0)
+                  and self.setpoint == target and not self.blocked and load_force == 0.0
+                  and not self.pressed)
         if steady:  # the last step's input state and target, which it left unchanged
             return self._steady_step(dt, target)
         setpoint0 = self.setpoint
@@ -150,10 +206,10 @@ class WheelMotor:
             omega = setpoint + 0.0 * t - 0.0 * tau + c * (1.0 - one_minus_e)
             angle2 = setpoint * t + 0.5 * 0.0 * t * t - 0.0 * tau * t + c * tau * one_minus_e
         angle += angle2
-        if self.blocked:
+        if self.blocked or (self.pressed and self.held):
             omega, angle = 0.0, 0.0
         self.omega = omega
-        if self.blocked:
+        if self.blocked or self.pressed:
             self._update_current((omega - omega0) / dt, load_force)
         else:  # _update_current, unblocked
             wheel_accel = (omega - omega0) / dt
@@ -182,7 +238,8 @@ class WheelMotor:
             self.stalled = True
         self._steady = None
         if (omega == omega0 and setpoint == target and setpoint0 == target and target != 0.0
-                and omega0 != 0.0 and not self.blocked and load_force == 0.0):
+                and omega0 != 0.0 and not self.blocked and load_force == 0.0
+                and not self.pressed):
             self._steady, self._steady_omega, self._steady_angle = target, omega0, angle
         return angle
 
@@ -212,9 +269,14 @@ class WheelMotor:
     def _update_current(self, wheel_accel: float, load_force: float) -> None:
         p, g = self.params, self.geometry
         commanded = abs(self.setpoint) * g.radius >= p.stall_speed and not self.over_current
-        if self.blocked:
+        if self.blocked or (self.pressed and self.held):
             self.current = math.copysign(p.stall_current, self.setpoint) if commanded else 0.0
             self.current += math.copysign(p.idle_current, self.current)
+            return
+        if self.pressed:  # slipping: the motor carries the tyre's sliding friction
+            force = 0.0 if self.omega == 0.0 else math.copysign(self.traction_force, self.omega)
+            amps = force * g.radius / (g.ratio * p.gear_efficiency * p.torque_constant)
+            self.current = amps + math.copysign(p.idle_current, amps)
             return
         m = 0.5 * p.robot_mass
         v = self.omega * g.radius

@@ -207,6 +207,10 @@ class MotorParams(_Validated):
     stall_current: float = _num(25.0, 0.0, 100.0, "A")  # current of a blocked, commanded motor
     stall_speed: float = _num(0.01, 0.0, 1.0, "m/s")  # setpoints below this never count as stall
     stall_time: float = _num(0.3, 0.0, 10.0, "s")  # wheel under half its setpoint this long
+    # tyre-floor friction coefficient mu: a wheel pressing the robot against something the world
+    # refuses holds while its rim force is under mu * (robot_mass / 2) * g, else it slips
+    # (physical-data.md 3.2: traction mu 0.5-0.7 for AMR drive wheels on concrete)
+    traction: float = _num(0.6, 0.0, 2.0)
 
 
 @dataclass(frozen=True)

@@ -8,9 +8,10 @@ profile as loaded: later parameter writes change what the firmware believes, not
 
 What the robot can bump into is not the firmware model's business: whoever builds the loop may
 install :class:`Surroundings` (``GroundTruth.surroundings``), which the integrator asks before
-every move. A refused move leaves the robot where it was with ground speed 0 (the wheels turn
-on, slipping against the obstacle, as a real robot pushing a wall); ``GroundTruth.blocked``
-says so. Without surroundings nothing is asked and nothing changes.
+every move. A refused move leaves the robot where it was with ground speed 0;
+``GroundTruth.blocked`` says so, and the MCU redoes the period's wheels as pressed against the
+floor's traction (motor.py, "Pressed": held and stalling, or slipping with the friction's
+current). Without surroundings nothing is asked and nothing changes.
 """
 
 from __future__ import annotations

@@ -180,3 +180,44 @@ def test_the_steady_speed_shortcut_is_the_full_step_bit_for_bit(params: MotorPar
     latched = params.over_current_limit == 0.9  # below the 0.93 A at 12 rad/s: after 2.5 s
     assert fast.over_current == latched
     assert shortcuts > (50 if latched else 500)
+
+
+def pressed_run(motor: WheelMotor, target: float, periods: int, dt: float = 0.005) -> float:
+    """Each period stepped free, then redone as pressed (what the MCU does for a refused
+    move): the angle [rad] the wheel really turned."""
+    angle = 0.0
+    for _ in range(periods):
+        state = motor.save()
+        motor.step(target, dt)
+        angle += motor.press(state, target, dt, brake=False)
+    return angle
+
+
+def test_pressed_against_the_world_the_default_motor_slips_on_the_traction() -> None:
+    p = MotorParams()
+    motor = WheelMotor(p, GEOMETRY)
+    run(motor, 5.0, 2.0)  # cruising at 5 rad/s (0.5 m/s)
+    f_t = p.traction * 0.5 * p.robot_mass * STANDARD_GRAVITY  # 441 N
+    assert motor.traction_force == pytest.approx(f_t)
+    assert motor.stall_force == pytest.approx(25.0 * 0.15 * 20 * 0.9 / R)  # 675 N
+    assert not motor.held
+    angle = pressed_run(motor, 5.0, 100)
+    assert angle == pytest.approx(5.0 * 0.5, rel=1e-6)  # the tyre slips, the wheel turns on
+    amps = f_t * R / (GEOMETRY.ratio * p.gear_efficiency * p.torque_constant)
+    assert motor.current == pytest.approx(amps + p.idle_current, rel=1e-12)  # 16.6 A
+    assert motor.status_bits == 0
+
+
+def test_pressed_against_the_world_a_held_wheel_stalls_after_stall_time() -> None:
+    p = MotorParams(robot_mass=250.0)  # 736 N of traction against 675 N of motor
+    motor = WheelMotor(p, GEOMETRY)
+    run(motor, 5.0, 2.0)
+    assert motor.held
+    dt = 0.005
+    n = math.ceil(p.stall_time / dt - 1e-9)  # periods until the timer reaches stall_time
+    assert pressed_run(motor, 5.0, n - 1, dt) == 0.0
+    assert motor.omega == 0.0 and motor.current == p.stall_current + p.idle_current
+    assert not motor.stalled
+    pressed_run(motor, 5.0, 1, dt)
+    assert motor.stalled and motor.status_bits & STATUS_STALLED
+    assert not motor.pressed  # only for the redone step

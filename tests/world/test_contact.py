@@ -69,7 +69,8 @@ def test_driving_into_a_wall_stops_at_the_wall(control_loop: bool) -> None:
     assert world.contact is not None and world.contact.touched == ("wall",)
     assert world.contact.point[0] == pytest.approx(WALL_X, abs=step + 1e-6)
     assert [e.touched for e in world.events] == [("wall",)]
-    # the wheels went on turning against the wall: /odom believes it drove on
+    # the default profile's motors overpower the traction (test_blocked_traction.py): the
+    # wheels slip on against the wall and /odom believes it drove on
     odom_x = loop.driver.ekf.pose[0]
     assert odom_x > truth.x + 0.5
     sample = LoopTruth(loop).sample()

@@ -118,6 +118,14 @@ class RosWire:
         return buffer
 
 
+def wanted(publisher: Any) -> bool:
+    """Whether building a message for ``publisher`` is worth it: a :class:`LocalWire`
+    publisher answers (:meth:`_TeePublisher.wanted`); any other publisher is always wanted
+    (alone, a face publishes as before)."""
+    ask = getattr(publisher, "wanted", None)
+    return True if ask is None else bool(ask())
+
+
 class Switchboard:
     """What the faces of one process share: local subscribers by topic, the last message of
     each latched topic, the tf2 buffer the TF publishers feed, and the inbox of messages from
@@ -203,7 +211,20 @@ class _TeePublisher:
 
     def publish(self, msg: Any, converted: dict[str, Callable[[], Any]] | None = None) -> None:
         self.board.deliver(self.name, msg, self.latch, converted)
-        self.real.publish(msg)
+        if self.latch or self._connected():
+            self.real.publish(msg)
+
+    def _connected(self) -> bool:
+        """Whether rospy's publish would send ``msg`` anywhere: without a connection it only
+        counts nothing and returns (its checks, an unregistered publisher's error, still run
+        where it cannot be told: no ``impl``)."""
+        impl = getattr(self.real, "impl", None)
+        return impl is None or bool(impl.has_connections())
+
+    def wanted(self) -> bool:
+        """Whether a message published now reaches anyone: a face in this process, a
+        connection on ROS, or a latched topic's later subscribers."""
+        return bool(self.latch or self.board.local.get(self.name) or self._connected())
 
     def get_num_connections(self) -> int:
         return int(self.real.get_num_connections())

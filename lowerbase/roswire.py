@@ -126,6 +126,15 @@ def wanted(publisher: Any) -> bool:
     return True if ask is None else bool(ask())
 
 
+def connected(publisher: Any) -> bool:
+    """Whether rospy's ``publisher.publish`` would send a message anywhere: without a
+    connection it serializes nothing, counts nothing and returns (a non-latched topic), so
+    not calling it changes nothing. True where it cannot be told (no rospy ``impl``: an
+    unregistered publisher, whose publish raises, or not rospy's)."""
+    impl = getattr(publisher, "impl", None)
+    return impl is None or bool(impl.has_connections())
+
+
 class Switchboard:
     """What the faces of one process share: local subscribers by topic, the last message of
     each latched topic, the tf2 buffer the TF publishers feed, and the inbox of messages from
@@ -215,11 +224,7 @@ class _TeePublisher:
             self.real.publish(msg)
 
     def _connected(self) -> bool:
-        """Whether rospy's publish would send ``msg`` anywhere: without a connection it only
-        counts nothing and returns (its checks, an unregistered publisher's error, still run
-        where it cannot be told: no ``impl``)."""
-        impl = getattr(self.real, "impl", None)
-        return impl is None or bool(impl.has_connections())
+        return connected(self.real)
 
     def wanted(self) -> bool:
         """Whether a message published now reaches anyone: a face in this process, a
@@ -257,7 +262,8 @@ class _TeeBroadcaster:
                 self.board.tf.set_transform_static(t, "lowerbase")
             else:
                 self.board.tf.set_transform(t, "lowerbase")
-        self.real.sendTransform(transforms)
+        if self.static or connected(getattr(self.real, "pub_tf", None)):
+            self.real.sendTransform(transforms)
 
 
 class LocalWire(RosWire):

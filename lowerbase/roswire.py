@@ -118,6 +118,23 @@ class RosWire:
         return buffer
 
 
+def wanted(publisher: Any) -> bool:
+    """Whether building a message for ``publisher`` is worth it: a :class:`LocalWire`
+    publisher answers (:meth:`_TeePublisher.wanted`); any other publisher is always wanted
+    (alone, a face publishes as before)."""
+    ask = getattr(publisher, "wanted", None)
+    return True if ask is None else bool(ask())
+
+
+def connected(publisher: Any) -> bool:
+    """Whether rospy's ``publisher.publish`` would send a message anywhere: without a
+    connection it serializes nothing, counts nothing and returns (a non-latched topic), so
+    not calling it changes nothing. True where it cannot be told (no rospy ``impl``: an
+    unregistered publisher, whose publish raises, or not rospy's)."""
+    impl = getattr(publisher, "impl", None)
+    return impl is None or bool(impl.has_connections())
+
+
 class Switchboard:
     """What the faces of one process share: local subscribers by topic, the last message of
     each latched topic, the tf2 buffer the TF publishers feed, and the inbox of messages from
@@ -203,7 +220,16 @@ class _TeePublisher:
 
     def publish(self, msg: Any, converted: dict[str, Callable[[], Any]] | None = None) -> None:
         self.board.deliver(self.name, msg, self.latch, converted)
-        self.real.publish(msg)
+        if self.latch or self._connected():
+            self.real.publish(msg)
+
+    def _connected(self) -> bool:
+        return connected(self.real)
+
+    def wanted(self) -> bool:
+        """Whether a message published now reaches anyone: a face in this process, a
+        connection on ROS, or a latched topic's later subscribers."""
+        return bool(self.latch or self.board.local.get(self.name) or self._connected())
 
     def get_num_connections(self) -> int:
         return int(self.real.get_num_connections())
@@ -236,7 +262,8 @@ class _TeeBroadcaster:
                 self.board.tf.set_transform_static(t, "lowerbase")
             else:
                 self.board.tf.set_transform(t, "lowerbase")
-        self.real.sendTransform(transforms)
+        if self.static or connected(getattr(self.real, "pub_tf", None)):
+            self.real.sendTransform(transforms)
 
 
 class LocalWire(RosWire):

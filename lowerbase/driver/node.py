@@ -41,6 +41,7 @@ from lowerbase.driver.links import REPLAY_SUFFIXES, BusLink, ReplayLink  # noqa:
 from lowerbase.driver.settings import NodeSettings
 from lowerbase.errors import RosUnavailableError
 from lowerbase.rosnode import ToRosout as _ToRosout  # noqa: F401 (navigation.node uses it)
+from lowerbase.roswire import wanted
 
 log = logging.getLogger(__name__)
 
@@ -217,6 +218,12 @@ class DriverNode:
         if pub is not None:
             pub.publish(msg)
 
+    def _wants(self, key: str) -> bool:
+        """Whether ``key``'s message would reach anyone (:func:`lowerbase.roswire.wanted`;
+        alone always): the lockstep robot builds no message nobody takes."""
+        pub = self._pubs.get(key)
+        return pub is not None and wanted(pub)
+
     def _on_event(self, what: str, core: DriverCore) -> None:
         """DriverCore listener (called under the lock, in the reader thread)."""
         now = core.clock.now()
@@ -224,20 +231,21 @@ class DriverNode:
             if self._throttles["odom"].ready(now):
                 self._publish_odometry()
         elif what == "imu":
-            if core.imu is not None and self._throttles["imu"].ready(now):
+            if (core.imu is not None and self._throttles["imu"].ready(now)
+                    and self._wants("imu")):
                 gyro, accel = core.imu
                 s = self.settings
                 self._publish("imu", self.io.imu_msg(
                     self.ros_now(), s.imu_frame, gyro, accel,
                     s.imu_angular_velocity_variance, s.imu_linear_acceleration_variance))
         elif what == "twist":
-            if self._throttles["odom_twist"].ready(now):
+            if self._throttles["odom_twist"].ready(now) and self._wants("odom_twist"):
                 self._publish("odom_twist", self.io.twist_msg(*core.measured_twist))
         elif what == "odometer":
-            if self._throttles["odometer"].ready(now):
+            if self._throttles["odometer"].ready(now) and self._wants("odometer"):
                 self._publish("odometer", self.io.Float64(data=core.odometer))
         elif what == "status_code":
-            if self._throttles["status_code"].ready(now):
+            if self._throttles["status_code"].ready(now) and self._wants("status_code"):
                 self._publish("status_code", self.io.status_code_msg(core.status_code))
         elif what == "battery":
             self._battery_dirty = True
@@ -260,7 +268,7 @@ class DriverNode:
         core, io, s = self.core, self.io, self.settings
         stamp = self._sample_stamp()
         odo = core.odometry
-        if odo is not None and "odom_raw" in self._pubs:
+        if odo is not None and self._wants("odom_raw"):
             self._publish("odom_raw", io.odometry_msg(
                 stamp, s.odom_frame, s.base_frame, (odo.x, odo.y, odo.yaw),
                 (odo.linear, odo.angular), odo.pose_covariance, odo.twist_covariance,

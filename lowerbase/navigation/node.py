@@ -31,6 +31,7 @@ from lowerbase.navigation.costmap import camera_cloud
 from lowerbase.navigation.loop import control_loop
 from lowerbase.navigation.steps import StepController
 from lowerbase.navigation.tf_map import MapToOdom
+from lowerbase.roswire import wanted
 from lowerbase.world.camera import CameraConfig
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lidar import LaserScan
@@ -347,7 +348,7 @@ class NavigationNode:
                 self._published_global = costs
                 self.pubs["global"].publish(io.costmap_msg(costs, gc.resolution, gc.origin,
                                                             stamp, frame))
-            if publish_local:
+            if publish_local and wanted(self.pubs["local"]):  # nobody takes it: not built
                 self.pubs["local"].publish(io.costmap_msg(lc.costs, lc.resolution, lc.origin,
                                                            stamp, frame))
 

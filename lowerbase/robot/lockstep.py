@@ -32,6 +32,7 @@ from lowerbase.robot.plan import UPPER
 from lowerbase.world.maps import DEFAULT_MAP
 
 CLOCK_RATE = 100.0  #: [Hz] of simulated time: /clock, at the IMU's rate (the fastest sensor)
+WAKE_PERIOD = 0.05  #: [s] of simulated time: how often rospy's sleepers here are woken
 NODE = "lowerbase_robot"  #: this process' node name (the faces keep their own names)
 UNTIL = ("", "move_base", "task")  #: the conditions a step can stop at (simcontrol)
 
@@ -47,6 +48,28 @@ class LockstepOptions:
     camera: bool = False  #: the depth camera (~50 ms a frame to render)
     seed: int = 0
     truth: str | None = None  #: --truth FILE: the emulator's ground truth as CSV
+
+
+class RosTime:
+    """Sets this process' ROS time (``rospy.rostime``) to the simulated time. rospy's setter
+    also wakes every thread sleeping on ROS time (actionlib's status timers: each wakes,
+    finds its time not yet come and sleeps again), which cost as much as the setting at
+    every step; they are woken once per :data:`WAKE_PERIOD` of simulated time instead, which
+    a 5 Hz timer does not notice (its next time is from its schedule, not from its wake)."""
+
+    def __init__(self, rospy: Any, wake_period: float = WAKE_PERIOD) -> None:
+        import rospy.rostime as rostime
+
+        self.rospy, self.rostime, self.wake_period = rospy, rostime, wake_period
+        self._wake_next = -math.inf  #: [s] the simulated time the sleepers are woken next
+
+    def set(self, now: float) -> None:
+        t = self.rospy.Time.from_sec(now)
+        if now + 1e-9 < self._wake_next:
+            self.rostime._rostime_current = t  # what rospy's setter sets, without the wake
+            return
+        self.rostime._set_rostime(t)
+        self._wake_next = (math.floor(now / self.wake_period + 1e-9) + 1) * self.wake_period
 
 
 class _Job:
@@ -149,6 +172,7 @@ class LockstepRobot:
             self.tasks = TasksNode(TasksSetup(places), wire=wire("tasks"), lock=self.lock,
                                    nav=NodeNavigation(self.navigation),
                                    steps=NodeSteps(self.navigation))
+        self._ros_time = RosTime(rospy)
         self._clock_pub: Any = None
         self._clock_k, self._clock_next = 0, 0.0  #: the next /clock: its index and time [s]
         self.loop.passive_listeners = True  # driver_base's face only publishes
@@ -197,17 +221,19 @@ class LockstepRobot:
                 self.tasks.advertise()
 
     def _set_ros_time(self) -> None:
-        from rospy.rostime import _set_rostime
-
-        _set_rostime(self.rospy.Time.from_sec(self.loop.now))
+        self._ros_time.set(float(self.loop.now))
 
     def _publish_clock(self) -> None:
         """/clock at every 10 ms of simulated time up to now (several after a batch)."""
         from rosgraph_msgs.msg import Clock
 
+        from lowerbase.roswire import connected
+
         now = self.loop.now
+        send = connected(self._clock_pub)  # nobody on ROS listens: no message is built
         while self._clock_next <= now + 1e-9:
-            self._clock_pub.publish(Clock(clock=self.rospy.Time.from_sec(self._clock_next)))
+            if send:
+                self._clock_pub.publish(Clock(clock=self.rospy.Time.from_sec(self._clock_next)))
             self._clock_k += 1
             self._clock_next = self._clock_k / CLOCK_RATE
 

@@ -18,7 +18,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from lowerbase.robot.lockstep import CLOCK_RATE, LockstepOptions
+from lowerbase.robot.lockstep import CLOCK_RATE, LockstepOptions, RosTime
 
 
 class LeggedLockstep:
@@ -44,6 +44,7 @@ class LeggedLockstep:
         self._publish_every = max(1, round(1.0 / (settings.publish_rate * self.dt)))
         self._clock_every = max(1, round(1.0 / (CLOCK_RATE * self.dt)))
         self._clock_pub: Any = None
+        self._ros_time = RosTime(rospy)
         self.parts = ("legged lower computer", "legged driver")
 
     @property
@@ -59,14 +60,14 @@ class LeggedLockstep:
             self.node.advertise()
 
     def _set_ros_time(self) -> None:
-        from rospy.rostime import _set_rostime
-
-        _set_rostime(self.rospy.Time.from_sec(self.loop.now))
+        self._ros_time.set(float(self.loop.now))
 
     def run_periods(self, periods: int, until: Callable[[], bool] | None = None) -> bool:
         """``periods`` 1 ms periods: /clock every 10 ms, the driver's tick and goal at its
         command rate, robot_state at its publish rate, then the lower computer's step."""
         from rosgraph_msgs.msg import Clock
+
+        from lowerbase.roswire import connected
 
         loop, node = self.loop, self.node
         for _ in range(periods):
@@ -75,7 +76,8 @@ class LeggedLockstep:
                 if step % self._clock_every == 0:
                     self.board.drain()
                     self._set_ros_time()
-                    self._clock_pub.publish(Clock(clock=self.rospy.Time.from_sec(loop.now)))
+                    if connected(self._clock_pub):  # nobody on ROS listens: nothing built
+                        self._clock_pub.publish(Clock(clock=self.rospy.Time.from_sec(loop.now)))
                 if step % self._tick_every == 0:
                     node.pursue_goal()
                     node.core.tick()

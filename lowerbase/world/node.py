@@ -26,6 +26,7 @@ from typing import Any
 
 from lowerbase.clock import Clock, RealClock
 from lowerbase.errors import LowerbaseError, WorldError
+from lowerbase.roswire import wanted
 from lowerbase.world.camera import DepthCamera
 from lowerbase.world.footprint import validate_pose
 from lowerbase.world.grid import OccupancyGrid
@@ -303,8 +304,9 @@ class WorldNode:
             stamp = self.rospy.Time.from_sec(at)
             est = self.localizer.update(odom, scan)
             if est is not None:
-                self._pubs["amcl_pose"].publish(io.pose_with_covariance(
-                    stamp, s.map_frame, est.pose, est.covariance))
+                if wanted(self._pubs["amcl_pose"]):  # nobody takes it: not built
+                    self._pubs["amcl_pose"].publish(io.pose_with_covariance(
+                        stamp, s.map_frame, est.pose, est.covariance))
                 self.stats["amcl_poses"] += 1
                 line = self.lost_watch.update(est)
                 if line is not None:

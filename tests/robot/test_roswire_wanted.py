@@ -1,0 +1,70 @@
+"""lowerbase.roswire without ROS: a lockstep publisher is wanted while a face in the process
+subscribes, a connection exists or the topic is latched; rospy's publish is skipped only
+where it would do nothing (no connection, not latched)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+from typing import Any
+
+from lowerbase.roswire import Switchboard, _TeePublisher, connected, wanted
+
+
+class FakeImpl:
+    def __init__(self) -> None:
+        self.connections: list[str] = []
+
+    def has_connections(self) -> bool:
+        return bool(self.connections)
+
+
+class FakePublisher:
+    def __init__(self) -> None:
+        self.impl = FakeImpl()
+        self.sent: list[Any] = []
+
+    def publish(self, msg: Any) -> None:
+        self.sent.append(msg)
+
+
+def board() -> Switchboard:
+    board = Switchboard.__new__(Switchboard)  # no tf2 buffer needed here
+    board.local, board.latched, board._delivering = {}, {}, []
+    board.stats = {"local": 0, "external": 0, "own_dropped": 0}
+    return board
+
+
+def test_unwanted_until_a_face_or_a_connection_takes_it() -> None:
+    b, real = board(), FakePublisher()
+    pub = _TeePublisher(real, b, "/odom_raw", latch=False)
+    assert not wanted(pub)
+    got: list[Any] = []
+    b.add_local("/odom_raw", got.append)
+    assert wanted(pub)
+    b.remove_local("/odom_raw", got.append)
+    real.impl.connections.append("client")
+    assert wanted(pub)
+
+
+def test_a_latched_topic_is_always_wanted_and_always_handed_to_rospy() -> None:
+    real = FakePublisher()
+    pub = _TeePublisher(real, board(), "/map", latch=True)
+    assert wanted(pub)
+    pub.publish("m")
+    assert real.sent == ["m"]
+
+
+def test_rospy_gets_a_message_only_with_a_connection() -> None:
+    b, real = board(), FakePublisher()
+    pub = _TeePublisher(real, b, "/scan", latch=False)
+    got: list[Any] = []
+    b.add_local("/scan", got.append)
+    pub.publish("a")
+    real.impl.connections.append("client")
+    pub.publish("b")
+    assert got == ["a", "b"] and real.sent == ["b"]
+
+
+def test_a_publisher_that_cannot_be_asked_is_wanted_and_connected() -> None:
+    plain = SimpleNamespace(publish=lambda msg: None)
+    assert wanted(plain) and connected(plain) and connected(None)

@@ -35,6 +35,7 @@ SUBCOMMANDS = (
     "record",
     "mcap",
     "ros-env",
+    "ros2-env",
     "warm",
 )
 

@@ -18,7 +18,9 @@ and UPPER_CASE: the .msg files are turned into .idl here with those two checks r
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
+import io
 import os
 import re
 import shutil
@@ -142,7 +144,8 @@ def prepare_source(pkg: InterfacePackage, dest: Path) -> None:
         target.write_text(text, encoding="utf-8")
         out_dir = dest / kind
         out_dir.mkdir(parents=True, exist_ok=True)
-        idl = convert[kind](defs, pkg.name, Path(kind) / rel.name, out_dir)
+        with contextlib.redirect_stdout(io.StringIO()):  # "Reading input file: ..."
+            idl = convert[kind](defs, pkg.name, Path(kind) / rel.name, out_dir)
         idls.append(idl.relative_to(dest).as_posix())
     deps = dependencies(texts, pkg.name)
     has_action = any(i.startswith("action/") for i in idls)

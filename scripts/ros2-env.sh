@@ -30,8 +30,10 @@ fi
 
 want="$(cat scripts/ros2-requirements.txt pyproject.toml | sha256sum | cut -c1-16)"
 if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$want" ]; then
-    echo "make ros2: creating $VENV with $ROS2_PYTHON"
-    "$ROS2_PYTHON" -m venv --clear "$VENV"
+    if [ ! -x "$VENV/bin/python" ]; then
+        echo "make ros2: creating $VENV with $ROS2_PYTHON"
+        "$ROS2_PYTHON" -m venv "$VENV"
+    fi
     "$VENV/bin/python" -m pip install --quiet --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
     # one resolver run for the wheels and lowerbase (its numpy must suit both)
     "$VENV/bin/python" -m pip install --quiet -r scripts/ros2-requirements.txt -e . \

@@ -15,13 +15,15 @@ OLDEST_VENV ?= .venv-py310
 OLDEST_PYTHON ?= $(shell { ls -d "$$(pyenv root 2>/dev/null)"/versions/3.10*/bin/python3.10 \
   "$$HOME"/.pyenv/versions/3.10*/bin/python3.10 2>/dev/null; command -v python3.10; } | sort -uV | tail -n 1)
 OLDEST_STAMP := $(OLDEST_VENV)/.lowerbase-installed
+ROS2_VENV ?= .venv-ros2
 
-.PHONY: help env system-deps test test-oldest lint typecheck unit demo bench docs clean
+.PHONY: help env system-deps test test-oldest lint typecheck unit demo bench docs clean ros2
 
 help:
 	@echo "make demo   - set up and run the demo (the whole robot: a transport task, a low battery, a charge; a report)"
 	@echo "make test   - set up and run ruff, mypy and the whole test suite"
 	@echo "make test-oldest - the test suite on the oldest supported Python (3.10, from pyenv)"
+	@echo "make ros2   - ROS 2 Kilted (PyPI wheels) in .venv-ros2 and its interface packages (docs/ros2.md)"
 	@echo "make bench  - run the benchmarks and print the results (WRITE=1: into docs/benchmarks.md)"
 	@echo "make docs   - regenerate docs/protocol.md, docs/status-codes.md, docs/legged-protocol.md"
 
@@ -62,6 +64,11 @@ $(OLDEST_STAMP): pyproject.toml
 test-oldest: $(OLDEST_STAMP)
 	LOWERBASE_WITHOUT_ROS=1 $(OLDEST_VENV)/bin/python -m pytest -q $(TESTS)
 
+# ROS 2 in a venv of its own (.venv-ros2) and woosh_msgs, tf2_msgs, nav2_msgs,
+# lowerbase_legged_msgs built once into build/ros2/<hash>; not part of `make test` (docs/ros2.md)
+ros2:
+	ROS2_VENV=$(ROS2_VENV) bash scripts/ros2-env.sh
+
 demo: env
 	$(PY) -m lowerbase demo
 
@@ -75,4 +82,4 @@ docs: env
 	$(PY) -m lowerbase.protocol.docs --legged docs/legged-protocol.md
 
 clean:
-	rm -rf $(VENV) $(OLDEST_VENV) build .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) $(OLDEST_VENV) $(ROS2_VENV) build .pytest_cache .mypy_cache .ruff_cache

@@ -36,6 +36,7 @@ SUBCOMMANDS = (
     "record",
     "mcap",
     "ros-env",
+    "ros2-env",
     "warm",
 )
 

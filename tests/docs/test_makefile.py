@@ -49,3 +49,8 @@ def test_make_test_oldest_without_python_3_10_fails_with_one_clear_line() -> Non
     assert proc.returncode != 0
     assert "no Python 3.10 found" in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_make_ros2_builds_its_own_venv_and_stays_out_of_make_test() -> None:
+    assert any("scripts/ros2-env.sh" in line for line in _dry_run("ros2", "ROS2_VENV=build/x"))
+    assert not any("ros2-env.sh" in line for line in _dry_run("-W", "pyproject.toml", "test"))

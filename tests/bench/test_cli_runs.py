@@ -26,3 +26,13 @@ def test_emulate_runs_the_command_in_a_child_and_counts_its_cpu() -> None:
 def test_a_failing_command_raises() -> None:
     with pytest.raises(subprocess.CalledProcessError):
         cli_runs.child_cpu(["emulate", "--simulated"])  # --simulated needs --duration
+
+
+def test_with_duration_sets_the_scenario_duration_only() -> None:
+    toml = ('[scenario]\nname = "x"\nduration = 21.0\n\n[[timeline]]\nat = 1.0\n'
+            'duration = 3.0\n')
+    out = cli_runs.with_duration(toml, 600.0)
+    assert 'duration = 600.0\n\n[[timeline]]' in out
+    assert out.endswith("duration = 3.0\n")
+    with pytest.raises(ValueError):
+        cli_runs.with_duration("[[timeline]]\nduration = 1.0\n", 5.0)

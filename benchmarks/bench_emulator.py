@@ -8,6 +8,7 @@ import sys
 import time
 from collections import defaultdict
 
+from benchmarks import cli_runs
 from benchmarks.common import Row, percentile
 from lowerbase.bms.adapter import McuBmsAdapter
 from lowerbase.clock import SimClock
@@ -186,4 +187,23 @@ def run(quick: bool = False) -> list[Row]:
             f"target >= 300; all frames ({fps:.0f}/s each) sent on udp_multicast; one "
             "chassis alone (bench_fleet: a fleet of N)"),
     ]
-    return rows + jitter(5.0 if quick else 30.0)
+    return rows + cli_rows(60.0 if quick else 600.0) + jitter(5.0 if quick else 30.0)
+
+
+def cli_rows(seconds: float) -> list[Row]:
+    """``lowerbase emulate --simulated`` as users run it, in a child process, by its CPU time
+    (issue 22 item 25): on udp_multicast (the default bus) and on python-can's virtual bus."""
+    rows = []
+    for label, bus in (("udp_multicast", ()), ("-i virtual", ("-i", "virtual"))):
+        run = cli_runs.emulate(seconds, bus)
+        rows += [
+            Row("emulator", f"CLI emulate --simulated, {label}", run.factor, "x real time",
+                f"`python -m lowerbase emulate {' '.join(bus)} --simulated --duration "
+                f"{seconds:g}` in a child process, by its CPU time, start-up subtracted; no "
+                "upper side on the bus, so the MCU idles (no MotionCommand) and steps period "
+                "by period (fastbatch runs need a command)"),
+            Row("emulator", f"CLI emulate --simulated, {label}, start-up", run.startup_cpu,
+                "s CPU", "the same command with --duration 0.01: imports, the cached kernels, "
+                "the bus"),
+        ]
+    return rows

@@ -16,6 +16,7 @@ from __future__ import annotations
 import sys
 import time
 
+from benchmarks import cli_runs
 from benchmarks.common import Row
 
 
@@ -67,6 +68,24 @@ def run(quick: bool = False) -> list[Row]:
     slowest = max(runs.items(), key=lambda kv: kv[1][1] / kv[1][0])
     rows.append(Row("scenarios", f"slowest per simulated second: {slowest[0]}",
                     slowest[1][0] / slowest[1][1], "x real time", ""))
+    return rows + cli_rows(60.0 if quick else 600.0)
+
+
+def cli_rows(seconds: float) -> list[Row]:
+    """``lowerbase scenario run`` as users run it, in a child process, by its CPU time (issue
+    22 item 25): the library's loop lengthened to ``seconds``, with its default MCAP recording
+    and with --no-mcap."""
+    from lowerbase.bench.scenario import library
+
+    path = library()["loop"]
+    rows = []
+    for label, extra in (("default (run.mcap)", ()), ("--no-mcap", ("--no-mcap",))):
+        run = cli_runs.scenario(path, seconds, extra)
+        rows.append(Row("scenarios", f"CLI scenario run, loop {seconds:g} s, {label}",
+                        run.factor, "x real time",
+                        f"`python -m lowerbase scenario run` in a child process, by its CPU "
+                        f"time, start-up ({run.startup_cpu:.1f} s CPU: imports, set-up, the "
+                        f"report) subtracted; {run.factor_with_startup:.0f}x with it"))
     return rows
 
 

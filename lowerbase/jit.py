@@ -18,7 +18,7 @@ import hashlib
 import importlib
 import os
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from functools import cache
 from pathlib import Path
 from typing import Any, TypeVar, cast
@@ -60,11 +60,15 @@ KERNEL_MODULES = (
 )
 
 
-def uncached() -> list[str]:
-    """The kernel modules with no compiled kernel in their cache yet (their first use compiles
-    them: seconds to minutes each)."""
+#: the kernel modules the emulated chassis (``lowerbase emulate``) compiles
+CHASSIS_KERNEL_MODULES = tuple(m for m in KERNEL_MODULES if ".firmware_model." in m)
+
+
+def uncached(modules: Sequence[str] = KERNEL_MODULES) -> list[str]:
+    """The kernel ``modules`` with no compiled kernel in their cache yet (their first use
+    compiles them: seconds to minutes each)."""
     missing = []
-    for module in KERNEL_MODULES:
+    for module in modules:
         importlib.import_module(module)  # its package's sources decide the cache's name
         where = cache_dir(module)
         tag = f"py{sys.version_info.major}{sys.version_info.minor}"  # numba's index: per Python

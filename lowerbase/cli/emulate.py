@@ -136,6 +136,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--obstacles, --initial-pose and --place go with --map NAME|FILE")
     profile = load_profile(args.profile)
     faults = [parse_fault(spec) for spec in args.fault]
+    if args.simulated:
+        _compile_notice()
     if args.fleet is not None:
         return _run_fleet(args, profile, faults)
     if args.slcan:
@@ -225,6 +227,24 @@ def run(args: argparse.Namespace) -> int:
         with contextlib.suppress(can.CanError):
             bus.shutdown()
     return 0
+
+
+def compile_notice() -> str | None:
+    """The line that says the chassis kernels compile in this run (not cached yet), or None.
+    On the simulated clock the compile counts against the run's factor (about 14 s of CPU
+    once; docs/benchmarks.md, "CLI emulate")."""
+    from lowerbase.jit import CHASSIS_KERNEL_MODULES, uncached
+
+    if not uncached(CHASSIS_KERNEL_MODULES):
+        return None
+    return ("lowerbase emulate: compiling the chassis' numba kernels first (not cached yet: "
+            "once, seconds to minutes; `lowerbase warm` does it ahead)")
+
+
+def _compile_notice() -> None:
+    line = compile_notice()
+    if line is not None:
+        print(line, file=sys.stderr, flush=True)
 
 
 def _fed(inner: Any, feed: Any, direction: str = "tx") -> Any:

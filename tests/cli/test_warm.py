@@ -34,3 +34,17 @@ def test_check_lists_the_kernels_a_cold_cache_lacks(tmp_path: Path) -> None:
 def test_make_env_warms_the_kernels() -> None:
     recipe = (ROOT / "Makefile").read_text()
     assert "-m lowerbase warm" in recipe.split("env:")[0]  # in the venv's set-up recipe
+
+
+def test_emulate_says_when_its_kernels_compile_in_the_run(tmp_path: Path) -> None:
+    """issue 22 item 25: a cold cache cost a simulated emulate run its factor unsaid."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    code = ("from lowerbase.cli.emulate import compile_notice; "
+            "from lowerbase.jit import CHASSIS_KERNEL_MODULES as m; "
+            "print(m); print(compile_notice())")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         cwd=ROOT, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert "lowerbase.firmware_model.lean_kernel" in out.stdout
+    assert "lowerbase.world" not in out.stdout
+    assert "compiling the chassis' numba kernels first" in out.stdout

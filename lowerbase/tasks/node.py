@@ -221,17 +221,22 @@ class TasksNode:
             self.machine.tick(now, self.inputs.chassis(now))
 
     def read_part_down(self) -> None:
-        """The supervisor's /lowerbase/part_down (cached by rospy, updated by the master), and,
-        once robot_status carries it, its acknowledgement in /lowerbase/part_reported."""
+        """The supervisor's /lowerbase/part_down (cached by rospy, updated by the master) into
+        the chassis inputs; logged (and so on /rosout) when it changes."""
         value = self.rospy.get_param_cached(PART_DOWN_PARAM, "")
         note = value[:PART_NOTE_MAX] if isinstance(value, str) else ""  # unset: {}
         with self.lock:
             self.inputs.part_down = note
-            shown = self.machine.tracker.current
         if note != self._part_noted:
             self._part_noted = note
             if note:
-                log.error("%s: robot_status shows the robot ABNORMAL", note)  # and /rosout
+                log.error("%s: robot_status shows the robot ABNORMAL", note)
+
+    def acknowledge_part_down(self) -> None:
+        """Once robot_status carries the part that ended, /lowerbase/part_reported says so
+        (the supervisor waits for it before it stops the robot)."""
+        with self.lock:
+            note, shown = self.inputs.part_down, self.machine.tracker.current
         if note and note != self._part_reported and shown is not None and note in shown.msg:
             self._part_reported = note
             self.rospy.set_param(PART_REPORTED_PARAM, note)
@@ -242,8 +247,7 @@ class TasksNode:
         while not rospy.is_shutdown():
             self.read_part_down()
             self.tick()
-            if self.inputs.part_down and self.inputs.part_down != self._part_reported:
-                self.read_part_down()  # the tick published it: acknowledge at once
+            self.acknowledge_part_down()
             try:
                 rate.sleep()
             except rospy.ROSInterruptException:

@@ -142,28 +142,19 @@ class Navigator:
         if scan.stamp <= 0.0 or self._poses[-1][0] <= 0.0:  # unstamped: the latest pose
             self._take_scan(self.pose, scan)
             return
-        pose = self._pose_at(scan.stamp)
-        if pose is None:
-            self._waiting = scan  # for the pose of its time (a newer scan replaces it)
-        elif isinstance(pose, str):  # too old
+        poses = self._poses
+        if scan.stamp < poses[0][0] and len(poses) == poses.maxlen:  # older than all kept
             self.stats["scan_too_old"] += 1
             n = self.stats["scan_too_old"]
             if n in (1, 10, 100) or n % 1000 == 0:
                 log.warning("%s: dropped a scan %.2f s older than every pose kept (a busy "
-                            "host; %d so far)", self.name, self._poses[0][0] - scan.stamp, n)
+                            "host; %d so far)", self.name, poses[0][0] - scan.stamp, n)
+            return
+        pose = next((p for t, p in poses if t >= scan.stamp), None)  # the pose of its time
+        if pose is None:
+            self._waiting = scan  # for the pose of its time (a newer scan replaces it)
         else:
             self._take_scan(pose, scan)
-
-    def _pose_at(self, stamp: float) -> Pose | str | None:
-        """The first kept pose stamped at or after ``stamp``; None: none yet; "too old": the
-        scan is older than the history kept."""
-        poses = self._poses
-        if stamp < poses[0][0] and len(poses) == poses.maxlen:
-            return "too old"
-        for t, pose in poses:
-            if t >= stamp:
-                return pose
-        return None
 
     def _take_scan(self, pose: Pose, scan: LaserScan) -> None:
         self._latest = (pose, scan)

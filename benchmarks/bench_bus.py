@@ -1,7 +1,7 @@
 """The bus at its limit: emulator and driver core with foreign traffic filling the bus.
 
 Three processes on one udp_multicast bus (loopback, a free port of its own): ``lowerbase
-emulate``, the driver core (``lowerbase.bench.busload_proc driver``, listening as the ROS
+emulate``, the driver core (``benchmarks.busload_proc driver``, listening as the ROS
 node's BusLink does) driving a twist, and another device (``busload_proc foreign``) sending
 classic 8-byte frames on IDs the catalog does not have at the bus's capacity (500 kbit/s, mean
 stuffed frame length: protocol.busload) minus the emulator's and driver's own rate. Run once
@@ -23,8 +23,8 @@ from collections import defaultdict
 from typing import Any
 
 from benchmarks.bench_emulator import deviations, periodic_key
+from benchmarks.busload_proc import cpu_seconds, run_queue_wait
 from benchmarks.common import Row, percentile
-from lowerbase.bench.busload_proc import cpu_seconds, run_queue_wait
 from lowerbase.protocol.busload import mean_frame_bits
 from lowerbase.protocol.codec import Codec, default_codec
 from lowerbase.transport import free_loopback_port
@@ -129,10 +129,10 @@ def trial(seconds: float, foreign_rate: float, catalog_filter: bool = True) -> d
         try:
             _line(emu, "lower computer on")
             if foreign_rate > 0:
-                gen = _proc("lowerbase.bench.busload_proc", "foreign", "--channel", GROUP,
+                gen = _proc("benchmarks.busload_proc", "foreign", "--channel", GROUP,
                             "--port", port, "--rate", f"{foreign_rate:.1f}", "--duration", bound)
                 procs.append(gen)
-            drv = _proc("lowerbase.bench.busload_proc", "driver", "--channel", GROUP,
+            drv = _proc("benchmarks.busload_proc", "driver", "--channel", GROUP,
                         "--port", port, "--duration", str(seconds), "--frames", tmp.name,
                         *([] if catalog_filter else ["--no-filter"]))
             procs.append(drv)

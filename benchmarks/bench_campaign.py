@@ -36,7 +36,7 @@ seed = 1
 
 
 def _campaign(tmp: Path, runs: int) -> Any:
-    from lowerbase.campaign.spec import load_campaign
+    from lowerbase.campaign.plan import load_campaign
 
     path = tmp / f"bench-{runs}.toml"
     path.write_text(CAMPAIGN.format(runs=runs), encoding="utf-8")

@@ -11,7 +11,7 @@
   x real time by CPU time, and the driver's share of it in ms per simulated second. The
   driver's ticks and twists run ahead of the MCU's frames, the MCU in batches of up to 256
   periods (one Mcu.advance each with the driver's commands, bit for bit the period-by-period
-  run: tests/bench/test_simloop_batch.py).
+  run: tests/simloop/test_simloop_batch.py).
 * Latency: a Twist published on /base_cmd_vel -> the MotionCommand on the bus, through a real
   rosmaster and the real node (``lowerbase driver`` in a process of its own, udp_multicast on
   loopback), p50/p99. Without ROS it falls back to DriverCore.set_twist -> send, and says so.
@@ -58,9 +58,9 @@ def _rectangle_lap(loop: Any, on_step: Any, speed: float = 0.8, turn_rate: float
 
 def bench_accuracy(laps: int, gyro_sigma: float | None = None) -> dict[str, float]:
     """Final and worst errors of wheel odometry and EKF over ``laps`` rectangle laps."""
-    from lowerbase.bench.simloop import SimLoop
     from lowerbase.driver.core import DriverConfig, LinkState
     from lowerbase.firmware_model.profile import load_profile
+    from lowerbase.simloop.loop import SimLoop
 
     p = load_profile()
     p = p.replace(truth=dataclasses.replace(
@@ -105,8 +105,8 @@ def bench_accuracy(laps: int, gyro_sigma: float | None = None) -> dict[str, floa
 
 def bench_cost(quick: bool) -> dict[str, float]:
     """[us] per EKF wheel update, per EKF gyro update, per DriverCore.on_frame."""
-    from lowerbase.bench.simloop import SimLoop
     from lowerbase.driver.ekf import PlanarEkf
+    from lowerbase.simloop.loop import SimLoop
 
     n = 2000 if quick else 10000
     ekf = PlanarEkf(stamp=0.0)
@@ -166,7 +166,7 @@ def bench_simloop(quick: bool) -> dict[str, float]:
     driving 0.5 m/s, 0.2 rad/s: simulated s per CPU s and per wall s (best of 3 each), and
     the driver's share [ms per simulated s]: its on_frame, tick and set_twist calls timed one
     by one, less the timer's own cost (an empty call timed as often)."""
-    from lowerbase.bench.simloop import SimLoop
+    from lowerbase.simloop.loop import SimLoop
 
     seconds = 10.0 if quick else 30.0
     cpu = wall = driver = math.inf

@@ -12,7 +12,7 @@ reply, and the CPU of both processes (``/proc/<pid>/stat`` utime+stime over the 
 
 Simulated clock: the lower computer alone (LeggedLower on a SimClock, every frame encoded,
 nothing listening) and with the legged driver core and the node's goal logic
-(``lowerbase.bench.legged_sim.LeggedSimLoop``: every frame decoded by the driver), both
+(``lowerbase.simloop.legged.LeggedSimLoop``: every frame decoded by the driver), both
 trotting under a velocity command, in robot seconds per wall second.
 """
 
@@ -31,11 +31,12 @@ from typing import Any
 import can
 
 from benchmarks.bench_bus import _emulator_stats, _line, _proc, _stop
+from benchmarks.busload_proc import cpu_seconds
 from benchmarks.common import Row, percentile
-from lowerbase.bench.busload_proc import cpu_seconds
 from lowerbase.clock import SimClock
 from lowerbase.firmware_model.runner import FULL_ID_MASK
-from lowerbase.legged.protocol import (
+from lowerbase.protocol.codec import Codec
+from lowerbase.protocol.legged import (
     BODY_BUS,
     COMMAND_MESSAGES,
     LEGS,
@@ -44,7 +45,6 @@ from lowerbase.legged.protocol import (
     LocomotionState,
     legged_codec,
 )
-from lowerbase.protocol.codec import Codec
 from lowerbase.transport import open_bus
 
 S = LocomotionState
@@ -330,7 +330,7 @@ def _lower_alone(seconds: float) -> tuple[float, float, int]:
 def _with_driver(seconds: float) -> tuple[float, float, int]:
     """(wall s, CPU s, frames) for ``seconds`` of LeggedSimLoop (lower computer + driver core
     + goal logic) trotting under a 20 Hz cmd_vel."""
-    from lowerbase.bench.legged_sim import LeggedSimLoop
+    from lowerbase.simloop.legged import LeggedSimLoop
 
     frames = [0]
 

@@ -41,9 +41,10 @@ from benchmarks.common import Row
 
 def _run(decoded: bool | None, path: Path) -> tuple[float, float]:
     """(wall s, simulated s) of the demo scenario; decoded None: no recorder."""
-    from lowerbase.bench.runner import SimHarness, run_scenario
-    from lowerbase.bench.scenario import library, load_scenario
     from lowerbase.recording.mcap_writer import McapRecorder
+    from lowerbase.scenarios.catalog import library
+    from lowerbase.scenarios.runner import SimHarness, run_scenario
+    from lowerbase.scenarios.wheeled import load_scenario
 
     scenario = load_scenario(library()["demo"])
     rec = McapRecorder(path, decoded=decoded) if decoded is not None else None
@@ -85,9 +86,11 @@ def _world(path: Path | None) -> tuple[float, int]:
     ``path`` with the world's channels (None: no recorder)."""
     import dataclasses
 
-    from lowerbase.bench.runner import SimHarness, run_scenario
-    from lowerbase.bench.scenario import library, load_scenario
     from lowerbase.recording.mcap_writer import McapRecorder
+    from lowerbase.recording.world import attach_world
+    from lowerbase.scenarios.catalog import library
+    from lowerbase.scenarios.runner import SimHarness, run_scenario
+    from lowerbase.scenarios.wheeled import load_scenario
 
     sc = dataclasses.replace(load_scenario(library()["warehouse_localization"]),
                              duration=WORLD_SIM, expectations=())
@@ -97,7 +100,7 @@ def _world(path: Path | None) -> tuple[float, int]:
     feed = None
     if rec is not None:
         rec.attach(harness.driver, harness.now, harness.truth)
-        feed = rec.attach_world(harness.world)
+        feed = attach_world(rec, harness.world)
     try:
         run_scenario(sc, harness)
     finally:
@@ -152,9 +155,9 @@ def _live(variant: str) -> tuple[float, int, int]:
     """(CPU s of this process, messages sent, messages the client got) over LIVE_DRIVE
     simulated s (a client that lags loses the oldest: the server's per-client backlog).
     variant: "none" (no publisher), "idle" (live server, no client), "client"."""
-    from lowerbase.bench.simloop import SimLoop
     from lowerbase.recording.live import FoxgloveSink
     from lowerbase.recording.publisher import RunPublisher
+    from lowerbase.simloop.loop import SimLoop
 
     sink = FoxgloveSink("127.0.0.1", 0) if variant != "none" else None
     pub = RunPublisher([sink]) if sink is not None else None

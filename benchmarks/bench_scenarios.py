@@ -1,7 +1,7 @@
 """Scenario benchmarks: the scenario library and ``make demo``'s scenario on the simulated clock.
 
 Every scenario of the library (scenarios/*.toml, what ``lowerbase scenario list`` shows) runs
-through ``lowerbase.bench.runner.run_simulated``: the emulated MCU and the driver core in a
+through ``lowerbase.scenarios.runner.run_simulated``: the emulated MCU and the driver core in a
 SimLoop, the runner's timeline, trace sampling and expectations (no report, no plots). Rows:
 the library's total wall time and speed in x real time, the demo scenario (scenarios/demo.toml,
 which ``make demo`` runs over a bus in real time) on the simulated clock, and the set-up part
@@ -22,8 +22,9 @@ from benchmarks.common import Row
 
 def _run_library(repeat: int) -> dict[str, tuple[float, float, float, bool]]:
     """name -> (simulated s, best wall s of the whole run, best set-up wall s, passed)."""
-    from lowerbase.bench.runner import SimHarness, run_scenario
-    from lowerbase.bench.scenario import library, load_scenario
+    from lowerbase.scenarios.catalog import library
+    from lowerbase.scenarios.runner import SimHarness, run_scenario
+    from lowerbase.scenarios.wheeled import load_scenario
 
     out: dict[str, tuple[float, float, float, bool]] = {}
     for name, path in library().items():
@@ -75,7 +76,7 @@ def cli_rows(seconds: float) -> list[Row]:
     """``lowerbase scenario run`` as users run it, in a child process, by its CPU time (issue
     22 item 25): the library's loop lengthened to ``seconds``, with its default MCAP recording
     and with --no-mcap."""
-    from lowerbase.bench.scenario import library
+    from lowerbase.scenarios.catalog import library
 
     path = library()["loop"]
     rows = []

@@ -36,15 +36,15 @@ GROUPS = (("world/lidar", "world raycast"), ("world/raycast", "world raycast"),
           ("world/localization", "localization"), ("world/", "world (other)"),
           ("navigation/", "navigation"), ("driver/", "driver"), ("bms/", "emulator (BMS)"),
           ("firmware_model/", "emulator"), ("protocol/", "protocol (CAN codec)"),
-          ("tasks/", "tasks"), ("bench/simloop", "sim loop"))
+          ("tasks/", "tasks"), ("simloop/", "sim loop"))
 
 
 def build() -> Any:
     """The whole stack at the start of a shift: a TaskSim on a NavSim on the warehouse
     WorldSim, the battery just above its low threshold. Built once per shift (imports, map
     distance fields, footprint cells, compiled kernels loaded): not part of the ratio."""
-    from lowerbase.bench.simloop import SimLoop
     from lowerbase.navigation.sim import NavSim
+    from lowerbase.simloop.loop import SimLoop
     from lowerbase.tasks.plan import TaskConfig
     from lowerbase.tasks.sim import TaskSim
     from lowerbase.world.sim import WorldConfig, WorldSim
@@ -87,8 +87,8 @@ def shift(seconds: float, profile: cProfile.Profile | None = None, profile_from:
 def standing(seconds: float, on_charger: bool) -> tuple[float, float]:
     """The whole stack standing for ``seconds`` (no task; ``on_charger``: docked, the contact
     closed, charging): (simulated s per CPU s, state of charge gained [%])."""
-    from lowerbase.bench.simloop import SimLoop
     from lowerbase.navigation.sim import NavSim
+    from lowerbase.simloop.loop import SimLoop
     from lowerbase.tasks.plan import TaskConfig
     from lowerbase.tasks.sim import TaskSim
     from lowerbase.world.sim import WorldConfig, WorldSim

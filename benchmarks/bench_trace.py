@@ -47,7 +47,7 @@ def _route(xs: list[float], speed: int = 500) -> Any:
 
 
 def _sim(tap: Callable[[float, str, int, bytes], None] | None = None) -> TraceSim:
-    from lowerbase.bench.simloop import SimLoop
+    from lowerbase.simloop.loop import SimLoop
     from lowerbase.trace.base import TraceParams
     from lowerbase.trace.sim import TraceSim
     from lowerbase.world.sim import WorldConfig, WorldSim

@@ -8,5 +8,5 @@ file and N alone (:func:`lowerbase.campaign.plan.plan_run`): its values are draw
 Modules: ``spec`` (the validated file), ``plan`` (run N's scenario), ``execute`` (one run, on a
 worker: the same in-process runners as ``lowerbase scenario run``), ``engine`` (Dask: a
 LocalCluster or a scheduler's address), ``table`` (CSV), ``report`` (index.html and plots).
-This package imports lowerbase.bench; nothing below the CLI imports it.
+It runs lowerbase.scenarios' runners; only the robot and the CLI are above it.
 """

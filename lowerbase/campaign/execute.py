@@ -37,7 +37,7 @@ def _errors(truth_x: np.ndarray, truth_y: np.ndarray, x: np.ndarray, y: np.ndarr
 
 
 def _wheeled(sc: Any) -> tuple[list[tuple[str, bool]], dict[str, Any]]:
-    from lowerbase.bench.runner import SimHarness, run_scenario
+    from lowerbase.scenarios.runner import SimHarness, run_scenario
 
     harness = SimHarness(sc)
     try:
@@ -62,8 +62,8 @@ def _wheeled(sc: Any) -> tuple[list[tuple[str, bool]], dict[str, Any]]:
 
 
 def _tasks(sc: Any) -> tuple[list[tuple[str, bool]], dict[str, Any]]:
-    from lowerbase.bench.report_tasks import columns
-    from lowerbase.bench.tasks_run import run_tasks_scenario
+    from lowerbase.reports.tasks import columns
+    from lowerbase.scenarios.tasks_run import run_tasks_scenario
 
     result = run_tasks_scenario(sc)
     metrics: dict[str, Any] = {}
@@ -81,7 +81,7 @@ def _tasks(sc: Any) -> tuple[list[tuple[str, bool]], dict[str, Any]]:
 
 
 def _legged(sc: Any) -> tuple[list[tuple[str, bool]], dict[str, Any]]:
-    from lowerbase.bench.legged_sim import run_legged_scenario
+    from lowerbase.scenarios.legged_run import run_legged_scenario
 
     result = run_legged_scenario(sc)
     tr = result.trace
@@ -93,7 +93,7 @@ def _legged(sc: Any) -> tuple[list[tuple[str, bool]], dict[str, Any]]:
 
 
 def _trace(sc: Any) -> tuple[list[tuple[str, bool]], dict[str, Any]]:
-    from lowerbase.bench.scenario_trace import run_trace_scenario
+    from lowerbase.scenarios.trace import run_trace_scenario
 
     result = run_trace_scenario(sc)
     return ([(name, ok) for name, ok, _ in result.outcomes],
@@ -110,7 +110,7 @@ WARM = {"scenario": {"name": "warm", "duration": 1.0},
 def warm() -> None:
     """Make a fresh worker's first run as fast as its next (~5 s of imports and cache loads
     otherwise land in the first run's time)."""
-    from lowerbase.bench.scenario import scenario_from_dict
+    from lowerbase.scenarios.wheeled import scenario_from_dict
 
     with _quiet():
         _wheeled(scenario_from_dict(WARM, source="warm"))

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from lowerbase.campaign.spec import Campaign
+from lowerbase.campaign.spec import Campaign, campaign_from_dict
 from lowerbase.errors import CampaignError, ConfigError
 from lowerbase.files import read_toml
 
@@ -148,23 +148,23 @@ def build_scenario(spec: RunSpec, workdir: Path) -> Any:
     source = f"{spec.scenario} run {spec.index}"
     try:
         if spec.kind == "tasks":
-            from lowerbase.bench.scenario_tasks import tasks_scenario_from_dict
+            from lowerbase.scenarios.tasks import tasks_scenario_from_dict
 
             return tasks_scenario_from_dict(data, source, path.parent)
         if spec.kind == "trace":
-            from lowerbase.bench.scenario_trace import trace_scenario_from_dict
+            from lowerbase.scenarios.trace import trace_scenario_from_dict
 
             return trace_scenario_from_dict(data, source, path.parent)
         if spec.kind == "legged":
-            from lowerbase.bench.scenario_legged import legged_scenario_from_dict
+            from lowerbase.scenarios.legged import legged_scenario_from_dict
 
             sc: Any = legged_scenario_from_dict(data, source=source, base=path.parent)
             from lowerbase.legged.profile import load_legged_profile
 
             load_legged_profile(sc.profile)
             return sc
-        from lowerbase.bench.scenario import scenario_from_dict
         from lowerbase.firmware_model.profile import load_profile
+        from lowerbase.scenarios.wheeled import scenario_from_dict
 
         sc = scenario_from_dict(data, source=source, base=path.parent)
         load_profile(sc.profile)  # a bad varied profile value fails here, not in the run
@@ -182,3 +182,16 @@ def check_campaign(campaign: Campaign) -> None:
         for s in range(len(campaign.scenarios)):
             index = s * campaign.per_scenario
             build_scenario(plan_run(campaign, index), Path(tmp) / str(index))
+
+
+def load_campaign(path: str | Path) -> Campaign:
+    """Read and validate a campaign file; every mistake is one CampaignError line naming the
+    file. Run 0 of every base scenario is built (not run) to check the varied keys."""
+    p = Path(path)
+    try:
+        campaign = campaign_from_dict(read_toml(p, "campaign"), p)
+        check_campaign(campaign)
+    except ConfigError as e:
+        text = str(e)
+        raise CampaignError(text if text.startswith(str(p)) else f"{p}: {text}") from None
+    return campaign

@@ -49,7 +49,7 @@ def plot_variation(v: Variation, rows: Sequence[Mapping[str, Any]], metric: str,
     other values: the failed share per value). False when there are no rows."""
     if not rows:
         return False
-    from lowerbase.bench.report import _pyplot
+    from lowerbase.reports.wheeled import _pyplot
 
     plt = _pyplot()
     xs = [_number(r.get(v.key)) for r in rows]

@@ -124,7 +124,7 @@ class BaseScenario:
 
 
 def kind_of(data: Mapping[str, Any]) -> str:
-    from lowerbase.bench.scenario import robot_of
+    from lowerbase.scenarios.wheeled import robot_of
 
     if "tasks" in data:
         return "tasks"
@@ -136,8 +136,8 @@ def kind_of(data: Mapping[str, Any]) -> str:
 def find_base(ref: str, here: Path) -> BaseScenario:
     """A scenario by path (relative to the campaign file's folder), library name, or
     ``trace/NAME``."""
-    from lowerbase.bench.scenario import find_scenario
-    from lowerbase.bench.scenario_trace import library_trace
+    from lowerbase.scenarios.catalog import find_scenario
+    from lowerbase.scenarios.trace import library_trace
 
     p = here / ref
     if p.is_file():
@@ -185,21 +185,6 @@ class Campaign:
     @property
     def total(self) -> int:
         return len(self.scenarios) * self.per_scenario
-
-
-def load_campaign(path: str | Path) -> Campaign:
-    """Read and validate a campaign file; every mistake is one CampaignError line naming the
-    file. Run 0 of every base scenario is built (not run) to check the varied keys."""
-    p = Path(path)
-    try:
-        campaign = campaign_from_dict(read_toml(p, "campaign"), p)
-        from lowerbase.campaign.plan import check_campaign
-
-        check_campaign(campaign)
-    except ConfigError as e:
-        text = str(e)
-        raise CampaignError(text if text.startswith(str(p)) else f"{p}: {text}") from None
-    return campaign
 
 
 def _tables(data: Mapping[str, Any], key: str) -> tuple[Mapping[str, Any], ...]:

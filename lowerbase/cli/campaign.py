@@ -80,9 +80,9 @@ def _range(text: str | None, total: int) -> list[int] | None:
 
 def run_command(args: argparse.Namespace) -> int:
     from lowerbase.campaign.engine import open_client, quiet_dask, run_campaign
+    from lowerbase.campaign.plan import load_campaign
     from lowerbase.campaign.progress import CampaignProgress
     from lowerbase.campaign.report import write_report
-    from lowerbase.campaign.spec import load_campaign
     from lowerbase.campaign.table import RowLog, write_csv
 
     campaign = load_campaign(args.campaign)
@@ -124,7 +124,7 @@ def run_command(args: argparse.Namespace) -> int:
 
 
 def check_command(args: argparse.Namespace) -> int:
-    from lowerbase.campaign.spec import load_campaign
+    from lowerbase.campaign.plan import load_campaign
 
     c = load_campaign(args.campaign)
     print(f"{args.campaign}: ok ({c.total} runs: {len(c.scenarios)} scenario(s) x "
@@ -133,8 +133,7 @@ def check_command(args: argparse.Namespace) -> int:
 
 
 def replay_command(args: argparse.Namespace) -> int:
-    from lowerbase.campaign.plan import build_scenario, plan_run
-    from lowerbase.campaign.spec import load_campaign
+    from lowerbase.campaign.plan import build_scenario, load_campaign, plan_run
     from lowerbase.campaign.toml_out import dumps
     from lowerbase.cli.scenario import run_loaded
 
@@ -152,7 +151,7 @@ def replay_command(args: argparse.Namespace) -> int:
         f"{k} = {v:.6g}" if isinstance(v, float) else f"{k} = {v}"
         for k, v in spec.values.items()), file=sys.stderr)
     if spec.kind == "trace":
-        from lowerbase.bench.scenario_trace import report, run_trace_scenario
+        from lowerbase.scenarios.trace import report, run_trace_scenario
 
         result = run_trace_scenario(scenario)
         print(report(result))

@@ -49,7 +49,7 @@ def add_subparser(subparsers: Any) -> None:
 
 
 def _settings(args: argparse.Namespace) -> Any:
-    from lowerbase.bench.conformance import Settings
+    from lowerbase.conformance import Settings
     from lowerbase.errors import ConfigError
 
     if not 1.0 <= args.observe <= 120.0:
@@ -74,7 +74,7 @@ def _row(check_id: str, result: str, detail: str) -> str:
 def run(args: argparse.Namespace) -> int:
     import can
 
-    from lowerbase.bench.conformance import (
+    from lowerbase.conformance import (
         CheckResult,
         ConformanceClient,
         junit_xml,
@@ -82,12 +82,12 @@ def run(args: argparse.Namespace) -> int:
         run_suite,
         select,
     )
-    from lowerbase.bench.conformance.core import nothing_passed
+    from lowerbase.conformance.core import nothing_passed
     from lowerbase.errors import ConfigError, LowerbaseError
     from lowerbase.transport import config_from_args, describe, open_bus
 
     if args.robot == "legged":
-        from lowerbase.bench.conformance.legged_cli import run_legged_conformance
+        from lowerbase.conformance.legged_cli import run_legged_conformance
 
         return run_legged_conformance(args, _row)
     checks = select(registry(), args.only)

@@ -1,6 +1,6 @@
 """``lowerbase decode``: decode candump lines from stdin, or a python-can log file.
 
-The reading is :mod:`lowerbase.bench.logfiles` (shared with ``lowerbase driver --replay``): a
+The reading is :mod:`lowerbase.transport.logfiles` (shared with ``lowerbase driver --replay``): a
 text line that is not a frame is reported with file:line and skipped; a corrupt or truncated
 file is reported with the frame it stopped after, and the exit code is 1.
 """
@@ -13,7 +13,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TextIO
 
-from lowerbase.bench.logfiles import (  # noqa: F401 (re-exported: the decode API)
+from lowerbase.errors import ConfigError, ProtocolError
+from lowerbase.transport.logfiles import (  # noqa: F401 (re-exported: the decode API)
     MAX_REPORTED_LINES,
     BadLine,
     Corrupt,
@@ -24,7 +25,6 @@ from lowerbase.bench.logfiles import (  # noqa: F401 (re-exported: the decode AP
     parse_candump_line,
     parse_line,
 )
-from lowerbase.errors import ConfigError, ProtocolError
 
 _frames_from_text = frames_from_text
 _frames_from_log = frames_from_log

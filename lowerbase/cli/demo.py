@@ -55,9 +55,9 @@ def add_subparser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lowerbase.bench.scenario import find_scenario, load_any_scenario
-    from lowerbase.bench.scenario_tasks import TasksScenario
     from lowerbase.errors import ConfigError
+    from lowerbase.scenarios.catalog import find_scenario, load_any_scenario
+    from lowerbase.scenarios.tasks import TasksScenario
 
     name = args.scenario or (CHASSIS_DEMO if args.chassis else TASK_DEMO)
     scenario = load_any_scenario(find_scenario(name))
@@ -79,8 +79,8 @@ def run(args: argparse.Namespace) -> int:
 
 def run_tasks(scenario: Any, out: Path, *, debug: bool = False,
               foxglove: str | None = None, mcap: bool = True) -> int:
-    from lowerbase.bench.demo import TaskStatusLine
-    from lowerbase.bench.report_tasks import exit_code, print_outcomes, run_and_report
+    from lowerbase.reports.tasks import exit_code, print_outcomes, run_and_report
+    from lowerbase.scenarios.demo import TaskStatusLine
 
     print("lowerbase demo: the whole robot in this process on the simulated clock: the "
           "emulated lower computer, the driver core, the world (map, lidars, amcl), "
@@ -112,10 +112,10 @@ def run_tasks(scenario: Any, out: Path, *, debug: bool = False,
 
 
 def run_chassis(args: argparse.Namespace, scenario: Any, out: Path) -> int:
-    from lowerbase.bench.demo import StatusLine, default_bus_config, describe_bus
-    from lowerbase.bench.scenario import Scenario
     from lowerbase.cli.scenario import execute, print_outcomes
     from lowerbase.errors import ConfigError
+    from lowerbase.scenarios.demo import StatusLine, default_bus_config, describe_bus
+    from lowerbase.scenarios.wheeled import Scenario
 
     if not isinstance(scenario, Scenario):
         raise ConfigError(f"scenario {scenario.name}: the demo runs task and chassis "

@@ -165,7 +165,7 @@ def bus_link(config: dict[str, Any]) -> Any:
 
 def run_legged(args: argparse.Namespace, ros_args: list[str]) -> int:
     from lowerbase.errors import ConfigError
-    from lowerbase.legged import node as legged_node
+    from lowerbase.legged_driver import node as legged_node
     from lowerbase.transport import config_from_args
 
     if args.replay or args.replay_profile or args.replay_param:

@@ -292,7 +292,7 @@ def _truth_hooks(args: argparse.Namespace) -> list[Any]:
     """The runner hooks that publish the ground truth: --truth (CSV), --truth-udp."""
     hooks: list[Any] = []
     if args.truth:
-        from lowerbase.bench.recording import TruthLog
+        from lowerbase.simloop.truth import TruthLog
 
         hooks.append(TruthLog(args.truth))
     if args.truth_udp is not None:

@@ -107,9 +107,9 @@ def add_subparser(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     import can
 
-    from lowerbase.bench.recording import check_recording_path
     from lowerbase.errors import ConfigError, LowerbaseError
     from lowerbase.protocol.codec import default_codec
+    from lowerbase.scenarios.replay import check_recording_path
     from lowerbase.transport import config_from_args, describe, open_bus
 
     mcap = Path(args.file).suffix.lower() == ".mcap"

@@ -233,7 +233,6 @@ def _run_lockstep(args: argparse.Namespace, sup: Any, speed: float, parts: tuple
 
 
 def run(args: argparse.Namespace) -> int:
-    from lowerbase.bench.demo import StatusLine
     from lowerbase.robot.master import (
         master_answers,
         master_uri,
@@ -244,6 +243,7 @@ def run(args: argparse.Namespace) -> int:
     from lowerbase.robot.partdown import PartReport
     from lowerbase.robot.plan import UPPER, RobotOptions, robot_plan
     from lowerbase.robot.supervisor import Supervisor
+    from lowerbase.scenarios.demo import StatusLine
     from lowerbase.world.maps import load_map
 
     if not args.sim_time:

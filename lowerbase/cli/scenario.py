@@ -3,11 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
-import logging
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -79,41 +76,6 @@ def default_out(name: str) -> Path:
     return Path("reports") / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
-@contextlib.contextmanager
-def log_to_file(path: Path, *, echo: bool = False) -> Iterator[None]:
-    """lowerbase's log records go to ``path`` (and to stderr only with ``echo``)."""
-    logger = logging.getLogger("lowerbase")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handler = logging.FileHandler(path, mode="w", encoding="utf-8")
-    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
-    saved = logger.level, logger.propagate
-    logger.addHandler(handler)
-    logger.setLevel(logging.DEBUG if echo else logging.INFO)
-    logger.propagate = echo
-    try:
-        yield
-    finally:
-        logger.removeHandler(handler)
-        logger.setLevel(saved[0])
-        logger.propagate = saved[1]
-        handler.close()
-
-
-def mcap_path(out: Path, mcap: str | Path | bool | None) -> Path | None:
-    """Where ``execute`` writes the MCAP: ``out/run.mcap`` (True), none (False/None) or the
-    given path (ConfigError unless it ends in .mcap)."""
-    from lowerbase.errors import ConfigError
-
-    if mcap is True:
-        return out / "run.mcap"
-    if mcap is None or mcap is False:
-        return None
-    path = Path(mcap)
-    if path.suffix.lower() != ".mcap":
-        raise ConfigError(f"--mcap {path}: the file name must end in .mcap")
-    return path
-
-
 def execute(scenario: Any, out: Path, *, mode: str = "simulated", record: str | None = None,
             progress: Any = None, debug: bool = False,
             bus_config: dict[str, Any] | None = None,
@@ -126,12 +88,14 @@ def execute(scenario: Any, out: Path, *, mode: str = "simulated", record: str | 
     ``foxglove``: HOST:PORT of a live Foxglove WebSocket server with the same channels (on the
     simulated clock it streams as fast as the run goes).
     """
-    from lowerbase.bench.recording import BusRecorder, check_recording_path
-    from lowerbase.bench.report import write_report
-    from lowerbase.bench.runner import SimHarness, run_scenario
+    from lowerbase.recording.world import attach_world
+    from lowerbase.reports.outputs import log_to_file, mcap_path
+    from lowerbase.reports.wheeled import write_report
+    from lowerbase.scenarios.replay import BusRecorder, check_recording_path
+    from lowerbase.scenarios.runner import SimHarness, run_scenario
 
     if mode == "processes":
-        from lowerbase.bench.demo import check_over_bus
+        from lowerbase.scenarios.demo import check_over_bus
 
         check_over_bus(scenario)  # before anything is started or written
     mcap_file = mcap_path(out, mcap)
@@ -165,12 +129,12 @@ def execute(scenario: Any, out: Path, *, mode: str = "simulated", record: str | 
         if mcap_rec is not None:
             mcap_rec.attach(harness.driver, harness.now, harness.truth)
             if getattr(harness, "world", None) is not None:  # /map, /scan, /amcl_pose, ...
-                mcap_rec.attach_world(harness.world)
+                attach_world(mcap_rec, harness.world)
 
     try:
         with log_to_file(out / "run.log", echo=debug):
             if mode == "processes":
-                from lowerbase.bench.demo import run_over_bus
+                from lowerbase.scenarios.demo import run_over_bus
 
                 result = run_over_bus(scenario, out, tap=tap if taps else None,
                                       progress=progress, bus_config=bus_config,
@@ -212,7 +176,7 @@ def print_outcomes(result: Any, out: Path | None, *, stream: Any = None) -> None
 
 
 def run_command(args: argparse.Namespace) -> int:
-    from lowerbase.bench.scenario import find_scenario, load_any_scenario
+    from lowerbase.scenarios.catalog import find_scenario, load_any_scenario
 
     if args.foxglove is not None:  # a bad address is refused before anything is said
         from lowerbase.recording.live import parse_address
@@ -226,16 +190,17 @@ def run_command(args: argparse.Namespace) -> int:
 def run_loaded(args: argparse.Namespace, scenario: Any, out: Path) -> int:
     """``lowerbase scenario run`` of a scenario already built (``lowerbase campaign replay``
     builds one run's); its report goes to ``out``."""
-    from lowerbase.bench.demo import ProgressBar, StatusLine
-    from lowerbase.bench.scenario_legged import LeggedScenario
-    from lowerbase.bench.scenario_tasks import TasksScenario
+    from lowerbase.reports.outputs import mcap_path
+    from lowerbase.scenarios.demo import ProgressBar, StatusLine
+    from lowerbase.scenarios.legged import LeggedScenario
+    from lowerbase.scenarios.tasks import TasksScenario
 
     if isinstance(scenario, LeggedScenario):  # robot = "legged": its own runner and report
-        from lowerbase.bench.legged_report import run_command as run_legged
+        from lowerbase.reports.legged import run_command as run_legged
 
         return run_legged(args, scenario, out)
     if isinstance(scenario, TasksScenario):  # a [tasks] table: TaskSim, its own report
-        from lowerbase.bench.report_tasks import run_command as run_tasks
+        from lowerbase.reports.tasks import run_command as run_tasks
 
         return run_tasks(args, scenario, out)
     progress: Any
@@ -260,7 +225,7 @@ def run_loaded(args: argparse.Namespace, scenario: Any, out: Path) -> int:
 
 
 def check_command(args: argparse.Namespace) -> int:
-    from lowerbase.bench.scenario import find_scenario, load_any_scenario
+    from lowerbase.scenarios.catalog import find_scenario, load_any_scenario
 
     for name in args.scenarios:
         s = load_any_scenario(find_scenario(name))
@@ -270,7 +235,7 @@ def check_command(args: argparse.Namespace) -> int:
 
 
 def list_command(args: argparse.Namespace) -> int:
-    from lowerbase.bench.scenario import library, load_any_scenario
+    from lowerbase.scenarios.catalog import library, load_any_scenario
 
     for name, path in library("all").items():
         s = load_any_scenario(path)
@@ -281,8 +246,8 @@ def list_command(args: argparse.Namespace) -> int:
 def replay_command(args: argparse.Namespace) -> int:
     import json
 
-    from lowerbase.bench.recording import check_recording_path, replay
-    from lowerbase.bench.report import _pyplot, plot_status, plot_trajectory, plot_velocities
+    from lowerbase.reports.wheeled import _pyplot, plot_status, plot_trajectory, plot_velocities
+    from lowerbase.scenarios.replay import check_recording_path, replay
 
     path = check_recording_path(args.recording, must_exist=True)
     out = Path(args.out) if args.out else default_out(f"replay-{path.stem}")

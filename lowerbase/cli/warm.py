@@ -40,8 +40,8 @@ def run(args: argparse.Namespace) -> int:
               "kernel modules compiled and cached"
               + ("" if not missing else "; `lowerbase warm` compiles the rest"))
         return 1 if missing else 0
-    from lowerbase.bench.scenario import find_scenario, load_any_scenario
-    from lowerbase.bench.tasks_run import run_tasks_scenario
+    from lowerbase.scenarios.catalog import find_scenario, load_any_scenario
+    from lowerbase.scenarios.tasks_run import run_tasks_scenario
 
     t0 = time.monotonic()
     if missing:
@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(f"lowerbase warm: all {len(KERNEL_MODULES)} kernel modules cached; checking "
               f"them on {WARM_SECONDS:g} s of the task demo", flush=True)
-    from lowerbase.bench.scenario_tasks import TasksScenario
+    from lowerbase.scenarios.tasks import TasksScenario
 
     scenario = load_any_scenario(find_scenario("tasks/demo"))
     assert isinstance(scenario, TasksScenario)

@@ -51,7 +51,6 @@ from lowerbase.driver.core_defs import (
     VERSION_FIELDS,
     DriverConfig,
     LinkState,
-    Listener,
     Send,
 )
 from lowerbase.driver.core_link import LinkLifecycle
@@ -66,6 +65,9 @@ __all__ = ["HOLD_COMMANDS", "ODOMETRY_PARAMETERS", "RELEASE_GRACE", "UPTIME_SLAC
            "VERSION_FIELDS", "DriverConfig", "DriverCore", "LinkState", "Listener", "Send"]
 
 log = logging.getLogger(__name__)
+
+#: a status listener: ``(what changed, the core)``
+Listener = Callable[[str, "DriverCore"], None]
 
 
 class DriverCore(LinkLifecycle, StatusInput):

@@ -7,16 +7,11 @@ import enum
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 from lowerbase.driver.ekf import EkfNoise
 from lowerbase.driver.odometry import OdometryNoise
 from lowerbase.errors import LowerbaseError
 from lowerbase.protocol.status_codes import StatusBit
-
-if TYPE_CHECKING:
-    from lowerbase.driver.core import DriverCore
-
 
 _IMU_FAULT = int(StatusBit.IMU_FAULT)
 
@@ -71,7 +66,6 @@ HOLD_COMMANDS = ("EStopSet", "Standby")
 RELEASE_GRACE = 0.3
 
 Send = Callable[[int, bytes], None]
-Listener = Callable[[str, "DriverCore"], None]
 
 
 def _continues(last: tuple[float, float], uptime: float, now: float,

@@ -18,8 +18,8 @@ main loop run on a :class:`~lowerbase.clock.RealClock`, or on ROS time when ``/u
 is true (:mod:`lowerbase.driver.rostime`: 20 Hz of /clock's time). A bus that fails (a USB
 adapter unplugged) is closed and reopened every second, while the core reports the lost link;
 nothing here raises on bad input from the wire. Run it with ``lowerbase driver`` (see
-docs/driver.md) or roslaunch (``lowerbase/driver/launch/driver_base.launch``); ``python -m
-lowerbase.driver.node ARGS`` is the same as ``lowerbase driver ARGS``.
+docs/driver.md) or roslaunch (``lowerbase/driver/launch/driver_base.launch``); the
+package's ``python -m lowerbase driver ARGS`` is the same.
 """
 
 from __future__ import annotations
@@ -40,16 +40,15 @@ from lowerbase.driver.core import DriverConfig, DriverCore, LinkState
 from lowerbase.driver.links import REPLAY_SUFFIXES, BusLink, ReplayLink  # noqa: F401 (re-export)
 from lowerbase.driver.settings import NodeSettings
 from lowerbase.errors import RosUnavailableError
-from lowerbase.rosnode import ToRosout as _ToRosout  # noqa: F401 (navigation.node uses it)
-from lowerbase.roswire import wanted
+from lowerbase.ros1.node import ROS_HINT
+from lowerbase.ros1.wire import wanted
 
 log = logging.getLogger(__name__)
 
 NODE_NAME = "driver_base"
 #: [s] the oldest sample /odom is stamped with its own time; older: the publish time
 MAX_STAMP_AGE = 5.0
-ROS_HINT = ("run lowerbase from a venv made from the ROS Python (Debian: /usr/bin/python3 -m venv "
-            "--system-site-packages VENV) or source /opt/ros/noetic/setup.bash; docs/driver.md")
+
 
 def import_ros() -> tuple[ModuleType, ModuleType]:
     """(rospy, lowerbase.driver.ros_io); RosUnavailableError with one clear line if missing."""
@@ -100,9 +99,9 @@ class DriverNode:
     ) -> None:
         """``core``: a DriverCore that already talks to its lower computer (the lockstep
         robot's, :mod:`lowerbase.robot.lockstep`; ``link`` and ``clock`` are then unused);
-        ``wire``: how the face reaches ROS (:mod:`lowerbase.roswire`; None: rospy as is);
+        ``wire``: how the face reaches ROS (:mod:`lowerbase.ros1.wire`; None: rospy as is);
         ``lock``: shared with the other faces of this process (None: one of its own)."""
-        from lowerbase.roswire import RosWire
+        from lowerbase.ros1.wire import RosWire
 
         self.rospy, self.io = import_ros()
         self.wire = wire if wire is not None else RosWire(self.rospy)
@@ -219,7 +218,7 @@ class DriverNode:
             pub.publish(msg)
 
     def _wants(self, key: str) -> bool:
-        """Whether ``key``'s message would reach anyone (:func:`lowerbase.roswire.wanted`;
+        """Whether ``key``'s message would reach anyone (:func:`lowerbase.ros1.wire.wanted`;
         alone always): the lockstep robot builds no message nobody takes."""
         pub = self._pubs.get(key)
         return pub is not None and wanted(pub)
@@ -370,7 +369,7 @@ def run(
     """
     import_ros()  # one line if ROS or woosh_msgs are missing
     from lowerbase.driver.settings import load_settings
-    from lowerbase.rosnode import ros_session
+    from lowerbase.ros1.node import ros_session
 
     with contextlib.suppress(AttributeError, ValueError):
         sys.stdout.reconfigure(line_buffering=True)  # type: ignore[union-attr]
@@ -411,14 +410,3 @@ def run(
             else:
                 link.close()
     return 0
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m lowerbase.driver.node ARGS`` == ``lowerbase driver ARGS``."""
-    from lowerbase.cli import main as cli_main
-
-    return cli_main(["driver", *(sys.argv[1:] if argv is None else argv)])
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,6 +1,6 @@
 """``lowerbase driver --replay FILE``: a recorded log fed to the driver instead of a bus.
 
-The file is read by :mod:`lowerbase.bench.logfiles`, as ``lowerbase decode`` reads it: a text
+The file is read by :mod:`lowerbase.transport.logfiles`, as ``lowerbase decode`` reads it: a text
 line that is not a frame (also one that is not UTF-8) is skipped and reported with file:line;
 a corrupt binary file, or a .blf shorter than its header says, ends the replay with an error
 (``error``: the command exits non-zero).
@@ -15,7 +15,10 @@ from collections import deque
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
-from lowerbase.bench.logfiles import (
+from lowerbase.clock import Clock, SimClock
+from lowerbase.errors import ConfigError, LowerbaseError
+from lowerbase.protocol.codec import default_codec
+from lowerbase.transport.logfiles import (
     MAX_REPORTED_LINES,
     BadLine,
     Corrupt,
@@ -23,9 +26,6 @@ from lowerbase.bench.logfiles import (
     Item,
     frames_from_log,
 )
-from lowerbase.clock import Clock, SimClock
-from lowerbase.errors import ConfigError, LowerbaseError
-from lowerbase.protocol.codec import default_codec
 
 log = logging.getLogger(__name__)
 

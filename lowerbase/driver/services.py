@@ -57,7 +57,7 @@ def send_control(core: DriverCore, command: str) -> tuple[bool, str]:
 
 
 def advertise(wire: Any, core: DriverCore, lock: Any) -> list[Any]:
-    """Create the services (after ``init_node``) through ``wire`` (:mod:`lowerbase.roswire`:
+    """Create the services (after ``init_node``) through ``wire`` (:mod:`lowerbase.ros1.wire`:
     anything with ``service(name, cls, handler)``); each call holds ``lock`` around the
     core."""
     from std_srvs.srv import (  # type: ignore[import-untyped]

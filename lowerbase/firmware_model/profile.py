@@ -24,8 +24,7 @@ from typing import Any, ClassVar
 
 from lowerbase.errors import ConfigError
 from lowerbase.files import read_toml
-
-STANDARD_GRAVITY = 9.80665  # [m/s^2], 1 g
+from lowerbase.firmware_model.allan import STANDARD_GRAVITY, check_instabilities
 
 
 def _num(default: float, lo: float, hi: float, unit: str = "", *, integer: bool = False) -> Any:
@@ -238,8 +237,6 @@ class ImuParams(_Validated):
 
     def _check_relations(self) -> None:
         """The bias instabilities must lie above the Allan floor of white noise + walk."""
-        from lowerbase.firmware_model.imu import check_instabilities
-
         check_instabilities(self)
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from lowerbase.legged.protocol import ActuatorError, Special
+from lowerbase.protocol.legged import ActuatorError, Special
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from lowerbase.legged.actuator import Actuator, ActuatorParams
 from lowerbase.legged.gait import LegGeometry, Trot, leg_fk, leg_ik, smoothstep
-from lowerbase.legged.protocol import (
+from lowerbase.protocol.legged import (
     LEGS,
     NO_JOINT,
     NO_REQUEST,

@@ -34,8 +34,8 @@ def run_legged(args: argparse.Namespace) -> int:
     from lowerbase.clock import PacedClock, RealClock, SimClock
     from lowerbase.legged.lower import Send
     from lowerbase.legged.profile import load_legged_profile
-    from lowerbase.legged.protocol import LEGS, legged_codec
     from lowerbase.legged.runner import close_buses, leg_bus_configs, open_legged, run_legged
+    from lowerbase.protocol.legged import LEGS, legged_codec
     from lowerbase.transport import config_from_args, describe
 
     given = [name for name in NOT_WITH_LEGGED if getattr(args, name, None)]

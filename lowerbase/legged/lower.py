@@ -38,7 +38,9 @@ from lowerbase.clock import Clock
 from lowerbase.errors import ConfigError, ProtocolError
 from lowerbase.legged.actuator import Actuator
 from lowerbase.legged.profile import LeggedProfile
-from lowerbase.legged.protocol import (
+from lowerbase.legged.thermal import BodyThermal, copper_loss, electrical_power
+from lowerbase.protocol.codec import Codec
+from lowerbase.protocol.legged import (
     BODY_BUS,
     COMMAND_MESSAGES,
     KD_MAX,
@@ -59,8 +61,6 @@ from lowerbase.legged.protocol import (
     parse_special,
     special_frame,
 )
-from lowerbase.legged.thermal import BodyThermal, copper_loss, electrical_power
-from lowerbase.protocol.codec import Codec
 
 log = logging.getLogger(__name__)
 

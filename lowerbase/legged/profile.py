@@ -27,7 +27,7 @@ from lowerbase.firmware_model.profile import _fmt, _num, _Validated, build_secti
 from lowerbase.legged.actuator import ActuatorParams
 from lowerbase.legged.body import Body, BodyParams
 from lowerbase.legged.gait import LegGeometry, Trot
-from lowerbase.legged.protocol import JOINTS, MOTOR_IDS, T_MAX
+from lowerbase.protocol.legged import JOINTS, MOTOR_IDS, T_MAX
 
 #: the legged pack's [battery] defaults (a Go1-class 6S Li-ion pack; sources in legged.toml);
 #: a profile's [battery] keys replace these one by one (protection limits one by one too)

@@ -29,7 +29,7 @@ from lowerbase.errors import ConfigError
 from lowerbase.firmware_model.runner import FULL_ID_MASK, bus_sender, filters_in_kernel, paced
 from lowerbase.legged.lower import LeggedLower
 from lowerbase.legged.profile import LeggedProfile
-from lowerbase.legged.protocol import BODY_BUS, COMMAND_MESSAGES, LEGS, N_BUSES, legged_codec
+from lowerbase.protocol.legged import BODY_BUS, COMMAND_MESSAGES, LEGS, N_BUSES, legged_codec
 from lowerbase.transport import is_catalog_frame
 
 log = logging.getLogger(__name__)

@@ -7,14 +7,21 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from lowerbase.world.pacing import Pace, paced_loop
 
-if TYPE_CHECKING:
-    from lowerbase.navigation.node import NavigationSetup
-
 Pose = tuple[float, float, float]
+
+
+class Rates(Protocol):
+    """The rates :func:`control_loop` keeps (the node's ``NavigationSetup``)."""
+
+    @property
+    def rate_hz(self) -> float: ...  # [Hz] control ticks
+
+    @property
+    def costmap_rate_hz(self) -> float: ...  # [Hz] the local costmap's publishing
 
 
 def pose2d(transform: Any) -> Pose | None:
@@ -27,7 +34,7 @@ def pose2d(transform: Any) -> Pose | None:
 
 
 def control_loop(pace: Pace, tick: Callable[[float], None],
-                 publish_costmaps: Callable[[bool], None], setup: NavigationSetup,
+                 publish_costmaps: Callable[[bool], None], setup: Rates,
                  running: Callable[[], bool]) -> None:
     """``tick(now)`` every ``1 / setup.rate_hz`` s of ``pace``'s clock (``now`` on that clock),
     the costmaps every ``setup.costmap_rate_hz``; a late tick is caught up within 1 s, a longer

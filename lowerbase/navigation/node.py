@@ -31,7 +31,7 @@ from lowerbase.navigation.costmap import camera_cloud
 from lowerbase.navigation.loop import control_loop
 from lowerbase.navigation.steps import StepController
 from lowerbase.navigation.tf_map import MapToOdom
-from lowerbase.roswire import wanted
+from lowerbase.ros1.wire import wanted
 from lowerbase.world.camera import CameraConfig
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lidar import LaserScan
@@ -73,8 +73,8 @@ class NavigationSetup:
 
 def import_ros() -> tuple[Any, Any]:
     """(rospy, lowerbase.navigation.ros_msgs); RosUnavailableError in one line if missing."""
-    from lowerbase.driver.node import ROS_HINT
     from lowerbase.errors import RosUnavailableError
+    from lowerbase.ros1.node import ROS_HINT
 
     try:
         import actionlib  # type: ignore[import-untyped]  # noqa: F401
@@ -96,9 +96,9 @@ class NavigationNode:
     """Subscribers, publishers, services and the control loop around one Navigator."""
 
     def __init__(self, setup: NavigationSetup, *, wire: Any = None, lock: Any = None) -> None:
-        """``wire``: how the face reaches ROS (:mod:`lowerbase.roswire`; None: rospy as is);
+        """``wire``: how the face reaches ROS (:mod:`lowerbase.ros1.wire`; None: rospy as is);
         ``lock``: shared with the other faces of this process (None: one of its own)."""
-        from lowerbase.roswire import RosWire
+        from lowerbase.ros1.wire import RosWire
 
         self.rospy, self.io = import_ros()
         self.wire = wire if wire is not None else RosWire(self.rospy)
@@ -383,7 +383,7 @@ class NavigationNode:
 
 def run(setup: NavigationSetup, ros_args: Sequence[str], where: str) -> int:
     """Start rospy on the master in ROS_MASTER_URI, build the node and spin."""
-    from lowerbase.rosnode import ros_session
+    from lowerbase.ros1.node import ros_session
     from lowerbase.world.pacing import RosPace
 
     import_ros()  # one line if ROS or the message modules are missing

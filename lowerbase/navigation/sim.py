@@ -28,10 +28,10 @@ import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
-from lowerbase.bench.simloop import TickedLoop
 from lowerbase.navigation.controller import Limits, wrap
 from lowerbase.navigation.costmap import camera_cloud
 from lowerbase.navigation.navigator import GoalState, NavCommand, Navigator, Pose
+from lowerbase.simloop.loop import TickedLoop
 from lowerbase.world.lidar import LaserScan
 from lowerbase.world.obstacles import Obstacle, Obstacles
 from lowerbase.world.sim import DeferredScan, WorldSim

@@ -22,7 +22,7 @@ class MapToOdom:
 
     def listen(self, buffer: Any = None) -> None:
         """Look up in ``buffer`` (a tf2_ros.Buffer that something else fills, e.g.
-        :meth:`lowerbase.roswire.RosWire.tf_buffer`); None: a buffer of its own on /tf."""
+        :meth:`lowerbase.ros1.wire.RosWire.tf_buffer`); None: a buffer of its own on /tf."""
         import tf2_ros
 
         if buffer is None:

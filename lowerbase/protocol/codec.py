@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 from typing import Any, Protocol
@@ -38,13 +37,9 @@ from cantools.database.conversion import (
 from lowerbase.errors import EncodeError, UnknownMessageError
 from lowerbase.protocol.codec_errors import _mux_error, _to_number
 from lowerbase.protocol.codegen import CodeGenerator
+from lowerbase.protocol.signals import Signals, SignalSpec
 
 DBC_PATH = Path(__file__).with_name("chassis.dbc")
-
-SignalValue = int | float | str
-Signals = dict[str, SignalValue]
-Payload = bytes | bytearray | memoryview
-
 
 class DecodeFunction(Protocol):
     def __call__(
@@ -52,41 +47,6 @@ class DecodeFunction(Protocol):
         decode_choices: bool = False, strict: bool = True,
     ) -> tuple[str, Signals]: ...
 
-
-
-@dataclass(frozen=True)
-class SignalSpec:
-    """One signal as the catalog defines it (Intel byte order, start bit = LSB)."""
-
-    name: str
-    start: int
-    length: int
-    is_signed: bool
-    is_float: bool
-    scale: float
-    offset: float
-    minimum: float | None
-    maximum: float | None
-    unit: str
-    comment: str
-    choices: Mapping[int, str]
-    #: raw (integer) limits implied by minimum/maximum and the bit width
-    raw_min: int
-    raw_max: int
-    #: how cantools converts: "identity", "int" (integer scale/offset) or "linear"
-    kind: str
-    #: the message's multiplexer signal (selects which other signals a frame carries)
-    is_multiplexer: bool = False
-    #: multiplexer values whose frames carry this signal; empty = every frame
-    multiplexer_ids: tuple[int, ...] = ()
-    #: "little_endian" (Intel), or "big_endian" (Motorola): ``start`` is then the LSB of the
-    #: signal in the byte-reversed payload, ``dbc_start`` the DBC's own (MSB) start bit
-    byte_order: str = "little_endian"
-    dbc_start: int = -1
-
-    @property
-    def mask(self) -> int:
-        return (1 << self.length) - 1
 
 
 def _raw_limits(sig: Any, kind: str) -> tuple[int, int]:

@@ -4,15 +4,13 @@ the calls into the generated functions; MessageCodec uses the number conversion 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any, NoReturn
+from typing import Any, NoReturn
 
 from lowerbase.errors import EncodeError, ProtocolError, SignalRangeError
-
-if TYPE_CHECKING:
-    from lowerbase.protocol.codec import MessageCodec, Signals
+from lowerbase.protocol.signals import MessageSpec, Signals
 
 
-def _to_number(codec: MessageCodec, name: str, value: Any) -> int | float:
+def _to_number(codec: MessageSpec, name: str, value: Any) -> int | float:
     if isinstance(value, bool):
         return int(value)
     if isinstance(value, str):
@@ -32,7 +30,7 @@ def _to_number(codec: MessageCodec, name: str, value: Any) -> int | float:
         ) from None
 
 
-def _keys_error(codec: MessageCodec, values: Mapping[str, Any], names: frozenset[str]) -> None:
+def _keys_error(codec: MessageSpec, values: Mapping[str, Any], names: frozenset[str]) -> None:
     missing = sorted(names - values.keys())
     unknown = sorted(set(values) - names)
     mux = codec.multiplexer
@@ -45,7 +43,7 @@ def _keys_error(codec: MessageCodec, values: Mapping[str, Any], names: frozenset
     )
 
 
-def _mux_error(codec: MessageCodec, value: Any) -> NoReturn:
+def _mux_error(codec: MessageSpec, value: Any) -> NoReturn:
     """Encode: the multiplexer is missing, out of range or selects no signals."""
     mux = codec.multiplexer
     assert mux is not None
@@ -57,7 +55,7 @@ def _mux_error(codec: MessageCodec, value: Any) -> NoReturn:
                       f"defines {sorted(codec.variants)})")
 
 
-def _unknown_mux(codec: MessageCodec, value: int) -> NoReturn:
+def _unknown_mux(codec: MessageSpec, value: int) -> NoReturn:
     """Decode: a multiplexer value that the catalog gives no signals."""
     mux = codec.multiplexer
     assert mux is not None
@@ -65,7 +63,7 @@ def _unknown_mux(codec: MessageCodec, value: int) -> NoReturn:
                         f"defines {sorted(codec.variants)})")
 
 
-def _out_of_range(codec: MessageCodec, values: Signals) -> None:
+def _out_of_range(codec: MessageSpec, values: Signals) -> None:
     """Raise for the first signal of a decoded payload that is outside its range."""
     for s in codec.signals:
         if s.name not in values:  # another multiplexer value's signal
@@ -78,7 +76,7 @@ def _out_of_range(codec: MessageCodec, values: Signals) -> None:
     raise AssertionError("no signal out of range")  # pragma: no cover
 
 
-def _range_error(codec: MessageCodec, name: str, value: float) -> None:
+def _range_error(codec: MessageSpec, name: str, value: float) -> None:
     s = codec.signal(name)
     raise SignalRangeError(
         f"{codec.name}.{name} = {value!r} is outside [{s.minimum}, {s.maximum}] {s.unit}".rstrip()

@@ -26,7 +26,7 @@ from lowerbase.protocol.codec_errors import (
 )
 
 if TYPE_CHECKING:
-    from lowerbase.protocol.codec import Payload, Signals, SignalSpec
+    from lowerbase.protocol.signals import Payload, Signals, SignalSpec
 
 
 _F32 = struct.Struct("<f")

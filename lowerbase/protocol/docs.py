@@ -184,7 +184,7 @@ def render(codec: Codec | None = None) -> str:
 
 def render_legged(codec: Codec | None = None) -> str:
     """docs/legged-protocol.md from ``legged.dbc`` (the legged robot's four buses)."""
-    from lowerbase.legged.protocol import (
+    from lowerbase.protocol.legged import (
         COMMAND_MESSAGES,
         LEGS,
         MOTOR_IDS,
@@ -230,7 +230,7 @@ def render_legged(codec: Codec | None = None) -> str:
         "## Special frames",
         "",
         "Eight-byte payloads on an actuator's command ID that no DBC signal expresses; a "
-        "receiver tests for them before decoding (`lowerbase.legged.protocol.parse_special`). "
+        "receiver tests for them before decoding (`lowerbase.protocol.legged.parse_special`). "
         "The actuator answers each with a MotorReply.",
         "",
         "| payload | command |",

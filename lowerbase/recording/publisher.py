@@ -81,8 +81,8 @@ class RunPublisher:
         self._truth: Truth | None = None
         self._core_tick: Callable[[], None] = lambda: None
         self._battery_dirty = False
-        self._world_topics: Any = None
-        self._world_feed: Any = None
+        self.world_topics: Any = None  #: recording.world.WorldTopics, once attached
+        self._feeds: list[Any] = []
         self._closed = False
 
     # -- channels ----------------------------------------------------------------------------
@@ -143,23 +143,10 @@ class RunPublisher:
         """Whether a sink wants ``topic`` now (opens its channel; the seq does not move)."""
         return bool(self._open(topic, lambda: self.ros1_spec(topic, type_name)))
 
-    def attach_world(self, world: Any) -> Any:
-        """Write a ``lowerbase.world.sim.WorldSim``'s topics as it steps (/map, /scan,
-        /amcl_pose, map -> odom, the truth on the map: :mod:`.world`); returns the
-        ``WorldFeed``, closed with this publisher. ``self.world_topics`` takes more (a plan)."""
-        from lowerbase.recording.world import WorldFeed
-
-        self._world_feed = WorldFeed(self.world_topics, world)
-        return self._world_feed
-
-    @property
-    def world_topics(self) -> Any:
-        """The :class:`~.world.WorldTopics` on these sinks (e.g. ``.plan(t, poses)``)."""
-        if self._world_topics is None:
-            from lowerbase.recording.world import WorldTopics
-
-            self._world_topics = WorldTopics(self)
-        return self._world_topics
+    def add_feed(self, feed: Any) -> None:
+        """A feed (``close()``) that writes on these sinks, closed before they are: e.g. a
+        world's (:func:`lowerbase.recording.world.attach_world`), whose last scan comes then."""
+        self._feeds.append(feed)
 
     def write(self, topic: str, msg: Any, t: float) -> None:
         """Write the rosbags message ``msg`` on ``topic`` at ``t`` [s]."""
@@ -311,8 +298,8 @@ class RunPublisher:
         if self._closed:
             return
         self._closed = True
-        if self._world_feed is not None:
-            self._world_feed.close()  # its last scan, before the sinks close
+        for feed in self._feeds:
+            feed.close()  # e.g. a world's last scan, before the sinks close
         if self._driver is not None:
             if self._on_event in self._driver.listeners:
                 self._driver.listeners.remove(self._on_event)

@@ -121,7 +121,7 @@ class TopicRecorder:
 def main(argv: Sequence[str] | None = None) -> int:
     from lowerbase.errors import ConfigError, LowerbaseError
     from lowerbase.recording.live import start_live
-    from lowerbase.rosnode import ros_session
+    from lowerbase.ros1.node import ros_session
     from lowerbase.transport import add_bus_arguments, config_from_args, describe, open_bus
 
     p = argparse.ArgumentParser(prog="python -m lowerbase.recording.rosrecord",

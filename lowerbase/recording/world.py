@@ -29,13 +29,11 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from lowerbase.recording import fastser as fs
 from lowerbase.recording.messages import to_ns
-
-if TYPE_CHECKING:
-    from lowerbase.recording.publisher import RunPublisher
+from lowerbase.recording.publisher import RunPublisher
 
 MAP_TOPIC = "/map"
 SCAN_TOPIC = "/scan"
@@ -211,3 +209,20 @@ class WorldFeed:
         self._finish()
         if self.world._after_step == self.after_step:
             del self.world._after_step  # the class's method again
+
+
+def world_topics(publisher: RunPublisher) -> WorldTopics:
+    """The :class:`WorldTopics` on ``publisher``'s sinks (made once; e.g. ``.plan(t, poses)``)."""
+    if publisher.world_topics is None:
+        publisher.world_topics = WorldTopics(publisher)
+    topics: WorldTopics = publisher.world_topics
+    return topics
+
+
+def attach_world(publisher: RunPublisher, world: Any) -> WorldFeed:
+    """Write a ``lowerbase.world.sim.WorldSim``'s topics on ``publisher`` as it steps (/map,
+    /scan, /amcl_pose, map -> odom, the truth on the map); the feed is closed with the
+    publisher."""
+    feed = WorldFeed(world_topics(publisher), world)
+    publisher.add_feed(feed)
+    return feed

@@ -3,13 +3,13 @@ clock: :class:`LockstepRobot`.
 
 The parts are the ones ``lowerbase robot`` starts as processes, with the same ROS faces: the
 emulated lower computer and driver_base's core exchange their frames at their periods' times
-(:class:`~lowerbase.bench.simloop.SimLoop`, the MCU's 5 ms period), and driver_base's face
+(:class:`~lowerbase.simloop.loop.SimLoop`, the MCU's 5 ms period), and driver_base's face
 (:class:`~lowerbase.driver.node.DriverNode`), the world's (:class:`~lowerbase.world.node.
 WorldNode`: lidars, camera, amcl, the map), navigation's (:class:`~lowerbase.navigation.node.
 NavigationNode`: move_base, step control, costmaps) and the tasks' (:class:`~lowerbase.tasks.
 node.TasksNode`: exec_task, robot_status) publish, subscribe and serve under the names they have
 alone. What one part publishes reaches the others in this process at once
-(:mod:`lowerbase.roswire`), so nothing is late or lost however busy the host is; tasks drive
+(:mod:`lowerbase.ros1.wire`), so nothing is late or lost however busy the host is; tasks drive
 navigation directly (:mod:`lowerbase.tasks.local_nav`).
 
 Each period of the MCU the parts whose rate is due run, in a fixed order (/clock at 100 Hz,
@@ -96,11 +96,11 @@ class LockstepRobot:
     face's topics, services and actions; :meth:`run_periods` moves time on."""
 
     def __init__(self, opts: LockstepOptions, rospy: Any) -> None:
-        from lowerbase.bench.simloop import SimLoop
         from lowerbase.driver.node import DriverNode
         from lowerbase.driver.settings import load_settings
         from lowerbase.firmware_model.profile import load_profile
-        from lowerbase.roswire import LocalWire, Switchboard
+        from lowerbase.ros1.wire import LocalWire, Switchboard
+        from lowerbase.simloop.loop import SimLoop
         from lowerbase.world.charger import ChargerContact
         from lowerbase.world.grid import OccupancyGrid
         from lowerbase.world.maps import load_map
@@ -137,7 +137,7 @@ class LockstepRobot:
         else:
             self.charger = None
         if opts.truth:
-            from lowerbase.bench.recording import TruthLog
+            from lowerbase.simloop.truth import TruthLog
 
             self.truth_log: Any = TruthLog(opts.truth)
         else:
@@ -227,7 +227,7 @@ class LockstepRobot:
         """/clock at every 10 ms of simulated time up to now (several after a batch)."""
         from rosgraph_msgs.msg import Clock
 
-        from lowerbase.roswire import connected
+        from lowerbase.ros1.wire import connected
 
         now = self.loop.now
         send = connected(self._clock_pub)  # nobody on ROS listens: no message is built

@@ -3,8 +3,8 @@ clock: :class:`LeggedLockstep`.
 
 The legged lower computer (the body controller, 12 MIT actuators on 4 leg buses, the pack) and
 the legged driver core exchange every frame at once, every 1 ms of simulated time
-(:class:`~lowerbase.bench.legged_sim.LeggedSimLoop`); the legged driver's ROS face
-(:class:`~lowerbase.legged.node.LeggedNode`: robot_state, /cmd_vel, the planning services,
+(:class:`~lowerbase.simloop.legged.LeggedSimLoop`); the legged driver's ROS face
+(:class:`~lowerbase.legged_driver.node.LeggedNode`: robot_state, /cmd_vel, the planning services,
 set_map, set_listen, ``~walk``/``~stand``/``~sit``) ticks at its command rate and publishes
 robot_state at its ``publish_rate`` of simulated time, as the node does on the wall clock.
 ROS time is the simulated time, /clock every 10 ms of it. The interface to
@@ -25,9 +25,9 @@ class LeggedLockstep:
     """The legged robot and its driver's face on one simulated clock (see the module)."""
 
     def __init__(self, opts: LockstepOptions, rospy: Any) -> None:
-        from lowerbase.bench.legged_sim import LeggedSimLoop
-        from lowerbase.legged.node import NODE_NAME, LeggedNode, load_legged_settings
-        from lowerbase.roswire import LocalWire, Switchboard
+        from lowerbase.legged_driver.node import NODE_NAME, LeggedNode, load_legged_settings
+        from lowerbase.ros1.wire import LocalWire, Switchboard
+        from lowerbase.simloop.legged import LeggedSimLoop
 
         self.opts = opts
         self.rospy = rospy
@@ -67,7 +67,7 @@ class LeggedLockstep:
         command rate, robot_state at its publish rate, then the lower computer's step."""
         from rosgraph_msgs.msg import Clock
 
-        from lowerbase.roswire import connected
+        from lowerbase.ros1.wire import connected
 
         loop, node = self.loop, self.node
         for _ in range(periods):

@@ -63,7 +63,7 @@ def watch_clock(watch: ClockWatch) -> Callable[[], None]:
     import rosgraph
     import rospy
 
-    from lowerbase.driver.settings import loopback_address
+    from lowerbase.ros1.loopback import loopback_address
 
     address = loopback_address(os.environ, rosgraph.get_master_uri())
     if address is not None:  # as every lowerbase node: listen on loopback with a local master

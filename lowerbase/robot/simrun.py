@@ -41,8 +41,8 @@ def init_rospy() -> Any:
     following no /clock (its own time is set directly: lowerbase.robot.lockstep)."""
     import rosgraph
 
-    from lowerbase.driver.settings import loopback_address
-    from lowerbase.rosnode import ToRosout, import_rospy
+    from lowerbase.ros1.loopback import loopback_address
+    from lowerbase.ros1.node import ToRosout, import_rospy
 
     rospy = import_rospy()
     address = loopback_address(os.environ, rosgraph.get_master_uri())

@@ -58,8 +58,8 @@ class TasksSetup:
 
 def import_ros() -> Any:
     """rospy; RosUnavailableError in one line if ROS (or actionlib) is missing."""
-    from lowerbase.driver.node import ROS_HINT
     from lowerbase.errors import RosUnavailableError
+    from lowerbase.ros1.node import ROS_HINT
 
     try:
         import actionlib  # type: ignore[import-untyped]  # noqa: F401
@@ -95,11 +95,11 @@ class TasksNode:
 
     def __init__(self, setup: TasksSetup, *, wire: Any = None, lock: Any = None,
                  nav: Any = None, steps: Any = None) -> None:
-        """``wire``: how the face reaches ROS (:mod:`lowerbase.roswire`; None: rospy as is);
+        """``wire``: how the face reaches ROS (:mod:`lowerbase.ros1.wire`; None: rospy as is);
         ``lock``: shared with the other faces of this process; ``nav`` and ``steps``: the
         machine's Navigation and step moves (None: actionlib clients of /move_base and
         /cmd_vel_control; in one process with navigation: :mod:`lowerbase.tasks.local_nav`)."""
-        from lowerbase.roswire import RosWire
+        from lowerbase.ros1.wire import RosWire
         from lowerbase.tasks.machine import TaskMachine
 
         self.rospy = import_ros()
@@ -267,7 +267,7 @@ class TasksNode:
 
 def run(setup: TasksSetup, ros_args: Sequence[str], where: str) -> int:
     """Start rospy on the master in ROS_MASTER_URI, build the node and spin."""
-    from lowerbase.rosnode import ros_session
+    from lowerbase.ros1.node import ros_session
 
     import_ros()  # one line if ROS or the message modules are missing
     with ros_session("tasks", NODE_NAME, ros_args) as session:

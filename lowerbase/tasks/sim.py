@@ -17,13 +17,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
-from lowerbase.bench.simloop import TickedLoop
 from lowerbase.bms.status import BmsStatus, ChargeMode
 from lowerbase.driver.core import DriverCore, LinkState
 from lowerbase.navigation.controller import Status as CtrlStatus
 from lowerbase.navigation.navigator import GoalState, NavCommand
 from lowerbase.navigation.sim import NavSim
 from lowerbase.protocol.status_codes import StatusBit
+from lowerbase.simloop.loop import TickedLoop
 from lowerbase.tasks.inputs import FAULT_BITS, faults_of
 from lowerbase.tasks.machine import TaskMachine
 from lowerbase.tasks.model import Pose, Status, TaskRequest, TaskResponse

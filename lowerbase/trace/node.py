@@ -69,8 +69,8 @@ class TraceSetup:
 def import_ros() -> tuple[Any, Any]:
     """(rospy, the lowerbase_msgs/Protobuf class); RosUnavailableError in one line if either
     is missing."""
-    from lowerbase.driver.node import ROS_HINT
     from lowerbase.errors import RosUnavailableError
+    from lowerbase.ros1.node import ROS_HINT
 
     try:
         import rospy
@@ -256,7 +256,7 @@ class TraceNode:
 
 def run(setup: TraceSetup, ros_args: Sequence[str], where: str) -> int:
     """Start rospy on the master in ROS_MASTER_URI, build the node and spin."""
-    from lowerbase.rosnode import ros_session
+    from lowerbase.ros1.node import ros_session
 
     import_ros()  # one line if ROS or the message modules are missing
     with ros_session("trace", NODE_NAME, ros_args) as session:

@@ -21,14 +21,15 @@ from typing import Any
 import can
 
 from lowerbase.errors import TransportError
+from lowerbase.transport.config import (  # noqa: F401 (the package's interface)
+    DEFAULT_CHANNEL,
+    DEFAULT_HOP_LIMIT,
+    DEFAULT_INTERFACE,
+    DEFAULT_PORT,
+    bus_config,
+)
 
 log = logging.getLogger(__name__)
-
-DEFAULT_INTERFACE = "udp_multicast"
-#: an administratively scoped IPv4 group; with hop_limit 0 nothing is sent off this host
-DEFAULT_CHANNEL = "239.74.163.2"
-DEFAULT_PORT = 43113
-DEFAULT_HOP_LIMIT = 0
 
 
 def free_loopback_port(kind: int = socket.SOCK_DGRAM) -> int:
@@ -67,41 +68,6 @@ def add_bus_arguments(parser: argparse.ArgumentParser, *, serial: bool = True) -
         parser.add_argument(
             "--baudrate", type=int, default=115200, help="serial baud rate (default 115200)"
         )
-
-
-def bus_config(
-    interface: str | None = None,
-    channel: Any = None,
-    **kwargs: Any,
-) -> dict[str, Any]:
-    """Resolve a bus configuration the way python-can does, with lowerbase's default.
-
-    Explicit arguments win over python-can's environment variables (CAN_INTERFACE,
-    CAN_CHANNEL, ...) and config files (~/.canrc, can.ini); with none of them, the default is
-    udp_multicast on 239.74.163.2:43113 with hop limit 0.
-    """
-    given = {k: v for k, v in {"interface": interface, "channel": channel, **kwargs}.items()
-             if v is not None}
-    try:
-        config = dict(can.util.load_config(config=given))
-    except can.CanInterfaceNotImplementedError:
-        if given.get("interface"):
-            raise TransportError(
-                f"unknown CAN interface {given['interface']!r}; "
-                f"choose one of: {', '.join(sorted(can.VALID_INTERFACES))}"
-            ) from None
-        config = {
-            "interface": DEFAULT_INTERFACE,
-            "channel": DEFAULT_CHANNEL,
-            "port": DEFAULT_PORT,
-            "hop_limit": DEFAULT_HOP_LIMIT,
-            **given,
-        }
-    config = {k: v for k, v in config.items() if v is not None}
-    if config.get("interface") == DEFAULT_INTERFACE:
-        config.setdefault("channel", DEFAULT_CHANNEL)
-        config.setdefault("hop_limit", DEFAULT_HOP_LIMIT)
-    return config
 
 
 def config_from_args(args: argparse.Namespace) -> dict[str, Any]:

@@ -187,7 +187,7 @@ def checked_config(interface: str | None, channel: Any, extra: dict[str, Any],
                    bus_kwargs: dict[str, Any]) -> dict[str, Any]:
     """The bus configuration of the command-line flags (``extra``: -b, --fd, ...) and
     ``--bus-kwargs``, checked against the interface they resolve to."""
-    from lowerbase.transport import bus_config
+    from lowerbase.transport.config import bus_config
 
     def resolve(kwargs: dict[str, Any]) -> dict[str, Any]:
         try:

@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING
 from lowerbase.firmware_model.kinematics import motor_rpm_to_wheel_rad_s
 
 if TYPE_CHECKING:
-    from lowerbase.bench.simloop import SimLoop
+    from lowerbase.simloop.loop import SimLoop
     from lowerbase.world.truth import WorldSurroundings
 
 #: [m] kept back from every slack (rounding of the distance transform and the poses)

@@ -26,7 +26,7 @@ from typing import Any
 
 from lowerbase.clock import Clock, RealClock
 from lowerbase.errors import LowerbaseError, WorldError
-from lowerbase.roswire import wanted
+from lowerbase.ros1.wire import wanted
 from lowerbase.world.camera import DepthCamera
 from lowerbase.world.footprint import validate_pose
 from lowerbase.world.grid import OccupancyGrid
@@ -71,8 +71,8 @@ class WorldSetup:
 
 def import_ros() -> tuple[Any, Any]:
     """(rospy, lowerbase.world.ros_msgs); RosUnavailableError in one line if missing."""
-    from lowerbase.driver.node import ROS_HINT
     from lowerbase.errors import RosUnavailableError
+    from lowerbase.ros1.node import ROS_HINT
 
     try:
         import rospy
@@ -89,9 +89,9 @@ class WorldNode:
     def __init__(self, setup: WorldSetup, truth: Any, *, clock: Clock | None = None,
                  wire: Any = None, lock: Any = None) -> None:
         """``clock``: the localizer's (None: wall time); ``wire``: how the face reaches ROS
-        (:mod:`lowerbase.roswire`; None: rospy as is); ``lock``: shared with the other faces
+        (:mod:`lowerbase.ros1.wire`; None: rospy as is); ``lock``: shared with the other faces
         of this process (None: one of its own)."""
-        from lowerbase.roswire import RosWire
+        from lowerbase.ros1.wire import RosWire
 
         self.rospy, self.io = import_ros()
         self.wire = wire if wire is not None else RosWire(self.rospy)
@@ -393,7 +393,7 @@ class WorldNode:
 
 def run(setup: WorldSetup, truth: Any, ros_args: Sequence[str], truth_where: str) -> int:
     """Start rospy on the master in ROS_MASTER_URI, build the node and spin."""
-    from lowerbase.rosnode import ros_session
+    from lowerbase.ros1.node import ros_session
 
     import_ros()  # one line if ROS or the message modules are missing
     with ros_session("world", NODE_NAME, ros_args) as session:

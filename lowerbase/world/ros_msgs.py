@@ -78,7 +78,7 @@ def odom_pose(msg: Any) -> Pose:
     return pose_of(msg.pose.pose, "/odom")
 
 
-#: the key of :func:`odom_pose` in a wire's conversions (lowerbase.roswire)
+#: the key of :func:`odom_pose` in a wire's conversions (lowerbase.ros1.wire)
 ODOM_POSE = "odom_pose"
 
 
@@ -118,7 +118,7 @@ def scan_as_received(scan: Scan, stamp: Any) -> Scan:
                 ranges=scan.ranges.astype(np.float32))
 
 
-#: the key of a /scan message's LaserScan in a wire's conversions (lowerbase.roswire)
+#: the key of a /scan message's LaserScan in a wire's conversions (lowerbase.ros1.wire)
 SCAN = "scan"
 
 

@@ -1,6 +1,6 @@
 """The world around the emulated chassis on the simulated clock, ROS-free: :class:`WorldSim`.
 
-A :class:`WorldSim` wraps a :class:`~lowerbase.bench.simloop.SimLoop` (emulator + driver) with
+A :class:`WorldSim` wraps a :class:`~lowerbase.simloop.loop.SimLoop` (emulator + driver) with
 a map, its named places, obstacles, the lidar rig (the merged /scan at its rate), the depth
 camera (at its rate; off unless asked, it is the costly part), the localizer (amcl, fed with
 the driver's /odom pose and the merged scan, or the ground truth) and contact (the footprint
@@ -35,9 +35,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from lowerbase.bench.simloop import SimLoop, SteppedLoop
 from lowerbase.errors import WorldError
 from lowerbase.firmware_model.profile import Profile
+from lowerbase.simloop.loop import SimLoop, SteppedLoop
 from lowerbase.world.camera import CameraFrame, DepthCamera
 from lowerbase.world.contact_gate import ContactGate
 from lowerbase.world.footprint import (

@@ -3,7 +3,7 @@
 - The world READS the robot's ground truth only through :class:`TruthSource`: ``sample()``
   gives a :class:`~lowerbase.world.truth_stream.TruthSample` (time, true pose and twist in the
   emulator's frame, contact). :class:`LoopTruth` is the in-process implementation over a
-  :class:`~lowerbase.bench.simloop.SimLoop`; ``truth_stream.TruthReceiver`` carries the same
+  :class:`~lowerbase.simloop.loop.SimLoop`; ``truth_stream.TruthReceiver`` carries the same
   samples across processes.
 - The robot FEELS the world only through the firmware model's
   :class:`~lowerbase.firmware_model.truth.Surroundings`: :class:`WorldSurroundings` answers
@@ -32,7 +32,7 @@ from lowerbase.world.obstacles import Box, Obstacles, Person
 from lowerbase.world.truth_stream import TruthSample
 
 if TYPE_CHECKING:
-    from lowerbase.bench.simloop import SimLoop
+    from lowerbase.simloop.loop import SimLoop
 
 __all__ = ["ContactEvent", "LoopTruth", "TruthSample", "TruthSource", "WorldSurroundings"]
 

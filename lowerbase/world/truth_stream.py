@@ -35,8 +35,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from lowerbase.bench.recording import TruthHook
 from lowerbase.errors import ConfigError
+from lowerbase.simloop.truth import TruthHook
 
 log = logging.getLogger(__name__)
 

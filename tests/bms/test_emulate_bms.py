@@ -7,9 +7,9 @@ from typing import Any
 
 import pytest
 
-from lowerbase.bench.client import LowerClient
 from lowerbase.bms.adapter import McuBmsAdapter
 from lowerbase.bms.link import ModbusTcpBmsLink
+from lowerbase.conformance.lower_client import LowerClient
 from lowerbase.firmware_model.profile import load_profile
 from lowerbase.firmware_model.sim import SimRig
 from lowerbase.protocol.status_codes import StatusBit

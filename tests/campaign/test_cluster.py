@@ -18,8 +18,7 @@ import pytest
 import lowerbase
 from lowerbase.campaign.engine import open_client, quiet_dask
 from lowerbase.campaign.execute import run_one
-from lowerbase.campaign.plan import plan_run
-from lowerbase.campaign.spec import load_campaign
+from lowerbase.campaign.plan import load_campaign, plan_run
 from lowerbase.campaign.table import read_csv
 from lowerbase.cli import main
 from tests.conftest import free_tcp_port

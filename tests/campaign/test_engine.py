@@ -14,8 +14,7 @@ import pytest
 
 import lowerbase
 from lowerbase.campaign.execute import run_one
-from lowerbase.campaign.plan import plan_run
-from lowerbase.campaign.spec import load_campaign
+from lowerbase.campaign.plan import load_campaign, plan_run
 from lowerbase.campaign.table import WALL, read_csv
 from lowerbase.cli import main
 

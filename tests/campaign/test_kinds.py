@@ -7,8 +7,7 @@ from pathlib import Path
 import pytest
 
 from lowerbase.campaign.execute import EXPECT, run_one
-from lowerbase.campaign.plan import plan_run
-from lowerbase.campaign.spec import load_campaign
+from lowerbase.campaign.plan import load_campaign, plan_run
 
 CASES = {
     "tasks/parking": ('"initial.soc" = { uniform = [60, 90] }',

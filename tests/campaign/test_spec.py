@@ -6,8 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from lowerbase.campaign.plan import plan_run
-from lowerbase.campaign.spec import load_campaign
+from lowerbase.campaign.plan import load_campaign, plan_run
 from lowerbase.campaign.toml_out import dumps
 from lowerbase.errors import CampaignError, ConfigError
 from lowerbase.files import read_toml, tomllib

@@ -9,12 +9,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.clock import SimClock
 from lowerbase.driver.core import DriverConfig, DriverCore, LinkState
 from lowerbase.firmware_model.profile import load_profile
 from lowerbase.protocol.codec import default_codec
 from lowerbase.protocol.status_codes import StatusBit
+from lowerbase.simloop.loop import SimLoop
 
 
 def ready(loop: SimLoop) -> bool:

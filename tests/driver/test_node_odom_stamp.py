@@ -12,9 +12,9 @@ from typing import Any
 
 import pytest
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.driver.core import LinkState
 from lowerbase.driver.settings import load_settings
+from lowerbase.simloop.loop import SimLoop
 
 BACKLOG = 0.5  #: [s] the reader stalls this long, then reads what waited in the socket
 

@@ -532,7 +532,7 @@ def test_roslaunch_starts_the_node_with_the_parameter_file(rig: dict[str, Any]) 
 def test_replay_feeds_a_recorded_run_through_the_driver(rig: dict[str, Any]) -> None:
     import can
 
-    from lowerbase.bench.simloop import SimLoop
+    from lowerbase.simloop.loop import SimLoop
 
     path = rig["tmp"] / "run.log"
     with can.Logger(str(path)) as logger:

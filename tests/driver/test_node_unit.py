@@ -100,7 +100,7 @@ def test_launch_script_under_the_system_python_without_the_dependencies() -> Non
 ])
 def test_loopback_address(environ: dict[str, str], uri: str, args: list[str],
                           expected: str | None) -> None:
-    from lowerbase.driver.settings import loopback_address
+    from lowerbase.ros1.loopback import loopback_address
 
     hosts = {"robot-master": ["192.168.1.7"]}
     assert loopback_address(environ, uri, args, resolve=hosts.__getitem__) == expected
@@ -117,7 +117,7 @@ def test_loopback_address(environ: dict[str, str], uri: str, args: list[str],
 ])
 def test_a_master_hostname_resolving_to_loopback_only_keeps_the_node_on_loopback(
         addresses: list[str], expected: str | None) -> None:
-    from lowerbase.driver.settings import loopback_address
+    from lowerbase.ros1.loopback import loopback_address
 
     asked: list[str] = []
 
@@ -132,7 +132,7 @@ def test_a_master_hostname_resolving_to_loopback_only_keeps_the_node_on_loopback
 def test_the_real_resolver_on_this_hosts_own_name() -> None:
     import socket
 
-    from lowerbase.driver.settings import loopback_address, resolve_host
+    from lowerbase.ros1.loopback import loopback_address, resolve_host
 
     own = socket.gethostname()
     addresses = resolve_host(own)

@@ -13,9 +13,9 @@ import math
 
 import pytest
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.driver.core import LinkState
 from lowerbase.firmware_model.mcu import Mcu
+from lowerbase.simloop.loop import SimLoop
 
 EPS = 0.01  # [m] a wheel cycle or two of motion, EKF smoothing
 

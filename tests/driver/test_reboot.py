@@ -12,9 +12,9 @@ import logging
 
 import pytest
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.driver.core import LinkState
 from lowerbase.firmware_model.mcu import Mcu
+from lowerbase.simloop.loop import SimLoop
 
 
 def ready(loop: SimLoop) -> bool:

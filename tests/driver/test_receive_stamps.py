@@ -14,11 +14,11 @@ from typing import Any
 import can
 import pytest
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.clock import SimClock
 from lowerbase.driver.core import LinkState
 from lowerbase.driver.links import MAX_RECEIVE_AGE, BusLink, receive_age
 from lowerbase.driver.rostime import RosClock
+from lowerbase.simloop.loop import SimLoop
 
 STALL = 0.3  #: [s] the reader does not run; then it handles everything that queued up
 EVERY = 1.0  #: [s] between stalls

@@ -8,12 +8,12 @@ from pathlib import Path
 import can
 import pytest
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.clock import SimClock
 from lowerbase.driver.core import DriverCore, LinkState
 from lowerbase.driver.links import ReplayLink
 from lowerbase.firmware_model.profile import load_profile
 from lowerbase.protocol.codec import default_codec
+from lowerbase.simloop.loop import SimLoop
 
 PARAMETERS = load_profile().chassis.as_wire_dict()
 

@@ -3,10 +3,10 @@
 
 from __future__ import annotations
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.driver.core import LinkState
 from lowerbase.driver.services import ESTOP, TRIGGERS, send_control
 from lowerbase.protocol.status_codes import StatusBit
+from lowerbase.simloop.loop import SimLoop
 
 
 def ready(loop: SimLoop) -> bool:

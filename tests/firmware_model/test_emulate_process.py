@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from lowerbase.bench.client import LowerClient
+from lowerbase.conformance.lower_client import LowerClient
 from lowerbase.protocol.status_codes import StatusBit
 from lowerbase.transport import open_bus
 from tests.conftest import bus_cli_args

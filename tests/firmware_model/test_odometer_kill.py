@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from lowerbase.bench.client import LowerClient
+from lowerbase.conformance.lower_client import LowerClient
 from lowerbase.firmware_model.mcu import ODOMETER_SAVE_PERIOD
 from lowerbase.transport import open_bus
 from tests.conftest import bus_cli_args

@@ -21,9 +21,9 @@ from lowerbase.firmware_model.profile import load_profile
 from lowerbase.firmware_model.runner import run
 from lowerbase.legged.lower import LeggedLower
 from lowerbase.legged.profile import load_legged_profile
-from lowerbase.legged.protocol import legged_codec
 from lowerbase.legged.runner import run_legged
 from lowerbase.protocol.codec import default_codec
+from lowerbase.protocol.legged import legged_codec
 from tests.firmware_model.test_scaled_clock import FakeTime, SilentBus
 
 CODEC = default_codec()

@@ -16,11 +16,11 @@ from typing import Any
 import can
 import pytest
 
-from lowerbase.bench.recording import TruthHook
 from lowerbase.clock import RealClock, ScaledClock, SimClock, real_seconds
 from lowerbase.firmware_model.mcu import Mcu
 from lowerbase.firmware_model.profile import load_profile
 from lowerbase.firmware_model.runner import run
+from lowerbase.simloop.truth import TruthHook
 from tests.conftest import ROOT
 
 

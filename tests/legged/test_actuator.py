@@ -8,7 +8,7 @@ import pytest
 
 from lowerbase.legged.actuator import Actuator, mit_torque
 from lowerbase.legged.figures import actuator
-from lowerbase.legged.protocol import ActuatorError, Special
+from lowerbase.protocol.legged import ActuatorError, Special
 
 
 def test_impedance_law_and_saturation() -> None:

@@ -10,7 +10,7 @@ import pytest
 
 from lowerbase.legged.body import ALLOWED, Body
 from lowerbase.legged.figures import BODY, mini_cheetah
-from lowerbase.legged.protocol import Fault, LocomotionState, RequestResult
+from lowerbase.protocol.legged import Fault, LocomotionState, RequestResult
 
 S = LocomotionState
 DT = 0.001

@@ -17,8 +17,8 @@ from lowerbase.clock import SimClock
 from lowerbase.errors import ConfigError
 from lowerbase.legged.lower import LeggedLower
 from lowerbase.legged.profile import LeggedProfile
-from lowerbase.legged.protocol import REPLY_ID, LocomotionState, legged_codec
 from lowerbase.legged.runner import close_buses, leg_bus_configs, open_legged, run_legged
+from lowerbase.protocol.legged import REPLY_ID, LocomotionState, legged_codec
 from lowerbase.transport import open_bus
 from tests.conftest import TEST_GROUP, free_udp_port
 

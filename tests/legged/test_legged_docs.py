@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from lowerbase.legged.protocol import legged_codec
 from lowerbase.protocol.docs import main, render_legged
+from lowerbase.protocol.legged import legged_codec
 from tests.conftest import ROOT
 
 

@@ -19,7 +19,8 @@ from lowerbase.bms.pack import BatteryPack
 from lowerbase.clock import SimClock
 from lowerbase.legged.lower import LeggedLower
 from lowerbase.legged.profile import LeggedProfile
-from lowerbase.legged.protocol import (
+from lowerbase.legged.thermal import BodyThermal
+from lowerbase.protocol.legged import (
     COMMAND_MESSAGES,
     REPLY_ID,
     REPLY_PREFIX,
@@ -32,7 +33,6 @@ from lowerbase.legged.protocol import (
     parse_special,
     special_frame,
 )
-from lowerbase.legged.thermal import BodyThermal
 
 S = LocomotionState
 CODEC = legged_codec()

@@ -12,7 +12,8 @@ import cantools
 import pytest
 
 from lowerbase.errors import SignalRangeError
-from lowerbase.legged.protocol import (
+from lowerbase.protocol.codec import Codec
+from lowerbase.protocol.legged import (
     COMMAND_MESSAGES,
     LEGGED_DBC_PATH,
     T_MAX,
@@ -23,7 +24,6 @@ from lowerbase.legged.protocol import (
     parse_special,
     special_frame,
 )
-from lowerbase.protocol.codec import Codec
 
 DB = cantools.database.load_file(str(LEGGED_DBC_PATH))
 

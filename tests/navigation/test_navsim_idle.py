@@ -5,8 +5,8 @@ standing robot and taken away again, and while tasks stand for loading."""
 
 from __future__ import annotations
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.navigation.sim import NavSim
+from lowerbase.simloop.loop import SimLoop
 from lowerbase.tasks.model import TaskRequest, TaskType
 from lowerbase.tasks.plan import TaskConfig
 from lowerbase.tasks.sim import TaskSim

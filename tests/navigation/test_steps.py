@@ -10,7 +10,6 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.navigation.controller import Limits, wrap
 from lowerbase.navigation.steps import (
     CANCEL,
@@ -28,6 +27,7 @@ from lowerbase.navigation.steps import (
     Step,
     StepController,
 )
+from lowerbase.simloop.loop import SimLoop
 
 
 def _loop() -> tuple[SimLoop, StepController]:

@@ -12,7 +12,6 @@ from collections import deque
 
 import pytest
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.navigation.controller import Limits, wrap
 from lowerbase.navigation.steps import (
     EXCUTE,
@@ -23,6 +22,7 @@ from lowerbase.navigation.steps import (
     Step,
     StepController,
 )
+from lowerbase.simloop.loop import SimLoop
 
 Pose = tuple[float, float, float]
 

@@ -8,9 +8,10 @@ from typing import Any
 
 import pytest
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.recording.mcap_writer import McapRecorder
 from lowerbase.recording.messages import to_ns
+from lowerbase.recording.world import attach_world
+from lowerbase.simloop.loop import SimLoop
 
 
 @dataclass
@@ -115,15 +116,16 @@ def record_world(path: Path, duration: float = 2.0) -> dict[str, int]:
     the world's topics (what `lowerbase scenario run` writes); the message counts."""
     import dataclasses
 
-    from lowerbase.bench.runner import SimHarness, run_scenario
-    from lowerbase.bench.scenario import library, load_scenario
+    from lowerbase.scenarios.catalog import library
+    from lowerbase.scenarios.runner import SimHarness, run_scenario
+    from lowerbase.scenarios.wheeled import load_scenario
 
     sc = dataclasses.replace(load_scenario(library()["warehouse_localization"]),
                              duration=duration, expectations=())
     rec = McapRecorder(path)
     harness = SimHarness(sc, tap=rec)
     rec.attach(harness.driver, harness.now, harness.truth)
-    rec.attach_world(harness.world)
+    attach_world(rec, harness.world)
     try:
         run_scenario(sc, harness)
     finally:
@@ -138,8 +140,8 @@ def record_tasks(path: Path, duration: float = 4.0) -> dict[str, int]:
     the message counts."""
     import dataclasses
 
-    from lowerbase.bench.scenario_tasks import library_tasks, load_tasks_scenario
-    from lowerbase.bench.tasks_run import run_tasks_scenario
+    from lowerbase.scenarios.tasks import library_tasks, load_tasks_scenario
+    from lowerbase.scenarios.tasks_run import run_tasks_scenario
 
     sc = dataclasses.replace(load_tasks_scenario(library_tasks()["transport"]),
                              duration=duration, expects=[])

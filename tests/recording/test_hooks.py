@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from lowerbase.bench.scenario import load_scenario
 from lowerbase.cli import main
 from lowerbase.cli.record import McapFrames
 from lowerbase.cli.scenario import execute
 from lowerbase.protocol.codec import default_codec
 from lowerbase.recording.ros1_types import ros1_types
+from lowerbase.scenarios.wheeled import load_scenario
 
 SCENARIO = """
 [scenario]

@@ -23,7 +23,6 @@ import pytest
 from mcap.reader import make_reader
 from rosbags.typesys import Stores, get_typestore
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.cli import main
 from lowerbase.clock import SimClock
 from lowerbase.errors import ConfigError
@@ -34,6 +33,7 @@ from lowerbase.protocol.codec import default_codec
 from lowerbase.recording.live import EmulatorFeed, FoxgloveSink, parse_address, start_live
 from lowerbase.recording.mcap_writer import McapRecorder
 from lowerbase.recording.messages import to_ns
+from lowerbase.simloop.loop import SimLoop
 from tests.recording.foxglove_client import LEGACY_SUBPROTOCOL, SUBPROTOCOL, FoxgloveClient
 
 ROS1 = get_typestore(Stores.ROS1_NOETIC)

@@ -18,14 +18,14 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros1.decoder import DecoderFactory
 
-from lowerbase.bench.report_tasks import run_and_report
-from lowerbase.bench.scenario_tasks import library_tasks, load_tasks_scenario
-from lowerbase.bench.tasks_run import SAMPLE_COLUMNS, TasksResult, run_tasks_scenario
 from lowerbase.cli import main
 from lowerbase.recording.live import FoxgloveSink
 from lowerbase.recording.messages import to_ns
 from lowerbase.recording.publisher import RunPublisher
 from lowerbase.recording.ros1_types import ros1_types
+from lowerbase.reports.tasks import run_and_report
+from lowerbase.scenarios.tasks import library_tasks, load_tasks_scenario
+from lowerbase.scenarios.tasks_run import SAMPLE_COLUMNS, TasksResult, run_tasks_scenario
 from lowerbase.tasks.model import Status
 from tests.recording.foxglove_client import FoxgloveClient
 

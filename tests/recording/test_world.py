@@ -17,11 +17,13 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from lowerbase.bench.scenario import library, load_scenario
 from lowerbase.cli import main
 from lowerbase.cli.scenario import execute
 from lowerbase.recording.messages import to_ns
 from lowerbase.recording.ros1_types import ros1_types
+from lowerbase.recording.world import attach_world, world_topics
+from lowerbase.scenarios.catalog import library
+from lowerbase.scenarios.wheeled import load_scenario
 from lowerbase.world.localization import Localizer
 from lowerbase.world.maps import load_map
 
@@ -224,11 +226,11 @@ def test_camera_depth_and_the_plan_hook(tmp_path: Path) -> None:
     frames: list[Any] = []
     path = tmp_path / "cam.mcap"
     with McapRecorder(path) as rec:
-        rec.attach_world(world)
+        attach_world(rec, world)
         for _ in range(3):
             world.run(0.07)
             frames.append(world.frame)
-        rec.world_topics.plan(1.5, [(1.0, 2.0, 0.0), (3.0, 2.5, 1.0)])
+        world_topics(rec).plan(1.5, [(1.0, 2.0, 0.0), (3.0, 2.5, 1.0)])
     got = read(path)
     depth = [d for _, d in got["/camera_1/depth/image_raw"]]
     assert len(depth) >= 3 and all(f is not None for f in frames)
@@ -256,7 +258,7 @@ def test_live_view_gets_the_map_when_it_subscribes_later() -> None:
     world = WorldSim(WorldConfig(map="empty_room", localization="truth"))
     client = None
     try:
-        pub.attach_world(world)
+        attach_world(pub, world)
         world.run(0.2)
         assert pub.counts["/map"] == 0  # nobody wanted it yet
         client = FoxgloveClient(sink.url)

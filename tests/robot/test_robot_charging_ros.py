@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 
-from lowerbase.bench.recording import TruthFollower
+from lowerbase.simloop.truth import TruthFollower
 from lowerbase.world.maps import load_map
 from lowerbase.world.places import load_places
 from tests.driver.conftest import require_ros, ros_master, woosh_msgs_build  # noqa: F401

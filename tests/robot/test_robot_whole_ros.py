@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from lowerbase.bench.recording import TruthFollower
+from lowerbase.simloop.truth import TruthFollower
 from lowerbase.world.localization.poses import compose
 from lowerbase.world.maps import load_map
 from lowerbase.world.places import load_places

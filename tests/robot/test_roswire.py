@@ -1,4 +1,4 @@
-"""lowerbase.roswire without ROS: an external input's rospy subscription never connects to this
+"""lowerbase.ros1.wire without ROS: an external input's rospy subscription never connects to this
 process' own publisher of the topic, and still connects to everyone else's."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 from typing import Any
 
-from lowerbase.roswire import _skip_own_publisher
+from lowerbase.ros1.wire import _skip_own_publisher
 
 OWN = "http://localhost:40001/"
 OTHER = "http://otherhost:40002/"

@@ -1,4 +1,4 @@
-"""lowerbase.roswire's conversions in-process (needs rospy and tf2_ros, no master: the
+"""lowerbase.ros1.wire's conversions in-process (needs rospy and tf2_ros, no master: the
 switchboard's tf2 buffer is a stand-in): each delivered message is converted once for all its
 local subscribers, or taken from its publisher."""
 
@@ -18,7 +18,7 @@ def board(monkeypatch: pytest.MonkeyPatch) -> Any:
     import rospy
     import tf2_ros
 
-    from lowerbase.roswire import Switchboard
+    from lowerbase.ros1.wire import Switchboard
 
     monkeypatch.setattr(tf2_ros, "Buffer", lambda **kwargs: None)  # a real one wants a master
 

@@ -1,4 +1,4 @@
-"""lowerbase.roswire without ROS: a lockstep publisher is wanted while a face in the process
+"""lowerbase.ros1.wire without ROS: a lockstep publisher is wanted while a face in the process
 subscribes, a connection exists or the topic is latched; rospy's publish is skipped only
 where it would do nothing (no connection, not latched)."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 from typing import Any
 
-from lowerbase.roswire import Switchboard, _TeePublisher, connected, wanted
+from lowerbase.ros1.wire import Switchboard, _TeePublisher, connected, wanted
 
 
 class FakeImpl:

@@ -9,9 +9,9 @@ from typing import Any
 
 import pytest
 
-from lowerbase.bench.scenario_tasks import load_tasks_scenario
 from lowerbase.cli import main
 from lowerbase.errors import ConfigError
+from lowerbase.scenarios.tasks import load_tasks_scenario
 from lowerbase.tasks import node
 from lowerbase.tasks.plan import TaskConfig
 

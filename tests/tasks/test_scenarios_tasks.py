@@ -1,7 +1,7 @@
-"""Task scenarios (lowerbase/bench/scenario_tasks.py, tasks_run.py): the library passes on the
+"""Task scenarios (lowerbase/scenarios/tasks.py, tasks_run.py): the library passes on the
 whole emulated robot, a wrong expectation fails, move_base goals drive the navigator, bad files
 are one-line ConfigErrors. The demo (scenarios/tasks/demo.toml) runs in
-tests/bench/test_report_tasks.py, once, with its report."""
+tests/reports/test_report_tasks.py, once, with its report."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lowerbase.bench.scenario_tasks import library_tasks, load_tasks_scenario
-from lowerbase.bench.tasks_run import report, run_tasks_scenario
 from lowerbase.errors import ConfigError
+from lowerbase.scenarios.tasks import library_tasks, load_tasks_scenario
+from lowerbase.scenarios.tasks_run import report, run_tasks_scenario
 
 HEAD = """
 [scenario]

@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.navigation.sim import NavSim
+from lowerbase.simloop.loop import SimLoop
 from lowerbase.tasks.model import AUTO_TASK_ID, TaskRequest
 from lowerbase.tasks.model import ActionType as AT
 from lowerbase.tasks.model import RobotState as RS

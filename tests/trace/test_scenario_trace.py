@@ -1,4 +1,4 @@
-"""The trace scenario runner (lowerbase.bench.scenario_trace) and the library's diagram."""
+"""The trace scenario runner (lowerbase.scenarios.trace) and the library's diagram."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from lowerbase.bench import scenario_trace as st
 from lowerbase.errors import ConfigError
+from lowerbase.scenarios import trace as st
 
 SHORT = """
 [scenario]

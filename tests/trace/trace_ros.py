@@ -1,7 +1,7 @@
 """ROS fixtures of the trace tests: every msggen package generated afresh, a rosmaster.
 
 Imported by the test modules that need them (``from tests.trace.trace_ros import ...``), as
-tests/legged/legged_ros.py does; everything skips without ROS (tests/driver/conftest.py).
+tests/legged_driver/legged_ros.py does; everything skips without ROS (tests/driver/conftest.py).
 """
 
 from __future__ import annotations

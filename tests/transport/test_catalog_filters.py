@@ -10,7 +10,7 @@ from typing import Any
 
 import can
 
-from lowerbase.bench.busload_proc import foreign_ids
+from benchmarks.busload_proc import foreign_ids
 from lowerbase.clock import SimClock
 from lowerbase.driver.links import BusLink, listen_to_lower, upper_listens_to
 from lowerbase.firmware_model.mcu import Mcu

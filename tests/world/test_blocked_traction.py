@@ -21,10 +21,10 @@ import math
 
 import pytest
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.firmware_model import lean_bits as bits
 from lowerbase.firmware_model.mcu import Mcu
 from lowerbase.firmware_model.profile import STANDARD_GRAVITY, Profile, load_profile
+from lowerbase.simloop.loop import SimLoop
 from lowerbase.world.truth import WorldSurroundings
 from tests.world.test_contact import WALL_X, reach_x, ready, room
 

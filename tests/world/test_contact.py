@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 from shapely.geometry import Point
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.driver.core import LinkState
 from lowerbase.firmware_model.mcu import Mcu
+from lowerbase.simloop.loop import SimLoop
 from lowerbase.world.footprint import DEFAULT_FOOTPRINT
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.obstacles import Box, Obstacles, Person

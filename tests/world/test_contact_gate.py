@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from shapely.geometry import Point
 
-from lowerbase.bench.simloop import SimLoop
+from lowerbase.simloop.loop import SimLoop
 from lowerbase.world.footprint import contact
 from lowerbase.world.obstacles import Box, Obstacles, Person
 from lowerbase.world.sim import WorldConfig, WorldSim

@@ -7,9 +7,9 @@ import math
 
 import pytest
 
-from lowerbase.bench.simloop import SimLoop
 from lowerbase.driver.core import LinkState
 from lowerbase.errors import LowerbaseError, MapError, WorldError
+from lowerbase.simloop.loop import SimLoop
 from lowerbase.world.localization.poses import compose, inverse, wrap_scalar
 from lowerbase.world.obstacles import Box, Obstacles
 from lowerbase.world.sim import WorldConfig, WorldSim

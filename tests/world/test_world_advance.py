@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from lowerbase.bench.simloop import SimLoop
+from lowerbase.simloop.loop import SimLoop
 from lowerbase.world.obstacles import Box, Obstacles
 from lowerbase.world.sim import WorldConfig, WorldSim
 

@@ -1,1 +1,0 @@
-"""Benches: the upper-computer side of tests: a protocol client, scenarios, conformance."""

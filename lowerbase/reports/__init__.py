@@ -1,0 +1,1 @@
+"""Reports of scenario runs: plots, summary.json, JUnit XML, an index page."""

@@ -27,6 +27,10 @@ settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
 
 ROOT = Path(__file__).resolve().parents[1]
+# udp_multicast buses join their group on loopback only (no IGMP report on the host's network;
+# children inherit it); tests/transport/test_multicast_netns.py tests the default join in a
+# network namespace of its own
+os.environ["LOWERBASE_MULTICAST_JOIN"] = "loopback"
 #: a multicast group of the tests' own; each test also gets its own port
 TEST_GROUP = "239.74.163.99"
 #: ``lowerbase conformance`` against an emulator process on the test host: the suite's limits

@@ -3,9 +3,28 @@
 python-can binds its socket to ``0.0.0.0:PORT``, so a plain unicast datagram that any host
 sends to that port is taken as a frame. :class:`GroupOnlyMulticastBus` binds its receive
 socket to the group address itself (the kernel then delivers only datagrams whose destination
-is the group). With hop limit 0 (lowerbase's default, "this host only") it also joins the group
-and sends on the loopback interface only and sets ``IP_MULTICAST_ALL`` off, so multicast that
-arrives from the network is not delivered either.
+is the group). With hop limit 0 (lowerbase's default, "this host only") it sends on the
+loopback interface and takes only what this host sent:
+
+- It joins the group on loopback and on the default multicast interface (the one the routing
+  table picks for the group, where python-can's ``UdpMulticastBus``, ``can.player`` or any
+  plain sender sends; the kernel loops a copy of such a send back to the host's members of
+  the group on that interface), and on no other (``IP_MULTICAST_ALL`` off).
+- Before it joins, a kernel socket filter is attached that drops every datagram that arrived
+  on another interface than loopback and is not such a looped-back copy (``PACKET_LOOPBACK``,
+  which only the kernel's multicast loop makes; multicast from the network is
+  ``PACKET_MULTICAST``, see :func:`lowerbase.transport.udp_wire.socket_filter`). The verdict
+  is the kernel's own record of where the packet came from, not an address a sender can
+  forge, needs no list of this host's addresses (which change), and costs nothing per frame.
+  Nothing from another host ever reaches the queue, not even before the first ``recv``.
+- Where no socket filter can be attached it joins on loopback only (as before: python-can's
+  default sender is then not heard, and a warning says so), never on the network.
+
+Joining on the default interface announces the membership there (IGMP) as any multicast
+member does; frames sent with hop limit (TTL) 0 never leave the host, ours or python-can's.
+``LOWERBASE_MULTICAST_JOIN=loopback`` in the environment keeps the join on loopback alone (no
+IGMP on the network; python-can's default sender is then not heard): the test suite sets it,
+as its traffic must stay on loopback or the project's own virtual devices.
 
 With hop limit 0 it sends from a socket of its own (``127.0.0.1``, an ephemeral port), and a
 kernel socket filter on the receive socket drops the datagrams that came from it: like a CAN
@@ -21,7 +40,9 @@ every ``udp_multicast`` configuration.
 from __future__ import annotations
 
 import ctypes
+import errno
 import logging
+import os
 import select
 import socket
 import struct
@@ -39,6 +60,9 @@ from lowerbase.transport import udp_wire
 
 log = logging.getLogger(__name__)
 
+#: ``loopback``: join the group on loopback only (see the module's docstring)
+JOIN_ENV = "LOWERBASE_MULTICAST_JOIN"
+
 _IP_MULTICAST_ALL = getattr(socket, "IP_MULTICAST_ALL", 49)  # Linux
 _SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 _SO_ATTACH_FILTER = getattr(socket, "SO_ATTACH_FILTER", 26)
@@ -48,12 +72,36 @@ _TIMESPEC = struct.Struct("@ll")
 RECEIVE_BUFFER = 1 << 21
 
 
+def _loopback_index() -> int:
+    try:
+        return socket.if_nametoindex("lo")
+    except OSError:  # pragma: no cover - Linux names it lo; its index is 1 in every namespace
+        return 1
+
+
+def _attach(sock: socket.socket, prog: list[udp_wire.Insn]) -> bool:
+    """Attach a classic-BPF program to ``sock`` (replacing the one before, atomically)."""
+    raw = b"".join(struct.pack("HBBI", *insn) for insn in prog)
+    buf = ctypes.create_string_buffer(raw, len(raw))
+    fprog = struct.pack("HL", len(prog), ctypes.addressof(buf))
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, _SO_ATTACH_FILTER, fprog)
+    except OSError as error:
+        log.debug("socket filter not attached: %s", error)
+        return False
+    return True
+
+
 class _GroupSocket(GeneralPurposeUdpMulticastBus):
+    #: loopback's index when the receive socket drops what other hosts send (hop limit 0)
+    host_only: int | None = None
+
     def _create_socket(self, address_family: socket.AddressFamily) -> socket.socket:
         if address_family != socket.AF_INET:  # IPv6 groups: python-can's own socket
             return super()._create_socket(address_family)
         local = self.hop_limit == 0
         iface = socket.inet_aton("127.0.0.1" if local else "0.0.0.0")
+        group = socket.inet_aton(self.group)
         sock = socket.socket(address_family, socket.SOCK_DGRAM)
         try:
             sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL,
@@ -63,11 +111,15 @@ class _GroupSocket(GeneralPurposeUdpMulticastBus):
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
             sock.bind((self.group, self.port))  # the group's datagrams only, never unicast
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
-                            socket.inet_aton(self.group) + iface)
+            if local:
+                sock.setsockopt(socket.IPPROTO_IP, _IP_MULTICAST_ALL, 0)
+                lo = _loopback_index()
+                if _attach(sock, udp_wire.socket_filter(None, None, host_only=lo)):
+                    self.host_only = lo
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, group + iface)
             if local:
                 sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, iface)
-                sock.setsockopt(socket.IPPROTO_IP, _IP_MULTICAST_ALL, 0)
+                self._join_default(sock, group)
             try:
                 sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
                 self.timestamp_nanosecond = True
@@ -78,6 +130,27 @@ class _GroupSocket(GeneralPurposeUdpMulticastBus):
             raise can.CanInitializationError(
                 f"could not bind {self.group}:{self.port}: {error}") from error
         return sock
+
+    def _join_default(self, sock: socket.socket, group: bytes) -> None:
+        """Join on the default multicast interface too, behind the host-only filter."""
+        join = os.environ.get(JOIN_ENV, "")
+        if join == "loopback":
+            return
+        if join:
+            log.warning("%s=%r is not a choice (loopback); joining as by default", JOIN_ENV, join)
+        if self.host_only is None:
+            log.warning("no socket filter on this system: udp_multicast %s:%d hears only "
+                        "senders on loopback (python-can's default sender is not heard)",
+                        self.group, self.port)
+            return
+        try:
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
+                            group + socket.inet_aton("0.0.0.0"))
+        except OSError as error:
+            # EADDRINUSE: the default interface is loopback (joined); ENODEV: no multicast
+            # route, so nobody can send on a default interface either
+            if error.errno != errno.EADDRINUSE:
+                log.debug("not joined on the default interface: %s", error)
 
 
 def _sender(port: int) -> socket.socket:
@@ -114,6 +187,7 @@ class GroupOnlyMulticastBus(UdpMulticastBus):
         self._kernel_masks: list[tuple[int, int]] | None = None
         self._accepts: dict[int, bool] = {}  #: classic 11-bit ID -> passes the filters
         self._rx: socket.socket | None = None
+        self._multicast: _GroupSocket
         self._multicast = group = _GroupSocket(channel, port, hop_limit)
         self._can_protocol = CanProtocol.CAN_FD if fd else CanProtocol.CAN_20
         self._own_port: int | None = None
@@ -145,19 +219,16 @@ class GroupOnlyMulticastBus(UdpMulticastBus):
 
     def _attach_filter(self) -> None:
         assert self._rx is not None
-        if self._own_port is None and self._kernel_masks is None:
+        host_only = self._multicast.host_only
+        if self._own_port is None and self._kernel_masks is None and host_only is None:
             return
         try:
-            prog = udp_wire.socket_filter(self._own_port, self._kernel_masks)
+            prog = udp_wire.socket_filter(self._own_port, self._kernel_masks, host_only)
         except ValueError:  # too many filters for one program: the IDs in user space only
-            prog = udp_wire.socket_filter(self._own_port, None)
-        raw = b"".join(struct.pack("HBBI", *insn) for insn in prog)
-        buf = ctypes.create_string_buffer(raw, len(raw))
-        fprog = struct.pack("HL", len(prog), ctypes.addressof(buf))
-        try:
-            self._rx.setsockopt(socket.SOL_SOCKET, _SO_ATTACH_FILTER, fprog)
-        except OSError as error:  # no socket filters here: everything is filtered in Python
-            log.debug("socket filter not attached: %s", error)
+            prog = udp_wire.socket_filter(self._own_port, None, host_only)
+        # not attached: the one before stays (the host-only check, attached before joining);
+        # what it lets through is filtered in Python
+        _attach(self._rx, prog)
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         assert self._rx is not None

@@ -12,7 +12,8 @@ layout directly and hands anything else to python-can's msgpack path.
 :func:`socket_filter` builds the classic-BPF program that the multicast bus attaches to its
 receive socket: the kernel drops this bus's own datagrams (looped back by multicast) and,
 given ``can_filters``, datagrams in this layout whose ID no filter accepts, before they cost
-the process a system call.
+the process a system call; with hop limit 0 it first drops every datagram that another host
+sent.
 """
 
 from __future__ import annotations
@@ -137,22 +138,35 @@ def unpack(datagram: bytes, timestamp: float) -> can.Message:
 _LD_W, _LD_H, _LD_B, _LD_LEN = 0x20, 0x28, 0x30, 0x80
 _JA, _JEQ, _JGE, _AND, _TAX, _TXA, _RET = 0x05, 0x15, 0x35, 0x54, 0x07, 0x87, 0x06
 _UDP_HEADER = 8
+# ancillary loads (SKF_AD_OFF + SKF_AD_PKTTYPE / SKF_AD_IFINDEX): the packet's type and the
+# index of the interface it arrived on
+_AD_PKTTYPE, _AD_IFINDEX = 0xFFFFF000 + 4, 0xFFFFF000 + 8
+PACKET_LOOPBACK = 5  #: linux/if_packet.h: a copy the kernel looped back from this host's send
 MAX_KERNEL_FILTERS = 48  #: more filters than this are applied in user space only
 Insn = tuple[int, int, int, int]  #: (code, jump if true, jump if false, k): struct sock_filter
 #: symbolic instruction: (code, k, label if true, label if false); a str alone is a label
 _Sym = tuple[int, int, str | None, str | None] | str
 
 
-def socket_filter(own_port: int | None, id_masks: Iterable[tuple[int, int]] | None) -> list[Insn]:
+def socket_filter(own_port: int | None, id_masks: Iterable[tuple[int, int]] | None,
+                  host_only: int | None = None) -> list[Insn]:
     """A classic-BPF program for a udp_multicast receive socket.
 
-    Drops datagrams from UDP source port ``own_port`` (this bus's own sending socket), and,
+    ``host_only`` (the loopback interface's index): first drop every datagram that did not
+    come from this host, that is, that arrived on another interface than loopback and is not
+    a copy of one of this host's own multicast sends (``PACKET_LOOPBACK``, made only by the
+    kernel's multicast loop; a datagram from the network is ``PACKET_MULTICAST``). Then drops
+    datagrams from UDP source port ``own_port`` (this bus's own sending socket), and,
     when ``id_masks`` (``(can_id, can_mask)`` pairs, python-can's filter semantics) is given,
     datagrams in python-can's layout whose ID matches none. Anything in another layout is
     kept, for user space to decide; the bus still applies the filters exactly (the extended
     flag too), so the kernel only ever drops what would be dropped anyway.
     """
     prog: list[_Sym] = []
+    if host_only is not None:
+        prog += [(_LD_W, _AD_PKTTYPE, None, None), (_JEQ, PACKET_LOOPBACK, "host", None),
+                 (_LD_W, _AD_IFINDEX, None, None), (_JEQ, host_only, "host", None),
+                 (_RET, 0, None, None), "host"]
     if own_port is not None:
         prog += [(_LD_H, 0, None, None), (_JEQ, own_port, "drop", None)]
     masks = list(id_masks) if id_masks is not None else []

@@ -81,8 +81,13 @@ def test_unpack_refuses_what_is_not_a_frame(datagram: bytes) -> None:
 # -- the socket filter, run by an independent classic-BPF interpreter ---------------------
 
 
-def _run_bpf(prog: list[udp_wire.Insn], packet: bytes) -> int:
-    """A minimal classic-BPF interpreter (the opcodes socket_filter uses)."""
+PACKET_MULTICAST = 2  # linux/if_packet.h: a multicast packet from the network
+
+
+def _run_bpf(prog: list[udp_wire.Insn], packet: bytes, pkttype: int = udp_wire.PACKET_LOOPBACK,
+             ifindex: int = 1) -> int:
+    """A minimal classic-BPF interpreter (the opcodes socket_filter uses). ``pkttype`` and
+    ``ifindex``: the ancillary values (SKF_AD_PKTTYPE, SKF_AD_IFINDEX) of the packet."""
     a = x = pc = 0
     while True:
         code, jt, jf, k = prog[pc]
@@ -90,6 +95,8 @@ def _run_bpf(prog: list[udp_wire.Insn], packet: bytes) -> int:
         cls = code & 0x07
         if code == 0x80:  # ld len
             a = len(packet)
+        elif code == 0x20 and k >= 0xFFFFF000:  # ld ancillary
+            a = {0xFFFFF004: pkttype, 0xFFFFF008: ifindex}[k]
         elif cls == 0x00:  # ld abs
             size = {0x00: 4, 0x08: 2, 0x10: 1}[code & 0x18]
             if k + size > len(packet):
@@ -134,6 +141,25 @@ def test_socket_filter_drops_own_datagrams_only() -> None:
     assert _run_bpf(prog, _udp(datagram, 41000)) == 0
     assert _run_bpf(prog, _udp(datagram, 41001)) != 0
     assert _run_bpf(prog, _udp(b"x", 41001)) != 0  # user space counts what is not a frame
+
+
+@pytest.mark.parametrize("masks", [None, [(0x10, 0x7FF)]])
+def test_socket_filter_host_only_drops_what_other_hosts_send(
+        masks: list[tuple[int, int]] | None) -> None:
+    """Kept: anything that arrived on loopback (index 1 here) and the copies of this host's
+    own multicast sends on another interface (index 4); dropped: multicast from the network."""
+    prog = udp_wire.socket_filter(41000, masks, host_only=1)
+    datagram = _udp(pack_message(can.Message(arbitration_id=0x10, data=b"\x01")))
+    assert _run_bpf(prog, datagram, PACKET_MULTICAST, ifindex=1) != 0
+    assert _run_bpf(prog, datagram, 0, ifindex=1) != 0  # PACKET_HOST, as loopback delivers
+    assert _run_bpf(prog, datagram, udp_wire.PACKET_LOOPBACK, ifindex=4) != 0
+    assert _run_bpf(prog, datagram, PACKET_MULTICAST, ifindex=4) == 0
+    assert _run_bpf(prog, datagram, 0, ifindex=4) == 0
+    assert _run_bpf(prog, _udp(b"x"), PACKET_MULTICAST, ifindex=4) == 0  # not even to count
+    assert _run_bpf(prog, _udp(b"x", 41000), udp_wire.PACKET_LOOPBACK, ifindex=4) == 0  # own
+    many = udp_wire.socket_filter(41000, [(i, 0x7FF) for i in range(48)], host_only=1)
+    assert _run_bpf(many, datagram, PACKET_MULTICAST, ifindex=4) == 0
+    assert _run_bpf(many, datagram, udp_wire.PACKET_LOOPBACK, ifindex=4) != 0
 
 
 def test_socket_filter_keeps_what_python_can_filters_keep() -> None:

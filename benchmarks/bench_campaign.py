@@ -22,7 +22,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from benchmarks.common import Row
+from benchmarks.common import Row, stop_processes
 
 CAMPAIGN = """
 [campaign]
@@ -77,13 +77,7 @@ def _cluster(workers: int, tmp: Path) -> Iterator[str]:
                   for _ in range(workers)]
         yield address
     finally:  # workers first, then the scheduler they would wait for
-        for p in reversed(procs):
-            p.terminate()
-            try:
-                p.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        stop_processes(reversed(procs))
 
 
 def overhead(runs: int, tmp: Path) -> list[Row]:

@@ -34,7 +34,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.common import Row, percentile
+from benchmarks.common import Row, percentile, stop_processes
 from lowerbase.transport import free_loopback_port
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -283,13 +283,7 @@ def bench_latency_ros(n: int) -> tuple[list[float], str] | None:
         result = json.loads(out.stdout.strip().splitlines()[-1])
         return result["latencies_us"], f"{len(result['latencies_us'])}/{result['sent']} matched"
     finally:
-        for proc in reversed(procs):
-            proc.terminate()
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        stop_processes(reversed(procs), timeout=10.0)
         shutil.rmtree(home, ignore_errors=True)
 
 

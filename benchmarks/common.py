@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import statistics
+import subprocess
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 
@@ -33,3 +34,16 @@ def percentile(values: list[float], p: float) -> float:
     if len(values) == 1:
         return values[0]
     return statistics.quantiles(values, n=1000, method="inclusive")[max(0, int(p * 10) - 1)]
+
+
+def stop_processes(procs: Iterable[subprocess.Popen[str]], timeout: float = 15.0) -> None:
+    """SIGTERM each still running process in turn (give them in stopping order, e.g. workers
+    before the scheduler they would wait for), wait ``timeout`` [s] for it, then SIGKILL."""
+    for p in procs:
+        if p.poll() is None:
+            p.terminate()
+        try:
+            p.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 import lowerbase
+from benchmarks.common import stop_processes
 from lowerbase.campaign.engine import open_client, quiet_dask
 from lowerbase.campaign.execute import run_one
 from lowerbase.campaign.plan import load_campaign, plan_run
@@ -70,14 +71,7 @@ def cluster(tmp_path: Path) -> Iterator[tuple[str, list[subprocess.Popen[bytes]]
         procs += workers
         yield address, workers
     finally:  # workers first, then the scheduler they would wait for
-        for p in reversed(procs):
-            if p.poll() is None:
-                p.terminate()
-            try:
-                p.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        stop_processes(reversed(procs))
         for f in logs:
             f.close()
 

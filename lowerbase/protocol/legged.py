@@ -17,7 +17,7 @@ from pathlib import Path
 
 from lowerbase.protocol.codec import Codec
 
-LEGGED_DBC_PATH = Path(__file__).resolve().parent.parent / "protocol" / "legged.dbc"
+LEGGED_DBC_PATH = Path(__file__).resolve().with_name("legged.dbc")
 
 #: legs in bus order: bus k carries leg LEGS[k]
 LEGS: tuple[str, ...] = ("FR", "FL", "RR", "RL")

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -48,7 +49,9 @@ class BackOff:
         self._start: Pose | None = None
         self._t0 = 0.0
         self._sign = -1.0
+        self._chosen = False
         self.count = 0  #: back-offs begun (for the stats)
+        self.flipped = 0  #: back-offs that went the other way (the way back was blocked)
 
     @property
     def active(self) -> bool:
@@ -57,6 +60,7 @@ class BackOff:
     def begin(self, pose: Pose, now: float, reversed_driving: bool) -> None:
         self._start, self._t0 = pose, now
         self._sign = 1.0 if reversed_driving else -1.0
+        self._chosen = False  # the direction is chosen at the first step (see step)
         self.count += 1
 
     def cancel(self) -> None:
@@ -74,19 +78,34 @@ class BackOff:
         if moved >= cfg.distance or now - self._t0 >= cfg.timeout:
             self._start = None
             return None
+        if self._clear(self._sign, pose, moved, costs, origin, footprint):
+            self._chosen = True
+            return self._sign * cfg.speed
+        if not self._chosen and self._clear(-self._sign, pose, moved, costs, origin, footprint):
+            # the way it came is blocked (a skewed robot's corner at a wall): back off the
+            # other way, into the footprint's free space, as a StepControl move would
+            self._sign, self._chosen = -self._sign, True
+            self.flipped += 1
+            return self._sign * cfg.speed
+        self._start = None
+        return None
+
+    def _clear(self, sign: float, pose: Pose, moved: float, costs: np.ndarray,
+               origin: tuple[float, float], footprint: FootprintCells) -> bool:
+        """Whether the footprint's sweep ``sign``-wards (1 forward, -1 back) stays off lethal
+        cells: over the next ``lookahead``; when it touches one already (the robot wedged, or
+        the estimate off by a few cm in a tight aisle), at the end of the back-off."""
+        cfg = self.config
+        x, y, yaw = pose
         c, sn = math.cos(yaw), math.sin(yaw)
         if footprint.max_cost(costs, origin, x, y, yaw)[0] >= LETHAL:
-            # already touching a lethal cell (the robot wedged, or the estimate off by a few
-            # cm in a tight aisle): go on only if the end of the back-off is clear of them
-            back = self._sign * (cfg.distance - moved)
+            back = sign * (cfg.distance - moved)
             px, py = np.array([x + back * c]), np.array([y + back * sn])
         else:
-            s = np.linspace(0.0, cfg.lookahead, 5)[1:] * self._sign
+            s = np.linspace(0.0, cfg.lookahead, 5)[1:] * sign
             px, py = x + s * c, y + s * sn
-        if (footprint.max_cost(costs, origin, px, py, np.full_like(px, yaw)) >= LETHAL).any():
-            self._start = None
-            return None
-        return self._sign * cfg.speed
+        return not bool((footprint.max_cost(costs, origin, px, py, np.full_like(px, yaw))
+                         >= LETHAL).any())
 
 
 @dataclass(frozen=True)
@@ -156,16 +175,31 @@ TURNING = "recovery: turning in place, then replanning"
 #: straight away); a wedged robot (its footprint on a lethal cell) always backs off first
 ORDER: tuple[str, ...] = ("back_off", "clear_conservative", "rotate", "clear_aggressive")
 
+#: the recovery behaviours there are (NavigatorConfig.recovery_behaviors picks and orders them)
+BEHAVIORS = frozenset(("back_off", "clear_conservative", "rotate", "clear_aggressive"))
+
+
+def check_behaviors(names: Sequence[str]) -> str:
+    """'' or why ``names`` is no recovery order (unknown names, or none)."""
+    if isinstance(names, str) or not names:
+        return f"a non-empty list of {', '.join(sorted(BEHAVIORS))}, got {names!r}"
+    unknown = [n for n in names if n not in BEHAVIORS]
+    if unknown:
+        return f"unknown {', '.join(map(repr, unknown))}; known: {', '.join(sorted(BEHAVIORS))}"
+    return ""
+
 
 class Recoveries:
     """A navigator's recoveries: which one runs before a blocked replan (:meth:`choose`, in
     the order of :data:`ORDER`) and the one running (:meth:`step`)."""
 
     def __init__(self, back_off: BackOffConfig | None = None, rotate: RotateConfig | None = None,
-                 clear: ClearCostmap | None = None) -> None:
+                 clear: ClearCostmap | None = None,
+                 behaviors: Sequence[str] = ORDER) -> None:
         self.back_off = BackOff(back_off)
         self.rotate = Rotate(rotate)
         self.clear = clear or ClearCostmap()
+        self.behaviors = tuple(behaviors)
         self.log: list[str] = []  #: every recovery chosen, oldest first
 
     @staticmethod
@@ -176,6 +210,26 @@ class Recoveries:
         if replans < 2:
             return ""
         return ORDER[min(replans - 2, len(ORDER) - 1)]
+
+    def pick(self, replans: int, wedged: bool) -> str:
+        """:meth:`choose` on this navigator's ``behaviors``."""
+        if wedged:
+            return "back_off"
+        if replans < 2:
+            return ""
+        order = self.behaviors
+        return order[min(replans - 2, len(order) - 1)]
+
+    def clear_for_plan(self, local: LayeredCostmap) -> bool:
+        """No plan: forget every mark of the ``local`` costmap (its obstacle layer reset to
+        free; the next scan marks what is there now). False: it held none (nothing to
+        retry)."""
+        layer = local.obstacle_layer
+        if layer is None or not (layer.map.data != layer.map.default).any():
+            return False
+        self.log.append("clear_for_plan")
+        local.clear()
+        return True
 
     def begin(self, step: str, pose: Pose, now: float, reversed_driving: bool,
               local: LayeredCostmap) -> str:

@@ -125,6 +125,10 @@ class Navigator:
         res = self.grid.resolution
         self._fp_forward = FootprintCells(pts, res)
         self._fp_reverse = FootprintCells([(-x, -y) for x, y in pts], res)
+        # the robot itself, without footprint_padding: what a recovery move keeps off lethal
+        # cells (the padding is the planner's margin; a StepControl move has none either)
+        body = [(float(x), float(y)) for x, y in self.global_costmap.footprint.points]
+        self._fp_body = FootprintCells(body, res)
 
     def _controller_config(self) -> ControllerConfig:
         cfg = self.config
@@ -334,7 +338,10 @@ class Navigator:
             self._progress.restart(now, p)
         if self._recovery.active:
             twist = self._recovery.step(p, now, self.combined.costs, self.combined.origin,
-                                        self._fp_forward)
+                                        self._fp_forward, self.local_costmap, self._fp_body)
+            if twist is None and self._recovery.resense(p, now, self.local_costmap):
+                self.combined.refresh()  # stale marks around the robot gone; re-sense
+                twist = (0.0, 0.0)
             if twist is not None:
                 self._progress.restart(now, p)  # recovering is not being stuck
                 return NavCommand(*twist, GoalState.ACTIVE, Status.BLOCKED, self.reason)

@@ -19,8 +19,8 @@ again), ``ClearCostmap`` aggressive (every local mark forgotten).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -39,6 +39,10 @@ class BackOffConfig:
     speed: float = 0.1  #: [m/s]
     lookahead: float = 0.1  #: [m] the sweep that must stay off lethal cells
     timeout: float = 6.0  #: [s] give up backing off after this long (wheels slipping)
+    #: [m] both ways blocked before moving: forget the local marks in a square this wide
+    #: around the robot, wait for the next scan to mark what is there, try once more
+    #: (stale marks beside the robot, where no ray clears them; 0: never)
+    resense_clear: float = 2.0
 
 
 class BackOff:
@@ -49,9 +53,11 @@ class BackOff:
         self._start: Pose | None = None
         self._t0 = 0.0
         self._sign = -1.0
+        self._reversed = False
         self._chosen = False
         self.count = 0  #: back-offs begun (for the stats)
         self.flipped = 0  #: back-offs that went the other way (the way back was blocked)
+        self.blocked = False  #: the last back-off ended before moving: both ways blocked
 
     @property
     def active(self) -> bool:
@@ -59,51 +65,73 @@ class BackOff:
 
     def begin(self, pose: Pose, now: float, reversed_driving: bool) -> None:
         self._start, self._t0 = pose, now
+        self._reversed = reversed_driving
         self._sign = 1.0 if reversed_driving else -1.0
         self._chosen = False  # the direction is chosen at the first step (see step)
+        self.blocked = False
         self.count += 1
+
+    def restart(self, pose: Pose, now: float) -> None:
+        """The same back-off again from ``pose`` (after a re-sense), its direction chosen anew."""
+        self.begin(pose, now, self._reversed)
+        self.count -= 1
 
     def cancel(self) -> None:
         self._start = None
 
     def step(self, pose: Pose, now: float, costs: np.ndarray, origin: tuple[float, float],
-             footprint: FootprintCells) -> float | None:
+             footprint: FootprintCells, body: FootprintCells | None = None) -> float | None:
         """The linear speed [m/s] to command now, or None: the back-off is over (far enough,
-        the way back is blocked too, or the timeout)."""
+        both ways blocked, or the timeout).
+
+        The direction is chosen at the first step: of the two ways along the heading whose
+        sweep over ``distance`` keeps the robot's ``body`` (its footprint without the
+        costmap's padding; None: ``footprint``) off lethal cells, the one ending with the
+        padded ``footprint`` on the lower cost (further from obstacles), the way it came on a
+        tie. A skewed robot whose corner is at a wall behind it thus backs off forwards, into
+        the free space, as a StepControl move would."""
         start, cfg = self._start, self.config
         if start is None:
             return None
+        fp = body or footprint
         x, y, yaw = pose
         moved = math.hypot(x - start[0], y - start[1])
         if moved >= cfg.distance or now - self._t0 >= cfg.timeout:
             self._start = None
             return None
-        if self._clear(self._sign, pose, moved, costs, origin, footprint):
-            self._chosen = True
-            return self._sign * cfg.speed
-        if not self._chosen and self._clear(-self._sign, pose, moved, costs, origin, footprint):
-            # the way it came is blocked (a skewed robot's corner at a wall): back off the
-            # other way, into the footprint's free space, as a StepControl move would
-            self._sign, self._chosen = -self._sign, True
-            self.flipped += 1
-            return self._sign * cfg.speed
-        self._start = None
-        return None
+        if not self._chosen:
+            best: tuple[float, float] | None = None
+            for sign in (self._sign, -self._sign):
+                if not self._clear(sign, pose, cfg.distance, costs, origin, fp):
+                    continue
+                end = footprint.max_cost(costs, origin, x + sign * cfg.distance * math.cos(yaw),
+                                         y + sign * cfg.distance * math.sin(yaw), yaw)[0]
+                if best is None or end < best[0]:
+                    best = (float(end), sign)
+            if best is None:
+                self.blocked = True  # ended without moving: both ways blocked
+                self._start = None
+                return None
+            self.flipped += best[1] != self._sign
+            self._sign, self._chosen = best[1], True
+        elif not self._clear(self._sign, pose, cfg.lookahead, costs, origin, fp):
+            self._start = None
+            return None
+        return self._sign * cfg.speed
 
-    def _clear(self, sign: float, pose: Pose, moved: float, costs: np.ndarray,
+    def _clear(self, sign: float, pose: Pose, length: float, costs: np.ndarray,
                origin: tuple[float, float], footprint: FootprintCells) -> bool:
-        """Whether the footprint's sweep ``sign``-wards (1 forward, -1 back) stays off lethal
-        cells: over the next ``lookahead``; when it touches one already (the robot wedged, or
-        the estimate off by a few cm in a tight aisle), at the end of the back-off."""
-        cfg = self.config
+        """Whether the footprint's sweep ``sign``-wards (1 forward, -1 back) over ``length``
+        stays off lethal cells; when it touches one already (the robot wedged, or the
+        estimate off by a few cm in a tight aisle), whether the end of the sweep does."""
         x, y, yaw = pose
         c, sn = math.cos(yaw), math.sin(yaw)
         if footprint.max_cost(costs, origin, x, y, yaw)[0] >= LETHAL:
-            back = sign * (cfg.distance - moved)
-            px, py = np.array([x + back * c]), np.array([y + back * sn])
+            s = np.array([length * sign])
         else:
-            s = np.linspace(0.0, cfg.lookahead, 5)[1:] * sign
-            px, py = x + s * c, y + s * sn
+            n = max(2, math.ceil(length / 0.025) + 1)
+            s = np.linspace(0.0, length, n)[1:] * sign
+        px, py = x + s * c, y + s * sn
         return not bool((footprint.max_cost(costs, origin, px, py, np.full_like(px, yaw))
                          >= LETHAL).any())
 
@@ -126,6 +154,7 @@ class Rotate:
         self._turned = 0.0
         self._t0 = 0.0
         self.count = 0  #: turns begun
+        self.blocked = False  #: the last turn ended before turning: its sweep was blocked
 
     @property
     def active(self) -> bool:
@@ -133,6 +162,7 @@ class Rotate:
 
     def begin(self, pose: Pose, now: float) -> None:
         self._last, self._turned, self._t0 = pose[2], 0.0, now
+        self.blocked = False
         self.count += 1
 
     def cancel(self) -> None:
@@ -154,6 +184,7 @@ class Rotate:
         ahead = yaw + np.linspace(0.0, cfg.lookahead, 5)[1:]
         if (footprint.max_cost(costs, origin, np.full_like(ahead, x), np.full_like(ahead, y),
                                ahead) >= LETHAL).any():
+            self.blocked = self._turned < 1e-3  # could not start turning
             self._last = None
             return None
         return cfg.speed
@@ -200,6 +231,9 @@ class Recoveries:
         self.rotate = Rotate(rotate)
         self.clear = clear or ClearCostmap()
         self.behaviors = tuple(behaviors)
+        #: waiting for a sensor update after clear_around: (updates then, pose, time)
+        self._resense: tuple[int, str, float] | None = None
+        self._resensed = False  #: clear_around done in this recovery already
         self.log: list[str] = []  #: every recovery chosen, oldest first
 
     @staticmethod
@@ -237,6 +271,8 @@ class Recoveries:
         returned, :meth:`step` drives it) or a reset of the ``local`` costmap's marks, done
         at once ('' returned)."""
         self.log.append(step)
+        self._resensed = False
+        self.back_off.blocked = self.rotate.blocked = False
         if step == "back_off":
             self.back_off.begin(pose, now, reversed_driving)
             return BACKING_OFF
@@ -252,17 +288,65 @@ class Recoveries:
 
     @property
     def active(self) -> bool:
-        return self.back_off.active or self.rotate.active
+        return self.back_off.active or self.rotate.active or self._resense is not None
 
     def cancel(self) -> None:
         self.back_off.cancel()
         self.rotate.cancel()
+        self._resense = None
+
+    def resense(self, pose: Pose, now: float, local: LayeredCostmap) -> bool:
+        """A back-off that found both ways blocked before moving escalates once: the local
+        marks in a ``resense_clear`` square around the robot are forgotten (clear_costmap's
+        reset, but around the robot, where the conservative one keeps them), and the back-off
+        starts again after the next sensor update has marked what is really there. True:
+        escalated (the caller refreshes the costs; :meth:`step` holds still until then)."""
+        size = self.back_off.config.resense_clear
+        move = "back_off" if self.back_off.blocked else "rotate" if self.rotate.blocked else ""
+        if not move or self._resensed or size <= 0:
+            return False
+        self.back_off.blocked = self.rotate.blocked = False
+        self._resensed = True
+        self.log.append("clear_around")
+        clear_inside(local, pose[0], pose[1], size)
+        self._resense = (local.stats.updates, move, now)
+        return True
 
     def step(self, pose: Pose, now: float, costs: np.ndarray, origin: tuple[float, float],
-             footprint: FootprintCells) -> tuple[float, float] | None:
-        """(linear, angular) to command now, or None: no recovery runs (any more)."""
+             footprint: FootprintCells, local: LayeredCostmap | None = None,
+             body: FootprintCells | None = None) -> tuple[float, float] | None:
+        """(linear, angular) to command now, or None: no recovery runs (any more). ``body``:
+        the robot's footprint without the costmap's padding, which the back-off keeps off
+        lethal cells (None: ``footprint``)."""
+        if self._resense is not None:
+            updates, move, t0 = self._resense
+            if local is not None and local.stats.updates <= updates \
+                    and now - t0 < self.back_off.config.timeout:
+                return (0.0, 0.0)  # standing still until a scan has marked what is there
+            self._resense = None
+            if move == "back_off":
+                self.back_off.restart(pose, now)
+            else:
+                self.rotate.begin(pose, now)
+                self.rotate.count -= 1  # the same turn, tried again
         if self.back_off.active:
-            v = self.back_off.step(pose, now, costs, origin, footprint)
+            v = self.back_off.step(pose, now, costs, origin, footprint, body)
             return None if v is None else (v, 0.0)
         w = self.rotate.step(pose, now, costs, origin, footprint)
         return None if w is None else (0.0, w)
+
+
+def clear_inside(local: LayeredCostmap, x: float, y: float, size: float) -> int:
+    """Forget the ``local`` costmap's marks inside the ``size`` x ``size`` m square centred on
+    (x, y) [m] (cells whose centre lies inside); the number of marked cells forgotten."""
+    layer = local.obstacle_layer
+    if layer is None:
+        return 0
+    m = layer.map
+    cols = m.origin[0] + (np.arange(m.width) + 0.5) * m.resolution
+    rows = m.origin[1] + (np.arange(m.height) + 0.5) * m.resolution
+    inside = (np.abs(rows - y)[:, None] <= 0.5 * size) & (np.abs(cols - x)[None, :] <= 0.5 * size)
+    forget = inside & (m.data != m.default)
+    m.data[forget] = m.default
+    local.clear_outside(x, y, math.inf)  # marks the master grid for a rebuild; forgets nothing
+    return int(forget.sum())

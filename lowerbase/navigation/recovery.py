@@ -4,16 +4,24 @@
 A robot can wedge itself where its footprint has no lethal-free motion along the plan (a
 rectangular base turning in an aisle it fits only straight): the controller answers BLOCKED on
 every tick, and replanning from the same pose gives the same plan. Before each replan the
-navigator therefore backs the robot off the way it came: straight back (forward when it was
-driving reversed) at ``speed`` for up to ``distance``, as long as the footprint's sweep over the
-next ``lookahead`` stays off lethal cells (when the footprint already touches one, as long as the
-end of the back-off is clear), then stops and replans from there.
+navigator therefore backs the robot off: straight along its heading at ``speed`` for up to
+``distance``, the way it came (back; forward when it was driving reversed) or the other way,
+whichever keeps the robot's own footprint (without the costmap's padding, as a StepControl
+move) off lethal cells and ends further from obstacles (the way it came on a tie); while it
+moves, the sweep over the next ``lookahead`` must stay clear (when the footprint already touches
+a lethal cell, the end of the back-off). When both ways look blocked before it moved, it
+escalates once: the local marks in a ``resense_clear`` square around the robot are forgotten
+(stale marks beside the robot that no ray clears), it waits for the next scan to mark what is
+there and tries again. A turn that cannot start does the same.
 
-move_base's own behaviours follow when blocked replans go on (``ORDER``, one per replan):
-``ClearCostmap`` conservative (the local marks outside a ``reset_distance`` square around the
-robot forgotten: stale marks of something gone that the lidars no longer see), ``Rotate`` (a
-full turn in place while the footprint's sweep stays off lethal cells: the lidars see all round
-again), ``ClearCostmap`` aggressive (every local mark forgotten).
+move_base's own behaviours follow when blocked replans go on (``recovery_behaviors``, default
+``ORDER``, one per replan): ``ClearCostmap`` conservative (the local marks outside a
+``reset_distance`` square around the robot forgotten: stale marks of something gone that the
+lidars no longer see), ``Rotate`` (a full turn in place while the footprint's sweep stays off
+lethal cells: the lidars see all round again), ``ClearCostmap`` aggressive (every local mark
+forgotten). No plan at all while the local costmap holds marks: its obstacle layer is reset
+and the planner tried once more (:meth:`Recoveries.clear_for_plan`, move_base's recoveries
+after a planner failure).
 """
 
 from __future__ import annotations

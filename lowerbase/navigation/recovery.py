@@ -152,16 +152,18 @@ class RotateConfig:
 
 
 class Rotate:
-    """rotate_recovery: one full turn in place (counter-clockwise), :meth:`begin` then
-    :meth:`step` each tick until it says done (turned 2 pi, the sweep ahead would touch a
-    lethal cell, or the timeout)."""
+    """rotate_recovery: one full turn in place, :meth:`begin` then :meth:`step` each tick until
+    it says done (turned 2 pi, the sweep ahead would touch a lethal cell, or the timeout).
+    Counter-clockwise, as rotate_recovery; clockwise when only that way has room to start."""
 
     def __init__(self, config: RotateConfig | None = None) -> None:
         self.config = config or RotateConfig()
         self._last: float | None = None
         self._turned = 0.0
         self._t0 = 0.0
+        self._sign = 1.0
         self.count = 0  #: turns begun
+        self.clockwise = 0  #: turns that went clockwise (no room counter-clockwise)
         self.blocked = False  #: the last turn ended before turning: its sweep was blocked
 
     @property
@@ -169,7 +171,7 @@ class Rotate:
         return self._last is not None
 
     def begin(self, pose: Pose, now: float) -> None:
-        self._last, self._turned, self._t0 = pose[2], 0.0, now
+        self._last, self._turned, self._t0, self._sign = pose[2], 0.0, now, 1.0
         self.blocked = False
         self.count += 1
 
@@ -189,13 +191,22 @@ class Rotate:
         if self._turned >= 2.0 * math.pi - 0.05 or now - self._t0 >= cfg.timeout:
             self._last = None
             return None
-        ahead = yaw + np.linspace(0.0, cfg.lookahead, 5)[1:]
-        if (footprint.max_cost(costs, origin, np.full_like(ahead, x), np.full_like(ahead, y),
-                               ahead) >= LETHAL).any():
-            self.blocked = self._turned < 1e-3  # could not start turning
-            self._last = None
-            return None
-        return cfg.speed
+
+        def room(sign: float) -> bool:
+            ahead = yaw + sign * np.linspace(0.0, cfg.lookahead, 5)[1:]
+            return not bool((footprint.max_cost(costs, origin, np.full_like(ahead, x),
+                                                np.full_like(ahead, y), ahead)
+                             >= LETHAL).any())
+
+        if room(self._sign):
+            return self._sign * cfg.speed
+        if self._turned < 1e-3 and self._sign > 0 and room(-1.0):
+            self._sign = -1.0
+            self.clockwise += 1
+            return -cfg.speed
+        self.blocked = self._turned < 1e-3  # could not start turning
+        self._last = None
+        return None
 
 
 @dataclass(frozen=True)

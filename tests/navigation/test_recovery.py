@@ -247,3 +247,16 @@ def test_no_plan_because_of_stale_marks_resets_the_local_costmap_and_plans_again
     mark(off, pose, [(5.0, 5.3)])
     off.send_goal((5.0, 5.0, 0.0), now=0.0)
     assert off.tick(0.0, pose).state is GoalState.ABORTED
+
+
+def test_rotate_turns_clockwise_when_only_that_way_has_room() -> None:
+    costs = grid([])
+    costs[int((2.5 + 0.36) / RES), int((2.5 + 0.38) / RES)] = LETHAL  # by the front-left corner
+    pose = (2.5, 2.5, 0.0)
+    assert FP.max_cost(costs, (0.0, 0.0), *pose)[0] < LETHAL
+    assert FP.max_cost(costs, (0.0, 0.0), 2.5, 2.5, 0.15)[0] >= LETHAL  # no room to the left
+    r = Rotate()
+    r.begin(pose, 0.0)
+    assert r.step(pose, 0.05, costs, (0.0, 0.0), FP) == pytest.approx(-0.5)
+    assert r.step((2.5, 2.5, -0.1), 0.25, costs, (0.0, 0.0), FP) == pytest.approx(-0.5)
+    assert r.clockwise == 1 and not r.blocked

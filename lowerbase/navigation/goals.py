@@ -18,7 +18,7 @@ from lowerbase.navigation.controller import ControllerConfig, Status, wrap
 from lowerbase.navigation.costmap import CostmapParams
 from lowerbase.navigation.layers import InflationParams
 from lowerbase.navigation.planner import INSCRIBED, GlobalPlanner
-from lowerbase.navigation.recovery import BackOffConfig
+from lowerbase.navigation.recovery import ORDER, BackOffConfig, check_behaviors
 from lowerbase.text import num, point
 
 Pose = tuple[float, float, float]
@@ -74,6 +74,11 @@ class NavigatorConfig:
     narrow_penalty: float = 10.0
     controller: ControllerConfig = field(default_factory=ControllerConfig)
     back_off: BackOffConfig = field(default_factory=BackOffConfig)  #: before each replan
+    #: move_base's recovery_behaviors: what runs before the 2nd, 3rd, ... blocked replan
+    #: (names of ``recovery.BEHAVIORS``; the last one repeats)
+    recovery_behaviors: tuple[str, ...] = ORDER
+    #: no plan while the local costmap holds marks: reset its obstacle layer, plan again
+    clear_on_no_path: bool = True
 
     def __post_init__(self) -> None:
         for name in ("xy_tolerance", "yaw_tolerance", "blocked_patience", "stuck_timeout",
@@ -88,6 +93,9 @@ class NavigatorConfig:
                 and math.isfinite(self.narrow_penalty) and self.narrow_penalty >= 1):
             raise NavigationError(f"navigator narrow_penalty = {self.narrow_penalty!r} is "
                                   f"invalid; allowed: >= 1")
+        why = check_behaviors(self.recovery_behaviors)
+        if why:
+            raise NavigationError(f"navigator recovery_behaviors: {why}")
         for name in ("max_replans", "max_early_replans"):
             v = getattr(self, name)
             if not isinstance(v, int) or v < 0:

@@ -110,7 +110,8 @@ class Navigator:
         self.early_replans = 0  #: replans because the local costmap blocked the path ahead
         self.planning = GoalPlanner(cfg, self.global_costmap, self.combined, grid.resolution)
         self.path: list[Pose] = []  #: the plan being followed (map frame)
-        self._recovery = Recoveries(self.config.back_off)
+        self._recovery = Recoveries(self.config.back_off,
+                                    behaviors=self.config.recovery_behaviors)
         self._reset_goal_state()
 
     @property
@@ -124,6 +125,10 @@ class Navigator:
         res = self.grid.resolution
         self._fp_forward = FootprintCells(pts, res)
         self._fp_reverse = FootprintCells([(-x, -y) for x, y in pts], res)
+        # the robot itself, without footprint_padding: what a recovery move keeps off lethal
+        # cells (the padding is the planner's margin; a StepControl move has none either)
+        body = [(float(x), float(y)) for x, y in self.global_costmap.footprint.points]
+        self._fp_body = FootprintCells(body, res)
 
     def _controller_config(self) -> ControllerConfig:
         cfg = self.config
@@ -267,7 +272,19 @@ class Navigator:
         return NavCommand(0.0, 0.0, state, Status.IDLE, reason)
 
     def _plan(self, pose: Pose) -> str:
-        """Plan from ``pose`` through the remaining waypoints; '' or why there is no plan."""
+        """Plan from ``pose`` through the remaining waypoints; '' or why there is no plan.
+        With no plan while the local costmap holds marks, move_base's planner-failure
+        recovery first: the local obstacle layer reset (marks made with a heading error, or
+        of something gone, whose keep-out closes an aisle), then one more plan; the next scan
+        marks what is really there."""
+        why = self._plan_once(pose)
+        if why and self.config.clear_on_no_path and self._recovery.clear_for_plan(
+                self.local_costmap):
+            self.combined.refresh()
+            why = self._plan_once(pose)
+        return why
+
+    def _plan_once(self, pose: Pose) -> str:
         goals = self._waypoints[:1] if self._point_by_point else self._waypoints
         planned = self.planning.through(pose, goals, self.mode, self._fp_forward)
         if isinstance(planned, str):
@@ -321,7 +338,10 @@ class Navigator:
             self._progress.restart(now, p)
         if self._recovery.active:
             twist = self._recovery.step(p, now, self.combined.costs, self.combined.origin,
-                                        self._fp_forward)
+                                        self._fp_forward, self.local_costmap, self._fp_body)
+            if twist is None and self._recovery.resense(p, now, self.local_costmap):
+                self.combined.refresh()  # stale marks around the robot gone; re-sense
+                twist = (0.0, 0.0)
             if twist is not None:
                 self._progress.restart(now, p)  # recovering is not being stuck
                 return NavCommand(*twist, GoalState.ACTIVE, Status.BLOCKED, self.reason)
@@ -402,7 +422,7 @@ class Navigator:
             # wedged (the footprint on a lethal cell) or a replan that did not help: a
             # recovery first (recovery.ORDER), then the replan (in tick, after a move)
             here = self._fp_forward.max_cost(self.combined.costs, self.combined.origin, *p)[0]
-            step = self._recovery.choose(self.replans, here >= LETHAL)
+            step = self._recovery.pick(self.replans, here >= LETHAL)
             if step:
                 moving = self._recovery.begin(step, p, now, self._reverse, self.local_costmap)
                 if moving:  # backing off or turning first

@@ -13,7 +13,14 @@ import pytest
 
 from lowerbase.navigation.controller import Command, Status
 from lowerbase.navigation.costmap import local_costmap
-from lowerbase.navigation.navigator import GoalState, Navigator, NavigatorConfig
+from lowerbase.navigation.layers import Observation
+from lowerbase.navigation.modes import NavigationModeGoal
+from lowerbase.navigation.navigator import (
+    GoalState,
+    NavigationError,
+    Navigator,
+    NavigatorConfig,
+)
 from lowerbase.navigation.planner import LETHAL, FootprintCells
 from lowerbase.navigation.recovery import BackOff, BackOffConfig, Rotate, RotateConfig
 from lowerbase.world.footprint import DEFAULT_POINTS
@@ -150,3 +157,106 @@ def test_recoveries_run_in_move_base_s_order_between_blocked_replans() -> None:
     assert seen == [("back_off", True, True), ("clear_conservative", True, False),
                     ("rotate", True, False), ("clear_aggressive", False, False)]
     assert nav._recovery.rotate.count == 1 and nav._recovery.back_off.count == 1
+
+
+def mark(nav: Navigator, pose: tuple[float, float, float], points: list[tuple[float, float]]
+         ) -> None:
+    """Marks at map ``points`` in the navigator's local costmap (an observation that only
+    marks: they stay, as marks no ray clears)."""
+    pts = np.array([(x, y, 0.1) for x, y in points])
+    nav.local_costmap.update_observations(pose, [Observation((pose[0], pose[1], 0.2), pts,
+                                                             clearing=False)])
+    nav.combined.refresh()
+
+
+def test_backs_off_forwards_when_the_way_back_is_blocked() -> None:
+    costs = grid([1.85])  # a wall just behind: backing 0.3 m would touch it
+    b = BackOff()
+    b.begin((2.4, 2.5, 0.0), 0.0, reversed_driving=False)
+    assert b.step((2.4, 2.5, 0.0), 0.05, costs, (0.0, 0.0), FP) == pytest.approx(0.1)
+    assert b.flipped == 1 and not b.blocked
+    assert b.step((2.5, 2.5, 0.0), 1.0, costs, (0.0, 0.0), FP) == pytest.approx(0.1)
+
+
+def test_back_off_keeps_the_body_off_lethal_cells_not_the_padding() -> None:
+    """A wall 0.36 m beside the centre line: inside the padded footprint's sweep, clear of the
+    robot's own (0.3 m half-width): the back-off checked on the body moves."""
+    costs = np.zeros((100, 100), np.uint8)
+    costs[int(2.86 / RES), :] = LETHAL  # a wall along x at y = 2.86
+    padded = FootprintCells([(1.2 * x, 1.2 * y) for x, y in DEFAULT_POINTS], RES)
+    pose = (2.5, 2.5, 0.0)
+    assert padded.max_cost(costs, (0.0, 0.0), *pose)[0] >= LETHAL
+    assert FP.max_cost(costs, (0.0, 0.0), *pose)[0] < LETHAL
+    b = BackOff()
+    b.begin(pose, 0.0, reversed_driving=False)
+    assert b.step(pose, 0.05, costs, (0.0, 0.0), padded) is None and b.blocked
+    b.begin(pose, 0.0, reversed_driving=False)
+    assert b.step(pose, 0.05, costs, (0.0, 0.0), padded, body=FP) == pytest.approx(-0.1)
+
+
+def test_both_ways_blocked_by_stale_marks_clears_around_and_re_senses() -> None:
+    """Marks just ahead of and behind the robot that no scan sees any more: the back-off finds
+    both ways blocked, forgets the marks around the robot, waits for the next sensor update
+    (standing still) and then backs off."""
+    nav = Navigator(room_grid(), NavigatorConfig())
+    nav.set_mode(NavigationModeGoal(navigation_mode=0))  # keep-out 0.5 m: the start is free
+    blocked = Command(0.0, 0.0, Status.BLOCKED, "test: an obstacle ahead")
+    nav.controller.compute = lambda pose: blocked  # type: ignore[method-assign]
+    pose = (5.0, 5.0, 0.0)
+    nav.update_sensors(pose)
+    nav.send_goal((5.0, 8.0, 0.0), now=0.0)
+    # 0.15 m beyond the padded footprint's back and front (the body's: 0.25 m)
+    mark(nav, pose, [(x, y) for x in (4.35, 5.65) for y in (4.9, 5.0, 5.1)])
+    commands = [nav.tick(0.05 * k, pose) for k in range(80)]  # 4 s, no sensor update
+    assert nav._recovery.log[:2] == ["back_off", "clear_around"], nav._recovery.log
+    assert all(c.linear == 0.0 and c.angular == 0.0 for c in commands)
+    assert commands[-1].reason.startswith("recovery: backing")  # waiting for a scan
+    nav.update_sensors(pose)  # the next scan: nothing there
+    cmd = nav.tick(4.0, pose)
+    assert cmd.linear == pytest.approx(-0.1) and cmd.reason.startswith("recovery: backing")
+
+
+def test_recovery_behaviors_are_configurable_and_checked() -> None:
+    nav = Navigator(room_grid(), NavigatorConfig(recovery_behaviors=("clear_aggressive",
+                                                                     "rotate")))
+    assert [nav._recovery.pick(n, False) for n in (1, 2, 3, 4)] == \
+        ["", "clear_aggressive", "rotate", "rotate"]
+    assert nav._recovery.pick(3, True) == "back_off"
+    with pytest.raises(NavigationError, match="unknown 'spin'"):
+        NavigatorConfig(recovery_behaviors=("back_off", "spin"))
+    with pytest.raises(NavigationError, match="non-empty"):
+        NavigatorConfig(recovery_behaviors=())
+
+
+def test_no_plan_because_of_stale_marks_resets_the_local_costmap_and_plans_again() -> None:
+    """A mark whose keep-out covers the goal (something gone, or marked with a heading error):
+    the plan fails, the local obstacle layer is reset, the second plan succeeds."""
+    nav = Navigator(room_grid(), NavigatorConfig())
+    pose = (3.0, 5.0, 0.0)
+    nav.update_sensors(pose)
+    mark(nav, pose, [(5.0, 5.3)])
+    assert not nav.make_plan(pose, (5.0, 5.0, 0.0)).ok  # the mark's keep-out covers the goal
+    nav.send_goal((5.0, 5.0, 0.0), now=0.0)
+    cmd = nav.tick(0.0, pose)
+    assert cmd.state is GoalState.ACTIVE, cmd.reason
+    assert nav._recovery.log == ["clear_for_plan"] and nav.path
+    m = nav.local_costmap.obstacle_layer.map  # type: ignore[union-attr]
+    assert not (m.data == 254).any()
+    off = Navigator(room_grid(), NavigatorConfig(clear_on_no_path=False))
+    off.update_sensors(pose)
+    mark(off, pose, [(5.0, 5.3)])
+    off.send_goal((5.0, 5.0, 0.0), now=0.0)
+    assert off.tick(0.0, pose).state is GoalState.ABORTED
+
+
+def test_rotate_turns_clockwise_when_only_that_way_has_room() -> None:
+    costs = grid([])
+    costs[int((2.5 + 0.36) / RES), int((2.5 + 0.38) / RES)] = LETHAL  # by the front-left corner
+    pose = (2.5, 2.5, 0.0)
+    assert FP.max_cost(costs, (0.0, 0.0), *pose)[0] < LETHAL
+    assert FP.max_cost(costs, (0.0, 0.0), 2.5, 2.5, 0.15)[0] >= LETHAL  # no room to the left
+    r = Rotate()
+    r.begin(pose, 0.0)
+    assert r.step(pose, 0.05, costs, (0.0, 0.0), FP) == pytest.approx(-0.5)
+    assert r.step((2.5, 2.5, -0.1), 0.25, costs, (0.0, 0.0), FP) == pytest.approx(-0.5)
+    assert r.clockwise == 1 and not r.blocked

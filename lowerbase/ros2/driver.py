@@ -10,7 +10,9 @@ parameters come from: ROS 2 parameters of the node, declared with the defaults o
 is ``-p publish_tf:=false``, ``_topics/odom:=/o`` is ``-p topics.odom:=/o``, ``__name:=x`` and
 ``__ns:=/x`` rename and move the node, any other ``a:=b`` is a remapping. An rclpy executor
 thread serves the subscriptions and services; the main thread runs the node's tick loop on
-wall time (``use_sim_time`` and /clock are not done yet: docs/ros2.md).
+wall time, or with ``use_sim_time`` true (``_use_sim_time:=true``) on /clock's time
+(:class:`lowerbase.ros2.clock.Ros2Clock`, as :mod:`lowerbase.driver.rostime` on ROS 1),
+after waiting for the first /clock.
 
 Discovery stays on this host (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``) unless the
 environment says otherwise. rclpy is imported only here and in :mod:`lowerbase.ros2.wire`.
@@ -32,7 +34,7 @@ from lowerbase.errors import RosUnavailableError
 NODE_NAME = "driver_base"
 DEFAULTS = Path(__file__).resolve().parent.parent / "driver" / "config" / "driver_base.yaml"
 #: parameters every rclpy node has; not the driver's
-RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
+RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")  # rclpy's own
 
 
 def import_rclpy() -> Any:
@@ -134,7 +136,8 @@ def run(
     from lowerbase.driver import ros_io
     from lowerbase.driver.node import DriverNode
     from lowerbase.driver.settings import load_settings
-    from lowerbase.ros2.wire import RclpyShim, Ros2Wire, StampedIo
+    from lowerbase.ros2.clock import Ros2Clock
+    from lowerbase.ros2.wire import RclpyShim, Ros2Wire, StampedIo, uses_sim_time
 
     with contextlib.suppress(AttributeError, ValueError):
         sys.stdout.reconfigure(line_buffering=True)  # type: ignore[union-attr]
@@ -156,18 +159,28 @@ def run(
             print("lowerbase driver: replay finished", file=sys.stderr, flush=True)
             shim.signal_shutdown("replay finished")
 
-        link = link_factory(finished)
-        driver = DriverNode(settings, config, link, wire=Ros2Wire(node),
-                            ros=(shim, StampedIo(ros_io)))
-        driver.advertise()
-        driver.start_reader()
-
         def serve() -> None:
             while not shim.is_shutdown():
                 executor.spin_once(timeout_sec=0.1)
 
+        clock: Ros2Clock | None = None
+        if uses_sim_time(node):  # the core and the loop on /clock's time
+            clock = Ros2Clock(node, shim)
+            shim.Time.source = clock.now
         spinner = threading.Thread(target=serve, name="driver_base-rclpy", daemon=True)
         spinner.start()
+        if clock is not None:
+            print("lowerbase driver: use_sim_time is true: waiting for /clock", flush=True)
+            with _signals_to(shim.signal_shutdown):
+                if not clock.wait_for_first():
+                    return 0
+        link = link_factory(finished)
+        driver = DriverNode(settings, config, link, clock=clock, wire=Ros2Wire(node),
+                            ros=(shim, StampedIo(ros_io)))
+        if clock is not None:  # frames handled late lag /clock K x as much (K x real time)
+            driver.core.allow_receive_lag(config.link_timeout)
+        driver.advertise()
+        driver.start_reader()
         scope = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") or (
             "LOCALHOST" if os.environ.get("ROS_LOCALHOST_ONLY") == "1" else "default")
         print(f"lowerbase driver: {shim.get_name()} on ROS 2 (domain "

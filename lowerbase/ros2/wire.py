@@ -112,12 +112,16 @@ class _TimeOf:
 
     def __init__(self, node: Node) -> None:
         self._node = node
+        #: where ROS time comes from instead of the node's clock (a Ros2Clock's ``now``)
+        self.source: Callable[[], float] | None = None
 
     @staticmethod
     def from_sec(seconds: float) -> Stamp:
         return Stamp.from_sec(seconds)
 
     def now(self) -> Stamp:
+        if self.source is not None:
+            return Stamp.from_sec(self.source())
         return Stamp(self._node.get_clock().now().nanoseconds)
 
 
@@ -259,3 +263,13 @@ class Ros2Wire:
 
     def static_broadcaster(self) -> TfBroadcaster:
         return TfBroadcaster(self.node, static=True)
+
+
+def uses_sim_time(node: Node) -> bool:
+    """True when the node's ``use_sim_time`` parameter is (ROS 2's /clock time)."""
+    return bool(node.get_parameter("use_sim_time").value)
+
+
+def clock_qos() -> QoSProfile:
+    """/clock as rclpy's own TimeSource takes it (best effort, depth 1)."""
+    return QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)

@@ -9,6 +9,7 @@
 ``imu``           one /imu/data_raw (sensor-data QoS)
 ``static_pub``    publishes two static transforms through Ros2Wire, then waits to be killed
 ``static_sub``    a late subscriber's /tf_static
+``clock_pub T``   publishes /clock from T s on at the wall clock's pace until killed
 
 Every wait has a deadline (``TIMEOUT``) and fails in one line when it passes.
 """
@@ -28,6 +29,7 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.srv import GetParameters
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -57,7 +59,7 @@ def odom(node: Node, n: int) -> dict[str, Any]:
     node.create_subscription(Odometry, "/odom", got.append, qos_for("/odom", 200))
     spin_until(node, lambda: len(got) > n, f"{n + 1} /odom messages")
     stamps = [sec(m.header.stamp) for m in got[: n + 1]]
-    return {"count": n, "rate": n / (stamps[-1] - stamps[0]),
+    return {"count": n, "rate": n / (stamps[-1] - stamps[0]), "first": stamps[0],
             "frame_id": got[0].header.frame_id, "child_frame_id": got[0].child_frame_id,
             "backwards": sum(b < a for a, b in pairwise(stamps))}
 
@@ -165,6 +167,19 @@ def static_pub(node: Node) -> None:
         rclpy.spin_once(node, timeout_sec=0.5)
 
 
+def clock_pub(node: Node, start: float) -> None:
+    """/clock from ``start`` [s] on, at the wall clock's pace, every 10 ms until killed."""
+    pub = node.create_publisher(Clock, "/clock", 10)
+    t0 = time.monotonic()
+    print("publishing", flush=True)
+    while rclpy.ok():
+        now = start + time.monotonic() - t0
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = int(now), int((now % 1.0) * 1e9)
+        pub.publish(msg)
+        rclpy.spin_once(node, timeout_sec=0.01)
+
+
 def static_sub(node: Node) -> dict[str, Any]:
     got: list[TFMessage] = []
     node.create_subscription(TFMessage, "/tf_static", got.append,
@@ -179,6 +194,9 @@ def main() -> None:
     node = rclpy.create_node(f"lowerbase_probe_{mode}")
     if mode == "static_pub":
         static_pub(node)
+        return
+    if mode == "clock_pub":
+        clock_pub(node, float(args[0]))
         return
     result: Any
     if mode == "odom":

@@ -108,3 +108,29 @@ def test_late_subscriber_gets_tf_static(ros2: Ros2) -> None:
     finally:
         pub.stop(timeout=30)
     assert got == {"laser": 0.2, "camera": 0.3}
+
+
+def test_use_sim_time_follows_clock(ros2: Ros2) -> None:
+    """``_use_sim_time:=true``: the driver waits for /clock, then stamps /odom on its time
+    (here 1000 s and on, at the wall's pace) and still publishes it at 50 Hz of it."""
+    bus = {"interface": "udp_multicast", "channel": TEST_GROUP, "port": free_udp_port(),
+           "hop_limit": 0}
+    procs = [Ros2Proc([sys.executable, "-m", "lowerbase", "emulate", *bus_cli_args(bus)],
+                      dict(os.environ))]
+    try:
+        procs[0].wait_for("lower computer on", timeout=60)
+        node = Ros2Proc([str(ros2.python), "-m", "lowerbase", "driver", "--ros2",
+                         *bus_cli_args(bus), "_use_sim_time:=true"], ros2.env)
+        procs.append(node)
+        node.wait_for("waiting for /clock", timeout=START_TIMEOUT)
+        clock = Ros2Proc([str(ros2.python), str(HERE / "ros2_driver_probe.py"), "clock_pub",
+                          "1000"], ros2.env)
+        procs.append(clock)
+        node.wait_for("on ROS 2", timeout=START_TIMEOUT)
+        got = ros2.run_json("ros2_driver_probe.py", "odom", "100", timeout=200)
+    finally:
+        for p in reversed(procs):
+            p.stop(timeout=30)
+    assert 1000.0 <= got["first"] < 1000.0 + START_TIMEOUT + 200.0, got
+    assert got["backwards"] == 0
+    assert 40.0 <= got["rate"] <= 60.0, got

@@ -49,6 +49,17 @@ def import_rclpy() -> Any:
         raise RosUnavailableError(
             f"ROS 2 is not importable from {sys.executable} ({exc}): run make ros2 and use "
             ".venv-ros2/bin/lowerbase (docs/ros2.md)") from None
+    from rclpy.type_support import check_for_type_support
+    from tf2_msgs.msg import TFMessage
+    from woosh_msgs.msg import Battery
+
+    try:  # the built packages' C libraries, found through LD_LIBRARY_PATH
+        for cls in (Battery, TFMessage):
+            check_for_type_support(cls)
+    except Exception as exc:  # rosidl's UnsupportedTypeSupport
+        raise RosUnavailableError(
+            f"{exc}: run eval \"$(.venv-ros2/bin/lowerbase ros2-env)\" in this shell first "
+            "(docs/ros2.md)") from None
     return rclpy
 
 

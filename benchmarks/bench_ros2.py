@@ -104,7 +104,8 @@ def run(quick: bool = False) -> list[Row]:
     g = "ros2"
     return [
         Row(g, "/odom publish -> rclpy subscriber p99", got["p99_ms"], "ms",
-            f"target <= 5 ms idle; p50 {got['p50_ms']:.2f}, max {got['max_ms']:.2f} ms; "
+            f"target <= 5 ms idle; p50 {got['p50_ms']:.2f}, max {got['max_ms']:.2f} ms "
+            f"(at {got['worst_at_s']:.1f} s), {got['over_10ms']} over 10 ms; "
             f"{got['count']} messages in {seconds:g} s ({got['rate']:.1f} Hz), "
             f"Fast DDS on loopback, reliable QoS; load {got['load']:.1f}"),
         Row(g, "/odom messages lost, driver -> rclpy subscriber", got["lost"], "messages",

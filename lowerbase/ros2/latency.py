@@ -6,7 +6,8 @@ gives it, depth 200), waits (at most 120 s) for the first message, then takes me
 ``SECONDS``. Latency is the subscriber's callback time minus the DDS source timestamp (the
 publisher's ``publish`` call), both this host's system clock; lost is the number of
 publication sequence numbers skipped. Prints one JSON line: count, rate [Hz], p50/p99/max
-latency [ms], lost.
+latency [ms], lost, how many took over 10 ms and when the
+worst came (seconds into the window).
 """
 
 from __future__ import annotations
@@ -56,7 +57,9 @@ def main(argv: list[str]) -> int:
         "count": n, "rate": n / elapsed,
         "p50_ms": statistics.median(ordered) if n else float("nan"),
         "p99_ms": ordered[min(n - 1, int(0.99 * n))] if n else float("nan"),
-        "max_ms": ordered[-1] if n else float("nan"), "lost": lost}))
+        "max_ms": ordered[-1] if n else float("nan"), "lost": lost,
+        "over_10ms": sum(v > 10.0 for v in ordered),
+        "worst_at_s": (latencies.index(ordered[-1]) / n * elapsed) if n else float("nan")}))
     return 0
 
 

@@ -14,8 +14,10 @@ wall time, or with ``use_sim_time`` true (``_use_sim_time:=true``) on /clock's t
 (:class:`lowerbase.ros2.clock.Ros2Clock`, as :mod:`lowerbase.driver.rostime` on ROS 1),
 after waiting for the first /clock.
 
-Discovery stays on this host (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``) unless the
-environment says otherwise. rclpy is imported only here and in :mod:`lowerbase.ros2.wire`.
+Nothing binds beyond loopback unless the environment says otherwise
+(:func:`loopback_only`: a Fast DDS profile with UDP on 127.0.0.1 only, because under
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` alone Fast DDS still binds every interface).
+rclpy is imported only in :mod:`lowerbase.ros2`.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, MutableMapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +36,8 @@ from lowerbase.errors import RosUnavailableError
 NODE_NAME = "driver_base"
 DEFAULTS = Path(__file__).resolve().parent.parent / "driver" / "config" / "driver_base.yaml"
 #: parameters every rclpy node has; not the driver's
+#: the Fast DDS profile that keeps a process on loopback (:func:`loopback_only`)
+LOOPBACK_PROFILE = Path(__file__).resolve().parent / "fastdds_loopback.xml"
 RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")  # rclpy's own
 
 
@@ -61,6 +65,24 @@ def import_rclpy() -> Any:
             f"{exc}: run eval \"$(.venv-ros2/bin/lowerbase ros2-env)\" in this shell first "
             "(docs/ros2.md)") from None
     return rclpy
+
+
+def loopback_only(environ: MutableMapping[str, str]) -> bool:
+    """Keep this process' DDS on 127.0.0.1 unless the environment asks for more: with the
+    discovery range LOCALHOST (or unset) and no Fast DDS profile of the user's, use
+    :data:`LOOPBACK_PROFILE` (UDP bound to 127.0.0.1 only, and shared memory) instead of the
+    range, under which Fast DDS still binds sockets on every interface. True if it did."""
+    scope = environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST") or "LOCALHOST"
+    if scope != "LOCALHOST" or environ.get("ROS_LOCALHOST_ONLY", "1") not in ("1", ""):
+        return False
+    if environ.get("FASTDDS_DEFAULT_PROFILES_FILE") or \
+            environ.get("FASTRTPS_DEFAULT_PROFILES_FILE"):
+        environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        return False
+    environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(LOOPBACK_PROFILE)
+    environ.pop("ROS_LOCALHOST_ONLY", None)
+    environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "SYSTEM_DEFAULT"  # the profile limits it
+    return True
 
 
 def ros2_arguments(ros_args: Sequence[str]) -> list[str]:
@@ -138,9 +160,7 @@ def run(
 ) -> int:
     """:func:`lowerbase.driver.node.run` on ROS 2."""
     rclpy = import_rclpy()
-    if not os.environ.get("ROS_LOCALHOST_ONLY") and \
-            not os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE"):
-        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    loopback_only(os.environ)
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
@@ -192,8 +212,9 @@ def run(
             driver.core.allow_receive_lag(config.link_timeout)
         driver.advertise()
         driver.start_reader()
-        scope = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") or (
-            "LOCALHOST" if os.environ.get("ROS_LOCALHOST_ONLY") == "1" else "default")
+        scope = "loopback only" if os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE") == \
+            str(LOOPBACK_PROFILE) else \
+            os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") or "SYSTEM_DEFAULT"
         print(f"lowerbase driver: {shim.get_name()} on ROS 2 (domain "
               f"{context.get_domain_id()}, discovery {scope}); link {link.description}",
               flush=True)

@@ -8,6 +8,7 @@ loaded 2-core host delays everything), never on a sleep.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
 import subprocess
@@ -35,6 +36,36 @@ class Ros2Proc(Proc):
         self._reader.start()
 
 
+def udp_bound_beyond_loopback(pid: int) -> list[str]:
+    """The local addresses of ``pid``'s UDP sockets (IPv4 and IPv6) that are neither
+    loopback nor a multicast group (the bus's own is one)."""
+    import ipaddress
+
+    inodes = set()
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        with contextlib.suppress(OSError):
+            target = os.readlink(f"/proc/{pid}/fd/{fd}")
+            if target.startswith("socket:["):
+                inodes.add(target[8:-1])
+    bad = []
+    for table in ("udp", "udp6"):
+        with open(f"/proc/{pid}/net/{table}") as f:
+            rows = [line.split() for line in f.readlines()[1:]]
+        for row in rows:
+            if row[9] not in inodes:
+                continue
+            hex_addr, hex_port = row[1].split(":")
+            raw = bytes.fromhex(hex_addr)
+            if len(raw) == 4:
+                address = ipaddress.ip_address(raw[::-1])
+            else:  # four little-endian 32-bit words
+                address = ipaddress.ip_address(b"".join(raw[i:i + 4][::-1]
+                                                        for i in range(0, 16, 4)))
+            if not (address.is_loopback or address.is_multicast):
+                bad.append(f"{address}:{int(hex_port, 16)}")
+    return bad
+
+
 @pytest.fixture(scope="module")
 def driver() -> Iterator[Ros2]:
     """An emulator and ``lowerbase driver --ros2`` on a udp_multicast port of their own."""
@@ -50,7 +81,8 @@ def driver() -> Iterator[Ros2]:
                          *bus_cli_args(bus)], ros2.env)
         procs.append(node)
         line = node.wait_for("on ROS 2", timeout=START_TIMEOUT)
-        assert "/driver_base" in line and "discovery LOCALHOST" in line, line
+        assert "/driver_base" in line and "discovery loopback only" in line, line
+        assert udp_bound_beyond_loopback(node.popen.pid) == []
         yield ros2
         code, err = node.stop(timeout=30)
         assert code == 0, err

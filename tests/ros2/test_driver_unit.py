@@ -8,7 +8,14 @@ import pytest
 
 from lowerbase.cli import main
 from lowerbase.driver.settings import load_settings
-from lowerbase.ros2.driver import DEFAULTS, flatten, ros2_arguments, unflatten
+from lowerbase.ros2.driver import (
+    DEFAULTS,
+    LOOPBACK_PROFILE,
+    flatten,
+    loopback_only,
+    ros2_arguments,
+    unflatten,
+)
 
 
 def test_ros1_arguments_become_ros2_ones() -> None:
@@ -43,3 +50,18 @@ def test_without_rclpy_one_line(capsys: pytest.CaptureFixture[str]) -> None:
 def test_legged_is_not_on_ros2_yet(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["driver", "--ros2", "--robot", "legged", "-i", "virtual", "-c", "x"]) == 1
     assert "--ros2 is for the wheeled robot so far" in capsys.readouterr().err
+
+
+def test_loopback_profile_unless_asked_otherwise() -> None:
+    assert LOOPBACK_PROFILE.is_file()
+    for given in ({}, {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "ROS_LOCALHOST_ONLY": "1"}):
+        env = dict(given)
+        assert loopback_only(env)
+        assert env == {"FASTDDS_DEFAULT_PROFILES_FILE": str(LOOPBACK_PROFILE),
+                       "ROS_AUTOMATIC_DISCOVERY_RANGE": "SYSTEM_DEFAULT"}
+    subnet = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}
+    assert not loopback_only(subnet) and subnet == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}
+    own = {"FASTDDS_DEFAULT_PROFILES_FILE": "/x.xml"}
+    assert not loopback_only(own)
+    assert own == {"FASTDDS_DEFAULT_PROFILES_FILE": "/x.xml",
+                   "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}

@@ -65,6 +65,9 @@ def add_subparser(subparsers: Any) -> None:
     p.add_argument("--replay-param", action="append", default=[], metavar="NAME=VALUE",
                    help="one such parameter by its wire name (e.g. wheelPerimeter=0.6283), "
                    "over --replay-profile or the packaged profile (repeatable)")
+    p.add_argument("--ros2", action="store_true",
+                   help="driver_base on ROS 2 instead (the same topics, services and "
+                   "parameters; run from .venv-ros2 after `make ros2`, docs/ros2.md)")
     p.add_argument("ros_args", nargs="*", metavar="NAME:=VALUE",
                    help="ROS remappings and special keys (see below)")
     p.set_defaults(func=run)
@@ -119,9 +122,17 @@ def run(args: argparse.Namespace) -> int:
 
     ros_args = split_ros_args(args.ros_args)
     if getattr(args, "robot", "wheeled") == "legged":
+        if getattr(args, "ros2", False):
+            raise ConfigError("--ros2 is for the wheeled robot so far (docs/ros2.md)")
         return run_legged(args, ros_args)
     parameters = replay_parameters(args)
-    node.import_ros()  # one clear line when ROS or woosh_msgs is missing, before anything else
+    ros2 = getattr(args, "ros2", False)
+    if ros2:
+        from lowerbase.driver import ros2_node as ros2_driver
+
+        ros2_driver.import_rclpy()  # one clear line when rclpy or the messages are missing
+    else:
+        node.import_ros()  # one clear line when ROS or woosh_msgs is missing, first
     if args.replay:
         if args.serial or getattr(args, "interface", None) or getattr(args, "channel", None):
             raise ConfigError("--replay replaces the bus: drop the bus options")
@@ -141,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
         def link_factory(finished: Any) -> Any:
             return bus_link(config)
 
-    code = node.run(link_factory, ros_args)
+    code = (ros2_driver.run if ros2 else node.run)(link_factory, ros_args)
     if replay is not None:
         if replay.skipped_lines:
             print(f"lowerbase driver: {replay.skipped_lines} line(s) of {replay.path.name} were "

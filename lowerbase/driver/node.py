@@ -95,15 +95,19 @@ class DriverNode:
     def __init__(
         self, settings: NodeSettings, config: DriverConfig, link: Any,
         clock: Clock | None = None, *, core: DriverCore | None = None, wire: Any = None,
-        lock: Any = None,
+        lock: Any = None, ros: tuple[Any, Any] | None = None,
     ) -> None:
         """``core``: a DriverCore that already talks to its lower computer (the lockstep
         robot's, :mod:`lowerbase.robot.lockstep`; ``link`` and ``clock`` are then unused);
         ``wire``: how the face reaches ROS (:mod:`lowerbase.ros1.wire`; None: rospy as is);
-        ``lock``: shared with the other faces of this process (None: one of its own)."""
+        ``lock``: shared with the other faces of this process (None: one of its own);
+        ``ros``: (rospy, message builders) to use instead of rospy and
+        :mod:`lowerbase.driver.ros_io` (the ROS 2 face, :mod:`lowerbase.driver.ros2_node`)."""
         from lowerbase.ros1.wire import RosWire
 
-        self.rospy, self.io = import_ros()
+        self.rospy: Any
+        self.io: Any
+        self.rospy, self.io = ros if ros is not None else import_ros()
         self.wire = wire if wire is not None else RosWire(self.rospy)
         self.settings = settings
         self.link = link

@@ -30,8 +30,17 @@ __all__ = [
 POSE_AXES = (0, 1, 5)
 #: (vx, wz) in the 6x6 (vx, vy, vz, wx, wy, wz) twist matrices
 TWIST_AXES = (0, 5)
+
+
+def _field_names(cls: Any) -> tuple[str, ...]:
+    """A message class's field names in order (ROS 1: ``__slots__``; ROS 2's slots are
+    ``_name`` and more, its fields come from ``get_fields_and_field_types``)."""
+    fields = getattr(cls, "get_fields_and_field_types", None)
+    return tuple(fields()) if fields is not None else tuple(cls.__slots__)
+
+
 #: the woosh_msgs/Parameter fields after its header, in message order
-PARAMETER_FIELDS: tuple[str, ...] = tuple(Parameter.__slots__[1:])
+PARAMETER_FIELDS: tuple[str, ...] = _field_names(Parameter)[1:]
 
 
 def quaternion_from_yaw(yaw: float) -> Quaternion:

@@ -60,12 +60,12 @@ def advertise(wire: Any, core: DriverCore, lock: Any) -> list[Any]:
     """Create the services (after ``init_node``) through ``wire`` (:mod:`lowerbase.ros1.wire`:
     anything with ``service(name, cls, handler)``); each call holds ``lock`` around the
     core."""
-    from std_srvs.srv import (  # type: ignore[import-untyped]
-        SetBool,
-        SetBoolResponse,
-        Trigger,
-        TriggerResponse,
-    )
+    from std_srvs.srv import SetBool, Trigger  # type: ignore[import-untyped]
+
+    # the response classes: ROS 1's ``TriggerResponse`` is ``Trigger._response_class``,
+    # ROS 2's is ``Trigger.Response``
+    TriggerResponse = getattr(Trigger, "Response", None) or Trigger._response_class
+    SetBoolResponse = getattr(SetBool, "Response", None) or SetBool._response_class
 
     def trigger(command: str) -> Callable[[Any], Any]:
         def handle(_request: Any) -> Any:

@@ -1,0 +1,215 @@
+"""Run in the ROS 2 venv: an rclpy client of ``lowerbase driver --ros2``; prints one JSON line.
+
+``odom N``        N /odom messages (after the first): their stamps' rate, frames, the count
+``latched``       a late subscriber's ~link_state, /driver_base/parameter and /information
+``service NAME``  once ~link_state is ready, calls the Trigger service NAME
+``params``        the node's ROS 2 parameters topics.odom, command_rate, publish_tf
+``drive``         once ~link_state is ready: /base_cmd_vel forward until /odom moved 0.2 m
+``tf``            one odom -> base_link on /tf
+``imu``           one /imu/data_raw (sensor-data QoS)
+``static_pub``    publishes two static transforms through Ros2Wire, then waits to be killed
+``static_sub``    a late subscriber's /tf_static
+``clock_pub T``   publishes /clock from T s on at the wall clock's pace until killed
+
+Every wait has a deadline (``TIMEOUT``) and fails in one line when it passes.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections.abc import Callable
+from itertools import pairwise
+from typing import Any
+
+import rclpy
+from geometry_msgs.msg import TransformStamped, Twist
+from nav_msgs.msg import Odometry
+from rcl_interfaces.srv import GetParameters
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Imu
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+from tf2_msgs.msg import TFMessage
+from woosh_msgs.msg import Information, Parameter
+
+from lowerbase.ros2.wire import Ros2Wire, qos_for
+
+TIMEOUT = 120.0
+
+
+def spin_until(node: Node, done: Callable[[], bool], what: str,
+               timeout: float = TIMEOUT) -> None:
+    deadline = time.monotonic() + timeout
+    while not done():
+        if time.monotonic() > deadline:
+            sys.exit(f"probe: {what} not seen within {timeout:.0f} s")
+        rclpy.spin_once(node, timeout_sec=0.1)
+
+
+def sec(stamp: Any) -> float:
+    return float(stamp.sec) + stamp.nanosec * 1e-9
+
+
+def odom(node: Node, n: int) -> dict[str, Any]:
+    got: list[Odometry] = []
+    node.create_subscription(Odometry, "/odom", got.append, qos_for("/odom", 200))
+    spin_until(node, lambda: len(got) > n, f"{n + 1} /odom messages")
+    stamps = [sec(m.header.stamp) for m in got[: n + 1]]
+    return {"count": n, "rate": n / (stamps[-1] - stamps[0]), "first": stamps[0],
+            "frame_id": got[0].header.frame_id, "child_frame_id": got[0].child_frame_id,
+            "backwards": sum(b < a for a, b in pairwise(stamps))}
+
+
+def latched(node: Node) -> dict[str, Any]:
+    state: list[String] = []
+    param: list[Parameter] = []
+    info: list[Information] = []
+    node.create_subscription(String, "/driver_base/link_state", state.append,
+                             qos_for("", latch=True))
+    node.create_subscription(Parameter, "/driver_base/parameter", param.append,
+                             qos_for("", latch=True))
+    node.create_subscription(Information, "/information", info.append,
+                             qos_for("", latch=True))
+    spin_until(node, lambda: bool(state and param and info), "the latched topics")
+    return {"link_state": state[-1].data, "wheelPerimeter": param[-1].wheelPerimeter,
+            "pulsePerCircle": param[-1].pulsePerCircle,
+            "hardwareVersion": info[-1].hardwareVersion}
+
+
+def call(node: Node, cls: Any, name: str, request: Any) -> Any:
+    client = node.create_client(cls, name)
+    spin_until(node, lambda: client.wait_for_service(timeout_sec=0.1), f"service {name}")
+    future = client.call_async(request)
+    spin_until(node, future.done, f"the response of {name}")
+    return future.result()
+
+
+def wait_ready(node: Node) -> None:
+    state: list[str] = []
+    node.create_subscription(String, "/driver_base/link_state", lambda m: state.append(m.data),
+                             qos_for("", latch=True))
+    spin_until(node, lambda: bool(state) and state[-1] == "ready", "~link_state ready")
+
+
+def service(node: Node, name: str) -> dict[str, Any]:
+    wait_ready(node)  # the command goes out only on a link that is up
+    response = call(node, Trigger, name, Trigger.Request())
+    return {"success": response.success, "message": response.message}
+
+
+def params(node: Node) -> dict[str, Any]:
+    names = ["topics.odom", "command_rate", "publish_tf"]
+    response = call(node, GetParameters, "/driver_base/get_parameters",
+                    GetParameters.Request(names=names))
+    values = response.values
+    return {"topics.odom": values[0].string_value, "command_rate": values[1].double_value,
+            "publish_tf": values[2].bool_value}
+
+
+def drive(node: Node) -> dict[str, Any]:
+    wait_ready(node)
+    got: list[Odometry] = []
+    node.create_subscription(Odometry, "/odom", got.append, qos_for("/odom", 50))
+    spin_until(node, lambda: bool(got), "/odom")
+    start = got[-1].pose.pose.position.x
+    pub = node.create_publisher(Twist, "/base_cmd_vel", qos_for("/base_cmd_vel"))
+    cmd = Twist()
+    cmd.linear.x = 0.3
+    deadline = time.monotonic() + TIMEOUT
+    next_cmd = 0.0
+    while got[-1].pose.pose.position.x - start < 0.2:
+        if time.monotonic() > deadline:
+            sys.exit(f"probe: /odom moved {got[-1].pose.pose.position.x - start:.3f} m, "
+                     f"not 0.2, within {TIMEOUT:.0f} s of commanding")
+        if time.monotonic() >= next_cmd:  # 20 Hz, as a teleop would
+            pub.publish(cmd)
+            next_cmd = time.monotonic() + 0.05
+        rclpy.spin_once(node, timeout_sec=0.02)
+    speed = got[-1].twist.twist.linear.x
+    for _ in range(5):
+        pub.publish(Twist())
+        rclpy.spin_once(node, timeout_sec=0.02)
+    return {"moved": got[-1].pose.pose.position.x - start, "speed": speed}
+
+
+def tf(node: Node) -> dict[str, Any]:
+    got: list[TFMessage] = []
+    node.create_subscription(TFMessage, "/tf", got.append, qos_for("/tf", 100))
+    spin_until(node, lambda: bool(got), "/tf")
+    t = got[-1].transforms[0]
+    return {"frame_id": t.header.frame_id, "child_frame_id": t.child_frame_id}
+
+
+def imu(node: Node) -> dict[str, Any]:
+    got: list[Imu] = []
+    node.create_subscription(Imu, "/imu/data_raw", got.append, qos_profile_sensor_data)
+    spin_until(node, lambda: bool(got), "/imu/data_raw")
+    return {"frame_id": got[-1].header.frame_id,
+            "orientation_covariance0": got[-1].orientation_covariance[0],
+            "accel_z": got[-1].linear_acceleration.z}
+
+
+def static_pub(node: Node) -> None:
+    broadcaster = Ros2Wire(node).static_broadcaster()
+    for child, x in (("laser", 0.2), ("camera", 0.3)):
+        t = TransformStamped()
+        t.header.frame_id = "base_link"
+        t.child_frame_id = child
+        t.transform.translation.x = x
+        t.transform.rotation.w = 1.0
+        broadcaster.sendTransform(t)
+    print("published", flush=True)
+    while rclpy.ok():
+        rclpy.spin_once(node, timeout_sec=0.5)
+
+
+def clock_pub(node: Node, start: float) -> None:
+    """/clock from ``start`` [s] on, at the wall clock's pace, every 10 ms until killed."""
+    pub = node.create_publisher(Clock, "/clock", 10)
+    t0 = time.monotonic()
+    print("publishing", flush=True)
+    while rclpy.ok():
+        now = start + time.monotonic() - t0
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = int(now), int((now % 1.0) * 1e9)
+        pub.publish(msg)
+        rclpy.spin_once(node, timeout_sec=0.01)
+
+
+def static_sub(node: Node) -> dict[str, Any]:
+    got: list[TFMessage] = []
+    node.create_subscription(TFMessage, "/tf_static", got.append,
+                             qos_for("/tf_static", latch=True))
+    spin_until(node, lambda: bool(got), "/tf_static")
+    return {t.child_frame_id: t.transform.translation.x for t in got[-1].transforms}
+
+
+def main() -> None:
+    mode, args = sys.argv[1], sys.argv[2:]
+    rclpy.init()
+    node = rclpy.create_node(f"lowerbase_probe_{mode}")
+    if mode == "static_pub":
+        static_pub(node)
+        return
+    if mode == "clock_pub":
+        clock_pub(node, float(args[0]))
+        return
+    result: Any
+    if mode == "odom":
+        result = odom(node, int(args[0]))
+    elif mode == "service":
+        result = service(node, args[0])
+    else:
+        result = {"latched": latched, "params": params, "drive": drive, "tf": tf, "imu": imu,
+                  "static_sub": static_sub}[mode](node)
+    print(json.dumps(result), flush=True)
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    main()

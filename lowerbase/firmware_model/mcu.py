@@ -28,6 +28,7 @@ from lowerbase.clock import Clock
 from lowerbase.errors import ConfigError
 from lowerbase.firmware_model import fastbatch, kinematics
 from lowerbase.firmware_model.encoder import EncoderCounter
+from lowerbase.firmware_model.fastkernel import KernelLoop
 from lowerbase.firmware_model.fastloop import LeanLoop
 from lowerbase.firmware_model.faults import Fault, parse_fault
 from lowerbase.firmware_model.imu import ImuModel
@@ -335,21 +336,27 @@ class Mcu(McuCommands, McuStatus, McuFrames):
         period k (in period order): a run then spans repeated MotionCommands
         (:func:`.fastbatch.advance`)."""
         if incoming:
-            fastbatch.advance(self, periods, incoming)
+            fastbatch.advance(self, periods, incoming, self._kernel_for_run)
             return
         clock = self.clock
         while periods > 0:
-            kernel = self._lean.kernel
+            kernel = self._kernel_for_run()
             done = 0
-            if (kernel is not None and self.lean and self._lean.compiled
-                    and not (self.faults or self._delayed or self._imu_bias_applied
-                             or self.imu.frozen)):
+            if kernel is not None:
                 done = fastbatch.run(kernel, periods)
             if not done:
                 self.step()
                 clock.advance(self.dt)  # type: ignore[attr-defined]  # a SimClock
                 done = 1
             periods -= done
+
+    def _kernel_for_run(self) -> KernelLoop | None:
+        """The compiled loop when a run of lean periods may be taken now, else None."""
+        kernel = self._lean.kernel
+        if (kernel is None or not self.lean or not self._lean.compiled or self.faults
+                or self._delayed or self._imu_bias_applied or self.imu.frozen):
+            return None
+        return kernel
 
     def _target(self, now: float) -> tuple[float, float, bool]:
         """Twist to drive (after limits and smoothing) and whether to brake."""

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from lowerbase.errors import ConfigError
@@ -85,6 +86,12 @@ class Fault:
         if self.duration is not None:
             text += f"+{self.duration:g}"
         return text
+
+
+def any_active(faults: Iterable[Fault], t_since_boot: float) -> bool:
+    """Whether one of ``faults`` is active at ``t_since_boot`` [s] (a fault armed for later,
+    or over, changes nothing in a control period: the lean path takes it)."""
+    return any(f.active(t_since_boot) for f in faults)
 
 
 def parse_fault(spec: str) -> Fault:

@@ -30,7 +30,7 @@ from lowerbase.firmware_model import fastbatch, kinematics
 from lowerbase.firmware_model.encoder import EncoderCounter
 from lowerbase.firmware_model.fastkernel import KernelLoop
 from lowerbase.firmware_model.fastloop import LeanLoop
-from lowerbase.firmware_model.faults import Fault, parse_fault
+from lowerbase.firmware_model.faults import Fault, any_active, parse_fault
 from lowerbase.firmware_model.imu import ImuModel
 from lowerbase.firmware_model.mcu_commands import McuCommands
 from lowerbase.firmware_model.mcu_defs import (  # re-exported: the names import from here
@@ -98,8 +98,8 @@ log = logging.getLogger(__name__)
 class Mcu(McuCommands, McuStatus, McuFrames):
     """The chassis MCU. See the module docstring for the contract."""
 
-    #: take the lean control loop (fastloop.py) whenever no fault is in play; False forces
-    #: the general one (the tests compare the two)
+    #: take the lean control loop (fastloop.py) in every period in which no fault is active;
+    #: False forces the general one (the tests compare the two)
     lean = True
 
     def __init__(
@@ -277,8 +277,8 @@ class Mcu(McuCommands, McuStatus, McuFrames):
 
     def step(self) -> None:
         """One control period: safety, motion, sensors, BMS, then the frames that are due."""
-        if self.lean and not (self.faults or self._delayed or self._imu_bias_applied
-                              or self.imu.frozen):
+        if self.lean and not (self._delayed or self._imu_bias_applied or self.imu.frozen or (
+                self.faults and any_active(self.faults, self.clock.now() - self.boot_time))):
             self._lean.step()  # the same, bit for bit, without the fault hooks (fastloop.py)
             return
         self._lean.release()  # the compiled lean loop's due times and counters, back here

@@ -135,16 +135,16 @@ Incoming = Sequence[tuple[int, int, bytes]]  #: (period offset, frame id, data),
 
 
 def advance(mcu: McuParts, periods: int, incoming: Incoming,
-            kernel_for_run: Callable[[], KernelLoop | None]) -> None:
+            kernel_for_run: Callable[[], tuple[KernelLoop, int] | None]) -> None:
     """``Mcu.advance`` with frames from the upper side: each ``(k, frame_id, data)`` is
     received (``Mcu.receive``) just before period ``k`` (0 .. periods - 1), as a loop of
     ``receive`` and ``step()`` does it. The frames due before period k go through ``receive``;
     of those after it, a MotionCommand equal to the last one accepted but for its Counter (the
     same command, chassis and limits: only its watchdog time changes) is taken by the
     compiled run itself (``run``'s ``fresh``), so runs span commands; any other frame ends the
-    run before its period. ``kernel_for_run``: the Mcu's compiled loop when a run may be
-    taken now (no fault, defect hook or delayed frame), else None (asked before every run: a
-    frame received may reboot the Mcu)."""
+    run before its period. ``kernel_for_run``: the Mcu's compiled loop and the most periods a
+    run may take now (none with a fault active, no defect hook or delayed frame), else None
+    (asked before every run: a frame received may reboot the Mcu)."""
     if any(k < 0 or k >= periods for k, _, _ in incoming):
         raise ValueError(f"incoming frames must be for periods 0 .. {periods - 1}")
     if any(a[0] > b[0] for a, b in itertools.pairwise(incoming)):
@@ -158,10 +158,11 @@ def advance(mcu: McuParts, periods: int, incoming: Incoming,
             mcu.receive(frame_id, data)
             _remember(mcu, frame_id, data, before)
             i += 1
-        kernel = kernel_for_run()
+        runs = kernel_for_run()
         done = 0
-        if kernel is not None:
-            n, fresh, j = min(periods - k, MAX_RUN), [], i
+        if runs is not None:
+            kernel, most = runs
+            n, fresh, j = min(periods - k, most), [], i
             while j < total and incoming[j][0] < k + n:
                 off, frame_id, data = incoming[j]
                 if not _repeat(mcu, frame_id, data):

@@ -94,6 +94,20 @@ def any_active(faults: Iterable[Fault], t_since_boot: float) -> bool:
     return any(f.active(t_since_boot) for f in faults)
 
 
+def quiet_periods(faults: Iterable[Fault], t_since_boot: float, dt: float, most: int) -> int:
+    """How many control periods of ``dt`` from ``t_since_boot`` on (at most ``most``) surely
+    have none of ``faults`` active: 0 when one is active now; before one that starts later, a
+    period fewer than fit (the simulated clock sums its steps: a period's time is t + k dt
+    only to rounding)."""
+    n = most
+    for f in faults:
+        if f.active(t_since_boot):
+            return 0
+        if f.start > t_since_boot:
+            n = min(n, max(0, math.floor((f.start - t_since_boot) / dt) - 1))
+    return n
+
+
 def parse_fault(spec: str) -> Fault:
     """Parse a fault spec (see the module docstring); ConfigError with the usage otherwise."""
     m = _SPEC.match(spec.strip())

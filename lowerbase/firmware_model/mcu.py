@@ -28,9 +28,9 @@ from lowerbase.clock import Clock
 from lowerbase.errors import ConfigError
 from lowerbase.firmware_model import fastbatch, kinematics
 from lowerbase.firmware_model.encoder import EncoderCounter
-from lowerbase.firmware_model.fastkernel import KernelLoop
+from lowerbase.firmware_model.fastkernel import MAX_RUN, KernelLoop
 from lowerbase.firmware_model.fastloop import LeanLoop
-from lowerbase.firmware_model.faults import Fault, any_active, parse_fault
+from lowerbase.firmware_model.faults import Fault, any_active, parse_fault, quiet_periods
 from lowerbase.firmware_model.imu import ImuModel
 from lowerbase.firmware_model.mcu_commands import McuCommands
 from lowerbase.firmware_model.mcu_defs import (  # re-exported: the names import from here
@@ -340,23 +340,26 @@ class Mcu(McuCommands, McuStatus, McuFrames):
             return
         clock = self.clock
         while periods > 0:
-            kernel = self._kernel_for_run()
+            runs = self._kernel_for_run()
             done = 0
-            if kernel is not None:
-                done = fastbatch.run(kernel, periods)
+            if runs is not None:
+                done = fastbatch.run(runs[0], min(periods, runs[1]))
             if not done:
                 self.step()
                 clock.advance(self.dt)  # type: ignore[attr-defined]  # a SimClock
                 done = 1
             periods -= done
 
-    def _kernel_for_run(self) -> KernelLoop | None:
-        """The compiled loop when a run of lean periods may be taken now, else None."""
+    def _kernel_for_run(self) -> tuple[KernelLoop, int] | None:
+        """The compiled loop and how many periods a run may take from now (none with a fault
+        active), or None when no run may be taken now."""
         kernel = self._lean.kernel
-        if (kernel is None or not self.lean or not self._lean.compiled or self.faults
-                or self._delayed or self._imu_bias_applied or self.imu.frozen):
+        if (kernel is None or not self.lean or not self._lean.compiled or self._delayed
+                or self._imu_bias_applied or self.imu.frozen):
             return None
-        return kernel
+        most = MAX_RUN if not self.faults else quiet_periods(
+            self.faults, self.clock.now() - self.boot_time, self.dt, MAX_RUN)
+        return (kernel, most) if most else None
 
     def _target(self, now: float) -> tuple[float, float, bool]:
         """Twist to drive (after limits and smoothing) and whether to brake."""

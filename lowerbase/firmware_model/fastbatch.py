@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, cast
 
 from lowerbase.clock import SimClock
 from lowerbase.firmware_model.fastkernel import MAX_RUN
@@ -60,33 +60,66 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
         for j in range(n):
             targets[j] = smoother.step(v, w, dt)
             wound.append((smoother.v, smoother.w))
+    ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
+    stuck = mcu._enc_stuck
     imu_due0 = mcu._imu_due
+    fs, js = kl.fs, kl.js
     status_in, state_in = mcu.status, mcu.state  # motion_fault is 0 here
-    kl.state_in(now, v, w, n, smoothed=mode == 1, brake=False,
-                watchdog=False,  # _target clears it in every period of a run
-                motion_fault=0, next_poll=mcu._bms_next_poll, last_cmd_time=mcu._last_cmd_time,
-                timeout=mcu.chassis.command_timeout)
-    js, flags = kl.js, lb.J_FRESH
+    fs[:lb.F_IN] = (
+        ml.omega, ml.setpoint, ml.current, ml._over_time, ml._stall_time,
+        mr.omega, mr.setpoint, mr.current, mr._over_time, mr._stall_time,
+        el._frac, er._frac, truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x,
+        truth.distance, mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge,
+        mcu._bms_elapsed, imu_due0, now, mcu.boot_time, v, w, lean.imu_cycle,
+        mcu._bms_last_answer, mcu._bms_next_poll, m.BMS_STEP, mcu._saved_odometer,
+        mcu._last_save, m.ODOMETER_SAVE_PERIOD, mcu._last_cmd_time,
+        mcu.chassis.command_timeout, mcu._standby_cmd_time)
+    js[:lb.J_SIZE] = (
+        ml.over_current, ml.stalled, mr.over_current, mr.stalled, el.total, er.total,
+        mcu._imu_same, status_in, 0, state_in, imu._left - 1 if noise else 0,
+        mcu._imu_last is not None, 0, 0, 0, 0, 0, n, mode == 1, noise, bms is not None,
+        mcu._bms_bits, mcu.estop_command,
+        False,  # the watchdog flag: _target clears it in every period of a run
+        mcu._speed_limited)
+    flags = lb.J_FRESH
     js[flags:] = 0
     for j in fresh:
         js[flags + j] = 1
-    kl.run_batch()
-    state, row, count, done, python_emit, steps, py_frames = kl.state_out()
+    kl.batch(kl.k, fs, js, targets, imu._arr if noise else kl.zero_rows, kl.imu,
+             kl.due, kl.per, kl.hot, kl.counters, kl.vals, kl.sig, kl.scale, kl.frames,
+             kl.out, kl.ids, kl.lens, kl.pidx)
+    (oc_l, st_l, oc_r, st_r, el.total, er.total, mcu._imu_same, mcu.status, mcu.motion_fault,
+     state, row, _, count, done, python_emit, steps, py_frames) = js[:17].tolist()
     if mode == 1:  # the smoother as after the last period done
         smoother.v, smoother.w = wound[done - 1] if done else start
     if not done:
         return 0
-    fs = kl.fs
+    (ml.omega, ml.setpoint, ml.current, ml._over_time, ml._stall_time,
+     mr.omega, mr.setpoint, mr.current, mr._over_time, mr._stall_time,
+     el._frac, er._frac, truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x,
+     truth.distance, mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge,
+     mcu._bms_elapsed, mcu._imu_due) = fs[:25].tolist()
     if fresh and fresh[0] < done:
         mcu._last_cmd_time = float(fs[lb.F_LAST_CMD])
         mcu.stats["rx_frames"] += sum(1 for j in fresh if j < done)
+    ml.over_current, ml.stalled = oc_l != 0, st_l != 0
+    mr.over_current, mr.stalled = oc_r != 0, st_r != 0
+    ml._steady = mr._steady = None
     mcu._watchdog = mcu._watchdog_ramp = False
     if mode != 1:
         smoother.reset(v, w)
     if state != mcu.state:
         mcu.state = m.RobotState(state)
     if mcu._imu_due != imu_due0:  # sampled
-        kl.took_sample(row)
+        s = kl.imu[6:].tolist()
+        sample = ((s[0], s[1], s[2]), (s[3], s[4], s[5]))
+        if noise and row + 1 < imu._left:
+            zl = imu._arr[row + 1].tolist()
+            gt, at, gb, ab = imu.gyro_turn_on, imu.accel_turn_on, imu.gyro_bias, imu.accel_bias
+            gb[0], gb[1], gb[2] = gt[0] + zl[0], gt[1] + zl[1], gt[2] + zl[2]
+            ab[0], ab[1], ab[2] = at[0] + zl[3], at[1] + zl[4], at[2] + zl[5]
+            imu._left = row + 1
+        imu._last = mcu._imu_last = mcu.imu_sample = sample
     clock = cast(SimClock, mcu.clock)  # the compiled loop runs on a SimClock only
     if steps:
         step = fs[lb.F_STEPS:lb.F_STEPS + 2 * steps].tolist()
@@ -97,7 +130,7 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
     ids, lens = kl.ids[:count].tolist(), kl.lens[:count].tolist()
     pidx = kl.pidx[:count].tolist()
     kl._next = float(kl.due[-1])
-    final: tuple[Any, ...] | None = None  # the state after the run while a period's frames go
+    final = None
     f = sent = 0
     send, counters, send_rows = mcu._send, mcu._counters, lean.send_rows
     for j in range(done):

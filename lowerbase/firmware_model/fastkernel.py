@@ -1,16 +1,14 @@
 """The lean control period in compiled code: :class:`KernelLoop` drives
 :func:`.lean_kernel.period` for :class:`~.fastloop.LeanLoop` (docs/emulator.md, "Where the time
-goes"), one period at a time (``step``) or in runs (fastbatch.py), both through
-:func:`.lean_batch.batch` (a period is a run of one).
+goes").
 
-One kernel call does the arithmetic; Python keeps what is rare or belongs to Python objects:
-``Mcu._target`` (smoother, watchdog), the IMU noise blocks, the BMS step and poll, the odometer
-save, and the frames other than the hot ones. The state goes in and out through the run's two
-arrays (``fs``, ``js``: lean_batch's slots, the one layout of a period's state; ``state_in``,
-``state_out``) on every call, so the Python objects (motors, encoders, ground truth, Mcu) are
-always current for whoever reads or writes them between calls. The periodic frames' due
-times and the hot frames' counters live in arrays while the kernel runs (``acquire``), and go
-back to the Mcu before any Python path steps (``release``).
+One kernel call per period does the arithmetic; Python keeps what is rare or belongs to Python
+objects: ``Mcu._target`` (smoother, watchdog), the IMU noise blocks, the BMS step and poll, the
+odometer save, and the frames other than the hot ones. The state goes in and out as scalars
+every period, so the Python objects (motors, encoders, ground truth, Mcu) are always current
+for whoever reads or writes them between periods. The periodic frames' due times and the hot
+frames' counters live in arrays while the kernel runs (``acquire``), and go back to the Mcu
+before any Python path steps (``release``).
 
 A period goes to the Python LeanLoop instead (``step`` returns False, nothing changed) when
 surroundings are installed (the world's collision check must see each move), slip events or
@@ -25,7 +23,6 @@ from __future__ import annotations
 
 import importlib
 import logging
-import math
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
@@ -128,13 +125,18 @@ def tables(periodic: list[MessageCodec], lk: Any) -> tuple[np.ndarray, ...]:
 def _warm_up(lk: Any, lb: Any) -> None:
     """Compile (or load from the cache) with the argument types of a real period."""
     k = np.ones(lk.C_SIZE + lk.R_SIZE)
-    imu = np.zeros(12)
+    z, imu = np.zeros(12), np.zeros(12)
     due, per = np.zeros(2), np.ones(1)
     hot = np.zeros((1, 2), np.int64)
     counters, vals = np.zeros(1, np.int64), np.zeros(lk.V_SIZE)
     sig, scale = np.zeros((1, 6), np.int64), np.ones((1, 2))
     frames = np.zeros((1, 6), np.int64)
     out, ids, lens = np.zeros((8, 8), np.uint8), np.zeros(8, np.int64), np.zeros(8, np.int64)
+    f, b, i = 0.0, False, 0
+    lk.period(k, f, f, f, f, b, f, f, f, b, b, f, f, f, f, f, b, b, f, f, i, f, i, f,
+              f, f, f, f, f, f, f, f, f, True, True, z, b, imu, i, True, f, f, f, i, i, i, i,
+              b, b, f, b, True, due, per, hot, counters, vals, sig, scale, frames, out, ids,
+              lens, i)
     lb.batch(k, np.zeros(lb.F_ODO_AT + 1), np.zeros(lb.J_FRESH + 1, np.int64), np.ones((1, 2)),
              np.zeros((1, 12)), imu, due, per, hot, counters, vals, sig, scale, frames, out,
              ids, lens, np.zeros(8, np.int64))
@@ -165,6 +167,7 @@ class KernelLoop:
         self.counters = np.zeros(n, np.int64)
         self.vals = np.zeros(lk.V_SIZE)
         self.imu = np.zeros(12)
+        self.zero_row = np.zeros(12)
         self.lb = lb  # lean_batch: runs of periods (fastbatch.py drives them)
         self.batch = _entry(lb.batch)
         self.fs = np.zeros(lb.F_ODO_AT + MAX_RUN)  # the state of a run (lean_batch)
@@ -253,8 +256,7 @@ class KernelLoop:
     # -- one period ------------------------------------------------------------------------------
 
     def step(self) -> bool:
-        """One lean period in the kernel (a run of one: :func:`.lean_batch.batch`, the state in
-        and out through the run's arrays); False (nothing done) when it is the Python loop's."""
+        """One lean period in the kernel; False (nothing done) when it is the Python loop's."""
         mcu, m, lean = self.mcu, self.m, self.lean
         truth, slip, bms = mcu.truth, mcu.slip, mcu.bms
         now = mcu.clock.now()
@@ -271,103 +273,53 @@ class KernelLoop:
         target_v, target_w, brake = mcu._target(now)
         imu = mcu.imu
         imu_due = now >= mcu._imu_due
-        noise = imu.params.noise
-        if imu_due and noise and not imu._left:
-            imu._block(lean.imu_cycle if lean.imu_cycle > 0.0 else 1.0 / imu.params.rate_hz,
-                       compiled=True)
-        # the poll is done (poll_ahead) and _target has judged the watchdog: the run of one
-        # period never stops before it
-        self.state_in(now, target_v, target_w, 1, smoothed=False, brake=brake,
-                      watchdog=mcu._watchdog, motion_fault=mcu.motion_fault,
-                      next_poll=math.inf, last_cmd_time=now, timeout=math.inf)
-        self.js[self.lb.J_FRESH] = 0
-        self.run_batch()
-        state, row, count, done, python_emit, steps, _ = self.state_out()
-        if done != 1:
-            raise RuntimeError(f"the compiled period did {done} periods, not 1")
-        if steps:
-            fs, f = self.fs, self.lb.F_STEPS
-            bms.step(float(fs[f]), float(fs[f + 1]) / float(fs[f]))
+        z = self.zero_row
+        if imu_due and imu.params.noise:
+            if not imu._left:
+                imu._block(lean.imu_cycle if lean.imu_cycle > 0.0 else 1.0 / imu.params.rate_hz,
+                           compiled=True)
+            imu._left -= 1
+            z = imu._arr[imu._left]
+        ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
+        stuck = mcu._enc_stuck
+        emit_now = now + 1e-9 >= self._next
+        state, count = self.store_state(self.lk.period(
+            self.k, now, mcu.boot_time, target_v, target_w, brake,
+            ml.omega, ml.setpoint, ml.current, ml.over_current, ml.stalled, ml._over_time,
+            ml._stall_time,
+            mr.omega, mr.setpoint, mr.current, mr.over_current, mr.stalled, mr._over_time,
+            mr._stall_time,
+            el.total, el._frac, er.total, er._frac,
+            truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.distance,
+            mcu.odometer, stuck["left"], stuck["right"],
+            imu_due, imu.params.noise, z, mcu._imu_last is not None, self.imu, mcu._imu_same,
+            bms is not None, mcu._bms_charge, mcu._bms_elapsed, mcu._bms_last_answer,
+            mcu._bms_bits, mcu.status, mcu.motion_fault, int(mcu.state), mcu.estop_command,
+            mcu._watchdog, mcu._standby_cmd_time,
+            mcu._speed_limited and mcu._last_cmd is not None,
+            emit_now, self.due, self.per, self.hot, self.counters, self.vals, self.sig,
+            self.scale, self.frames, self.out, self.ids, self.lens, 0))
+        ml._steady = mr._steady = None
+        if bms is not None and mcu._bms_elapsed >= m.BMS_STEP - 1e-9:  # nothing above reads it
+            bms.step(mcu._bms_elapsed, mcu._bms_charge / mcu._bms_elapsed)
+            mcu._bms_charge = mcu._bms_elapsed = 0.0
         if state != mcu.state:
             mcu.state = m.RobotState(state)
         if imu_due:
-            self.took_sample(row)
+            mcu._imu_due += lean.imu_cycle
+            s = self.imu[6:].tolist()
+            sample = ((s[0], s[1], s[2]), (s[3], s[4], s[5]))
+            if imu.params.noise:
+                zl = imu._arr[imu._left].tolist()
+                gt, at, gb, ab = imu.gyro_turn_on, imu.accel_turn_on, imu.gyro_bias, imu.accel_bias
+                gb[0], gb[1], gb[2] = gt[0] + zl[0], gt[1] + zl[1], gt[2] + zl[2]
+                ab[0], ab[1], ab[2] = at[0] + zl[3], at[1] + zl[4], at[2] + zl[5]
+            imu._last = mcu._imu_last = mcu.imu_sample = sample
         if mcu.odometer != mcu._saved_odometer and now - mcu._last_save >= m.ODOMETER_SAVE_PERIOD:
             mcu._save_state()
-        if python_emit:
-            self._send(now, -1)
-        elif count:
+        if count:
             self._send(now, count)
         return True
-
-    def state_in(self, now: float, target_v: float, target_w: float, n: int, *,
-                 smoothed: bool, brake: bool, watchdog: bool, motion_fault: int,
-                 next_poll: float, last_cmd_time: float, timeout: float) -> None:
-        """The state of the motors, encoders, ground truth and Mcu into the run's arrays
-        (``fs``, ``js``: lean_batch's slots, the one layout of a period's state), for a run of
-        up to ``n`` periods from ``now``; the per-period MotionCommand flags are the caller's."""
-        mcu, lean, lb, m = self.mcu, self.lean, self.lb, self.m
-        ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
-        truth, stuck, imu = mcu.truth, mcu._enc_stuck, mcu.imu
-        noise = imu.params.noise
-        self.fs[:lb.F_IN] = (
-            ml.omega, ml.setpoint, ml.current, ml._over_time, ml._stall_time,
-            mr.omega, mr.setpoint, mr.current, mr._over_time, mr._stall_time,
-            el._frac, er._frac, truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x,
-            truth.distance, mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge,
-            mcu._bms_elapsed, mcu._imu_due, now, mcu.boot_time, target_v, target_w,
-            lean.imu_cycle, mcu._bms_last_answer, next_poll, m.BMS_STEP, mcu._saved_odometer,
-            mcu._last_save, m.ODOMETER_SAVE_PERIOD, last_cmd_time, timeout,
-            mcu._standby_cmd_time)
-        self.js[:lb.J_SIZE] = (
-            ml.over_current, ml.stalled, mr.over_current, mr.stalled, el.total, er.total,
-            mcu._imu_same, mcu.status, motion_fault, mcu.state, imu._left - 1 if noise else 0,
-            mcu._imu_last is not None, 0, 0, 0, 0, 0, n, smoothed, noise, mcu.bms is not None,
-            mcu._bms_bits, mcu.estop_command, watchdog,
-            mcu._speed_limited and mcu._last_cmd is not None, brake)
-
-    def run_batch(self) -> None:
-        """:func:`.lean_batch.batch` on the run's arrays (``state_in`` filled them)."""
-        imu = self.mcu.imu
-        self.batch(self.k, self.fs, self.js, self.targets,
-                   imu._arr if imu.params.noise else self.zero_rows, self.imu, self.due,
-                   self.per, self.hot, self.counters, self.vals, self.sig, self.scale,
-                   self.frames, self.out, self.ids, self.lens, self.pidx)
-
-    def state_out(self) -> tuple[int, ...]:
-        """The state after a run back into the motors, encoders, ground truth and Mcu; returns
-        (state, IMU noise row, frame count, periods done, the last period's frames are
-        Python's, BMS pack steps, bit j: period j emitted a frame Python builds)."""
-        mcu, lean = self.mcu, self.lean
-        ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
-        truth, stuck = mcu.truth, mcu._enc_stuck
-        (oc_l, st_l, oc_r, st_r, el.total, er.total, mcu._imu_same, mcu.status, mcu.motion_fault,
-         state, row, _, count, done, python_emit, steps, py_frames) = self.js[:17].tolist()
-        if done:
-            (ml.omega, ml.setpoint, ml.current, ml._over_time, ml._stall_time,
-             mr.omega, mr.setpoint, mr.current, mr._over_time, mr._stall_time,
-             el._frac, er._frac, truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x,
-             truth.distance, mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge,
-             mcu._bms_elapsed, mcu._imu_due) = self.fs[:25].tolist()
-            ml.over_current, ml.stalled = oc_l != 0, st_l != 0
-            mr.over_current, mr.stalled = oc_r != 0, st_r != 0
-            ml._steady = mr._steady = None
-        return state, row, count, done, python_emit, steps, py_frames
-
-    def took_sample(self, row: int) -> None:
-        """After a run whose periods sampled the IMU (the last sample in ``self.imu[6:]``;
-        ``row``: the noise row before the last one used): the Mcu's sample and IMU biases."""
-        mcu = self.mcu
-        imu = mcu.imu
-        s = self.imu[6:].tolist()
-        sample = ((s[0], s[1], s[2]), (s[3], s[4], s[5]))
-        if imu.params.noise and row + 1 < imu._left:
-            zl = imu._arr[row + 1].tolist()
-            gt, at, gb, ab = imu.gyro_turn_on, imu.accel_turn_on, imu.gyro_bias, imu.accel_bias
-            gb[0], gb[1], gb[2] = gt[0] + zl[0], gt[1] + zl[1], gt[2] + zl[2]
-            ab[0], ab[1], ab[2] = at[0] + zl[3], at[1] + zl[4], at[2] + zl[5]
-            imu._left = row + 1
-        imu._last = mcu._imu_last = mcu.imu_sample = sample
 
     def poll_ahead(self, now: float) -> bool:
         """The BMS poll of the period at ``now``, done before the kernel runs the period
@@ -385,6 +337,22 @@ class KernelLoop:
             mcu._bms_bits = int(bms.status_bits(snapshot))
             mcu._bms_last_answer = now
         return True
+
+    def store_state(self, r: tuple[Any, ...]) -> tuple[Any, ...]:
+        """Put the state a kernel call returned (``period``'s or ``batch``'s, the same leading
+        33 scalars) back into the motors, encoders, ground truth and Mcu; returns the rest."""
+        mcu, lean = self.mcu, self.lean
+        ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
+        truth, stuck = mcu.truth, mcu._enc_stuck
+        (ml.omega, ml.setpoint, ml.current, ml.over_current, ml.stalled, ml._over_time,
+         ml._stall_time,
+         mr.omega, mr.setpoint, mr.current, mr.over_current, mr.stalled, mr._over_time,
+         mr._stall_time,
+         el.total, el._frac, er.total, er._frac,
+         truth.x, truth.y, truth.yaw, truth.v, truth.w, truth.accel_x, truth.distance,
+         mcu.odometer, stuck["left"], stuck["right"], mcu._bms_charge, mcu._bms_elapsed,
+         mcu._imu_same, mcu.status, mcu.motion_fault) = r[:33]
+        return r[33:]
 
     def _send(self, now: float, count: int) -> None:
         """The frames the kernel emitted (``count`` -1: the Python emitter's turn)."""

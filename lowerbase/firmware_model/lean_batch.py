@@ -39,8 +39,8 @@ F_ODO_AT = F_STEPS + 2 * MAX_STEPS  #: ``fs`` has F_ODO_AT + the run's most peri
 #: BMS pack steps, bit j: period j emitted a frame Python builds) ...
 J_COUNT, J_DONE, J_PY_EMIT, J_STEPS, J_PY_FRAMES = range(12, 17)
 #: ... and what only goes in
-J_N, J_SMOOTHED, J_NOISE, J_BMS, J_BMS_BITS, J_ESTOP, J_WATCHDOG, J_LIMITED, J_BRAKE = range(17, 26)
-J_SIZE = 26
+J_N, J_SMOOTHED, J_NOISE, J_BMS, J_BMS_BITS, J_ESTOP, J_WATCHDOG, J_LIMITED = range(17, 25)
+J_SIZE = 25
 #: then, per period j of the run, 1: the last MotionCommand again before it (its watchdog
 #: time refreshed; ``fs[F_LAST_CMD]`` comes back as the last such time)
 J_FRESH = J_SIZE
@@ -54,9 +54,9 @@ def batch(k: np.ndarray, fs: np.ndarray, js: np.ndarray, targets: np.ndarray,
           frames: np.ndarray, out: np.ndarray, ids: np.ndarray, lens: np.ndarray,
           pidx: np.ndarray) -> None:
     """Up to ``js[J_N]`` periods from ``fs[F_NOW]``, driving at the target twist
-    (``js[J_SMOOTHED]``: at ``targets[j]`` in period j; ``js[J_BRAKE]``: braking); the
-    state in ``fs``/``js`` is replaced by the state after them (see the slots above;
-    ``pidx``: each frame's period)."""
+    (``js[J_SMOOTHED]``: at ``targets[j]`` in period j), no brake; the state in ``fs``/``js``
+    is replaced by the state after them (see the slots above; ``pidx``: each frame's
+    period)."""
     dt = k[C_DT]
     (om_l, sp_l, cur_l, ot_l, stt_l, om_r, sp_r, cur_r, ot_r, stt_r, fr_l, fr_r,
      x, y, yaw, tv, tw, accel_x, distance, odometer, stuck_l, stuck_r, charge, elapsed,
@@ -74,7 +74,7 @@ def batch(k: np.ndarray, fs: np.ndarray, js: np.ndarray, targets: np.ndarray,
     row, has_last = js[J_ROW], js[J_HAS_LAST] != 0
     n, smoothed, noise, bms = js[J_N], js[J_SMOOTHED] != 0, js[J_NOISE] != 0, js[J_BMS] != 0
     bms_bits, estop_command = js[J_BMS_BITS], js[J_ESTOP] != 0
-    watchdog, limited, brake = js[J_WATCHDOG] != 0, js[J_LIMITED] != 0, js[J_BRAKE] != 0
+    watchdog, limited = js[J_WATCHDOG] != 0, js[J_LIMITED] != 0
     count = 0
     done = 0
     python_emit = False
@@ -101,7 +101,7 @@ def batch(k: np.ndarray, fs: np.ndarray, js: np.ndarray, targets: np.ndarray,
          x, y, yaw, tv, tw, accel_x, distance,
          odometer, stuck_l, stuck_r, charge, elapsed, imu_same,
          status, motion_fault, state, c) = period(
-            k, now, boot_time, t_v, t_w, brake,
+            k, now, boot_time, t_v, t_w, False,
             om_l, sp_l, cur_l, oc_l, st_l, ot_l, stt_l,
             om_r, sp_r, cur_r, oc_r, st_r, ot_r, stt_r,
             tot_l, fr_l, tot_r, fr_r, x, y, yaw, tv, tw, distance, odometer, stuck_l, stuck_r,

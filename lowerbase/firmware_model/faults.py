@@ -88,10 +88,17 @@ class Fault:
         return text
 
 
-def any_active(faults: Iterable[Fault], t_since_boot: float) -> bool:
-    """Whether one of ``faults`` is active at ``t_since_boot`` [s] (a fault armed for later,
-    or over, changes nothing in a control period: the lean path takes it)."""
-    return any(f.active(t_since_boot) for f in faults)
+#: faults whose hook acts when their value changes, not in every period they are active: the
+#: gyro bias step (Mcu._apply_faults adds it once; the IMU model then carries it as data)
+ONCE = frozenset({"imu-bias"})
+
+
+def any_active(faults: Iterable[Fault], t_since_boot: float,
+               skip: frozenset[str] = frozenset()) -> bool:
+    """Whether one of ``faults`` (but those of a kind in ``skip``) is active at
+    ``t_since_boot`` [s] (a fault armed for later, or over, changes nothing in a control
+    period: the lean path takes it)."""
+    return any(f.active(t_since_boot) for f in faults if f.kind not in skip)
 
 
 def quiet_periods(faults: Iterable[Fault], t_since_boot: float, dt: float, most: int) -> int:

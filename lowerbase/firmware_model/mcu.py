@@ -30,7 +30,7 @@ from lowerbase.firmware_model import fastbatch, kinematics
 from lowerbase.firmware_model.encoder import EncoderCounter
 from lowerbase.firmware_model.fastkernel import MAX_RUN, KernelLoop
 from lowerbase.firmware_model.fastloop import LeanLoop
-from lowerbase.firmware_model.faults import Fault, any_active, parse_fault, quiet_periods
+from lowerbase.firmware_model.faults import ONCE, Fault, any_active, parse_fault, quiet_periods
 from lowerbase.firmware_model.imu import ImuModel
 from lowerbase.firmware_model.mcu_commands import McuCommands
 from lowerbase.firmware_model.mcu_defs import (  # re-exported: the names import from here
@@ -249,6 +249,14 @@ class Mcu(McuCommands, McuStatus, McuFrames):
                 return f
         return None
 
+    def _faults_act(self) -> bool:
+        """Whether a fault hook acts in this period: a fault active (but the gyro bias, which
+        the IMU model carries once added), or the gyro bias to add or take back."""
+        if any_active(self.faults, self.clock.now() - self.boot_time, ONCE):
+            return True
+        bias = self._active("imu-bias")
+        return (bias.value if bias else 0.0) != self._imu_bias_applied
+
     def _wheel_target(self, side: str, rim: float) -> float:
         """What the firmware makes the real wheel do [rad/s] for a commanded rim speed [m/s]:
         the motor speed its beliefs give (rim / believed radius x believed ratio; the minSpeed
@@ -277,8 +285,8 @@ class Mcu(McuCommands, McuStatus, McuFrames):
 
     def step(self) -> None:
         """One control period: safety, motion, sensors, BMS, then the frames that are due."""
-        if self.lean and not (self._delayed or self._imu_bias_applied or self.imu.frozen or (
-                self.faults and any_active(self.faults, self.clock.now() - self.boot_time))):
+        if self.lean and not (self._delayed or self.imu.frozen or (
+                (self.faults or self._imu_bias_applied) and self._faults_act())):
             self._lean.step()  # the same, bit for bit, without the fault hooks (fastloop.py)
             return
         self._lean.release()  # the compiled lean loop's due times and counters, back here

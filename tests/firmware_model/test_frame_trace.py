@@ -231,6 +231,13 @@ def test_the_lean_loop_runs_whenever_no_fault_is_active(monkeypatch: pytest.Monk
     rig.mcu.clear_fault()
     rig.drive(0.5, 0.1, 1.0)
     assert len(calls) == round((rig.now - 1.0) / rig.mcu.dt)
+    before = len(calls)
+    rig.mcu.inject("imu-bias:0.05")  # added in one general period, then the IMU model's data
+    rig.drive(0.5, 0.1, 1.0)
+    assert len(calls) == before + round(1.0 / rig.mcu.dt) - 1
+    rig.mcu.clear_fault()  # taken back in one general period
+    rig.drive(0.5, 0.1, 1.0)
+    assert len(calls) == before + 2 * round(1.0 / rig.mcu.dt) - 2
 
 
 def test_the_trace_covers_every_kind_of_frame() -> None:

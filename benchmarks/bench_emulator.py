@@ -181,8 +181,8 @@ def run(quick: bool = False) -> list[Row]:
         Row("emulator", "simulated clock, one chassis, Python lean loop", python, "x real time",
             "the same without the compiled period (no numba; docs/emulator.md)"),
         Row("emulator", "simulated clock, one chassis, general loop", general, "x real time",
-            "the same with every step through the fault-aware loop (what a run with a "
-            "fault armed costs; docs/emulator.md)"),
+            "the same with every step through the fault-aware loop (what the periods with "
+            "a fault active cost; docs/emulator.md)"),
         Row("emulator", "chassis per core in real time", per_core, "chassis",
             f"target >= 300; all frames ({fps:.0f}/s each) sent on udp_multicast; one "
             "chassis alone (bench_fleet: a fleet of N)"),

@@ -17,12 +17,6 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "lowerbase"
 DOC = ROOT / "docs" / "architecture.md"
 
-#: the one circle allowed while issue 23 item 3 (the control period once) is open; docs say so
-KNOWN_CIRCLES = [frozenset({
-    "lowerbase.firmware_model.fastbatch", "lowerbase.firmware_model.fastkernel",
-    "lowerbase.firmware_model.fastloop", "lowerbase.firmware_model.mcu",
-})]
-
 Graph = dict[str, set[str]]
 
 
@@ -200,7 +194,6 @@ def test_no_import_runs_back_up() -> None:
     assert not bad, "imports against docs/architecture.md's layers:\n" + "\n".join(bad)
 
 
-def test_no_circles_but_the_known_one() -> None:
-    found = circles(import_graph(PACKAGE))
-    new = [sorted(c) for c in found if c not in KNOWN_CIRCLES]
-    assert not new, f"import circles: {new}"
+def test_no_import_circles() -> None:
+    found = [sorted(c) for c in circles(import_graph(PACKAGE))]
+    assert not found, f"import circles: {found}"

@@ -11,16 +11,17 @@ truth (SimRig and the fleet's buses do not; the frames themselves are exact).
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, cast
 
 from lowerbase.clock import SimClock
+from lowerbase.firmware_model.fastkernel import MAX_RUN
 
 if TYPE_CHECKING:  # pragma: no cover
     from lowerbase.firmware_model.fastkernel import KernelLoop
-    from lowerbase.firmware_model.mcu import Mcu
+    from lowerbase.firmware_model.mcu_defs import McuParts
 
-MAX_RUN = 60  #: periods per kernel call (at most 62: lean_batch keeps a bit per period in an int64)
+__all__ = ["MAX_RUN", "Incoming", "advance", "run"]
 
 
 def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
@@ -166,14 +167,17 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
 Incoming = Sequence[tuple[int, int, bytes]]  #: (period offset, frame id, data), by offset
 
 
-def advance(mcu: Mcu, periods: int, incoming: Incoming) -> None:
+def advance(mcu: McuParts, periods: int, incoming: Incoming,
+            kernel_for_run: Callable[[], tuple[KernelLoop, int] | None]) -> None:
     """``Mcu.advance`` with frames from the upper side: each ``(k, frame_id, data)`` is
     received (``Mcu.receive``) just before period ``k`` (0 .. periods - 1), as a loop of
     ``receive`` and ``step()`` does it. The frames due before period k go through ``receive``;
     of those after it, a MotionCommand equal to the last one accepted but for its Counter (the
     same command, chassis and limits: only its watchdog time changes) is taken by the
     compiled run itself (``run``'s ``fresh``), so runs span commands; any other frame ends the
-    run before its period."""
+    run before its period. ``kernel_for_run``: the Mcu's compiled loop and the most periods a
+    run may take now (none with a fault active, no defect hook or delayed frame), else None
+    (asked before every run: a frame received may reboot the Mcu)."""
     if any(k < 0 or k >= periods for k, _, _ in incoming):
         raise ValueError(f"incoming frames must be for periods 0 .. {periods - 1}")
     if any(a[0] > b[0] for a, b in itertools.pairwise(incoming)):
@@ -187,12 +191,11 @@ def advance(mcu: Mcu, periods: int, incoming: Incoming) -> None:
             mcu.receive(frame_id, data)
             _remember(mcu, frame_id, data, before)
             i += 1
-        kernel = mcu._lean.kernel
+        runs = kernel_for_run()
         done = 0
-        if (kernel is not None and mcu.lean and mcu._lean.compiled
-                and not (mcu.faults or mcu._delayed or mcu._imu_bias_applied
-                         or mcu.imu.frozen)):
-            n, fresh, j = min(periods - k, MAX_RUN), [], i
+        if runs is not None:
+            kernel, most = runs
+            n, fresh, j = min(periods - k, most), [], i
             while j < total and incoming[j][0] < k + n:
                 off, frame_id, data = incoming[j]
                 if not _repeat(mcu, frame_id, data):
@@ -211,7 +214,7 @@ def advance(mcu: Mcu, periods: int, incoming: Incoming) -> None:
         k += done
 
 
-def _remember(mcu: Mcu, frame_id: int, data: bytes, before: object) -> None:
+def _remember(mcu: McuParts, frame_id: int, data: bytes, before: object) -> None:
     """After ``receive``: a MotionCommand just accepted (a new ``_last_cmd``) is the one a
     repeat must equal (payload but for the Counter, length, command, chassis)."""
     cmd = mcu._last_cmd
@@ -226,7 +229,7 @@ def _remember(mcu: Mcu, frame_id: int, data: bytes, before: object) -> None:
                       mcu.chassis)
 
 
-def _repeat(mcu: Mcu, frame_id: int, data: bytes) -> bool:
+def _repeat(mcu: McuParts, frame_id: int, data: bytes) -> bool:
     r = mcu._repeat_of
     return (r is not None and frame_id == r[0] and len(data) == r[1] and mcu._last_cmd is r[4]
             and mcu.chassis is r[5] and int.from_bytes(data, "little") & r[3] == r[2])

@@ -23,17 +23,44 @@ from __future__ import annotations
 
 import importlib
 import logging
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from lowerbase.firmware_model import fastbatch
+from lowerbase.firmware_model import mcu_defs
 from lowerbase.protocol.codec import MessageCodec
 
 if TYPE_CHECKING:  # pragma: no cover
-    from lowerbase.firmware_model.fastloop import LeanLoop
+    from lowerbase.firmware_model.encoder import EncoderCounter
+    from lowerbase.firmware_model.mcu_defs import McuParts, Send
+    from lowerbase.firmware_model.motor import WheelMotor
+    from lowerbase.firmware_model.profile import ChassisParams
 
 log = logging.getLogger(__name__)
+
+MAX_RUN = 60  #: periods per kernel call (at most 62: lean_batch keeps a bit per period in an int64)
+
+
+class LeanParts(Protocol):
+    """What the compiled loop uses of the Python lean loop (:class:`~.fastloop.LeanLoop`):
+    the Mcu, its motors and encoders, the derived constants, the Python frame emitter."""
+
+    mcu: McuParts
+    ml: WheelMotor
+    mr: WheelMotor
+    el: EncoderCounter
+    er: EncoderCounter
+    ppr_l: float
+    ppr_r: float
+    bpp_l: float
+    bpp_r: float
+    imu_cycle: float
+    stall_speed: float
+    idle2: float
+
+    def _derive(self, c: ChassisParams) -> None: ...
+    def _emit_due(self, now: float) -> None: ...
+    def send_rows(self, i: int, counters: dict[str, int], send: Send) -> int: ...
 
 #: the hot frames: message, multiplexer value (None: plain), value slots after the Counter
 HOT: dict[str, list[tuple[int | None, tuple[str, ...]]]] = {
@@ -128,10 +155,8 @@ def _entry(fn: Any) -> Any:
 class KernelLoop:
     """The compiled lean period of one Mcu (see the module docstring)."""
 
-    def __init__(self, lean: LeanLoop, lk: Any, lb: Any) -> None:
-        from lowerbase.firmware_model import mcu as m  # the constants; no import cycle at load
-
-        self.lean, self.mcu, self.lk, self.m = lean, lean.mcu, lk, m
+    def __init__(self, lean: LeanParts, lk: Any, lb: Any) -> None:
+        self.lean, self.mcu, self.lk, self.m = lean, lean.mcu, lk, mcu_defs
         mcu = self.mcu
         self.hot, self.frames, self.sig, self.scale = tables(mcu._periodic, lk)
         n = len(mcu._periodic)
@@ -143,14 +168,14 @@ class KernelLoop:
         self.vals = np.zeros(lk.V_SIZE)
         self.imu = np.zeros(12)
         self.zero_row = np.zeros(12)
-        self.lb = lb  # lean_batch: runs of periods (fastbatch.py)
+        self.lb = lb  # lean_batch: runs of periods (fastbatch.py drives them)
         self.batch = _entry(lb.batch)
-        self.fs = np.zeros(lb.F_ODO_AT + fastbatch.MAX_RUN)  # the state of a run (lean_batch)
-        self.js = np.zeros(lb.J_FRESH + fastbatch.MAX_RUN, np.int64)
-        size = 5 * fastbatch.MAX_RUN + 2 * n + 8
+        self.fs = np.zeros(lb.F_ODO_AT + MAX_RUN)  # the state of a run (lean_batch)
+        self.js = np.zeros(lb.J_FRESH + MAX_RUN, np.int64)
+        size = 5 * MAX_RUN + 2 * n + 8
         self.out, self.ids = np.zeros((size, 8), np.uint8), np.zeros(size, np.int64)
         self.lens, self.pidx = np.zeros(size, np.int64), np.zeros(size, np.int64)
-        self.targets = np.zeros((fastbatch.MAX_RUN, 2))
+        self.targets = np.zeros((MAX_RUN, 2))
         self.zero_rows = np.zeros((1, 12))
         self.k = np.zeros(lk.C_SIZE + lk.R_SIZE)
         self.owned = False

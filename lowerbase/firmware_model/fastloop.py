@@ -20,11 +20,12 @@ from typing import TYPE_CHECKING, Any
 
 from lowerbase.clock import SimClock
 from lowerbase.firmware_model import lean_bits as bits
+from lowerbase.firmware_model import mcu_defs as m
 from lowerbase.firmware_model.encoder import wrap_int32 as wrap
 from lowerbase.firmware_model.fastkernel import KernelLoop, kernel
 
 if TYPE_CHECKING:  # pragma: no cover
-    from lowerbase.firmware_model.mcu import Mcu, Send
+    from lowerbase.firmware_model.mcu_defs import McuParts, Send
     from lowerbase.firmware_model.profile import ChassisParams
 
 Rows = list[dict[str, Any]]
@@ -43,9 +44,7 @@ class LeanLoop:
     #: Python loop (the reference the kernel is tested against)
     compiled = True
 
-    def __init__(self, mcu: Mcu) -> None:
-        from lowerbase.firmware_model import mcu as m  # the constants; no import cycle at load
-
+    def __init__(self, mcu: McuParts) -> None:
         self.mcu = mcu
         self.m = m
         self.ml, self.mr = mcu._motors["left"], mcu._motors["right"]

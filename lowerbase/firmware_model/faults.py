@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from lowerbase.errors import ConfigError
@@ -85,6 +86,33 @@ class Fault:
         if self.duration is not None:
             text += f"+{self.duration:g}"
         return text
+
+
+#: faults whose hook acts when their value changes, not in every period they are active: the
+#: gyro bias step (Mcu._apply_faults adds it once; the IMU model then carries it as data)
+ONCE = frozenset({"imu-bias"})
+
+
+def any_active(faults: Iterable[Fault], t_since_boot: float,
+               skip: frozenset[str] = frozenset()) -> bool:
+    """Whether one of ``faults`` (but those of a kind in ``skip``) is active at
+    ``t_since_boot`` [s] (a fault armed for later, or over, changes nothing in a control
+    period: the lean path takes it)."""
+    return any(f.active(t_since_boot) for f in faults if f.kind not in skip)
+
+
+def quiet_periods(faults: Iterable[Fault], t_since_boot: float, dt: float, most: int) -> int:
+    """How many control periods of ``dt`` from ``t_since_boot`` on (at most ``most``) surely
+    have none of ``faults`` active: 0 when one is active now; before one that starts later, a
+    period fewer than fit (the simulated clock sums its steps: a period's time is t + k dt
+    only to rounding)."""
+    n = most
+    for f in faults:
+        if f.active(t_since_boot):
+            return 0
+        if f.start > t_since_boot:
+            n = min(n, max(0, math.floor((f.start - t_since_boot) / dt) - 1))
+    return n
 
 
 def parse_fault(spec: str) -> Fault:

@@ -28,8 +28,9 @@ from lowerbase.clock import Clock
 from lowerbase.errors import ConfigError
 from lowerbase.firmware_model import fastbatch, kinematics
 from lowerbase.firmware_model.encoder import EncoderCounter
+from lowerbase.firmware_model.fastkernel import MAX_RUN, KernelLoop
 from lowerbase.firmware_model.fastloop import LeanLoop
-from lowerbase.firmware_model.faults import Fault, parse_fault
+from lowerbase.firmware_model.faults import ONCE, Fault, any_active, parse_fault, quiet_periods
 from lowerbase.firmware_model.imu import ImuModel
 from lowerbase.firmware_model.mcu_commands import McuCommands
 from lowerbase.firmware_model.mcu_defs import (  # re-exported: the names import from here
@@ -97,8 +98,8 @@ log = logging.getLogger(__name__)
 class Mcu(McuCommands, McuStatus, McuFrames):
     """The chassis MCU. See the module docstring for the contract."""
 
-    #: take the lean control loop (fastloop.py) whenever no fault is in play; False forces
-    #: the general one (the tests compare the two)
+    #: take the lean control loop (fastloop.py) in every period in which no fault is active;
+    #: False forces the general one (the tests compare the two)
     lean = True
 
     def __init__(
@@ -248,6 +249,14 @@ class Mcu(McuCommands, McuStatus, McuFrames):
                 return f
         return None
 
+    def _faults_act(self) -> bool:
+        """Whether a fault hook acts in this period: a fault active (but the gyro bias, which
+        the IMU model carries once added), or the gyro bias to add or take back."""
+        if any_active(self.faults, self.clock.now() - self.boot_time, ONCE):
+            return True
+        bias = self._active("imu-bias")
+        return (bias.value if bias else 0.0) != self._imu_bias_applied
+
     def _wheel_target(self, side: str, rim: float) -> float:
         """What the firmware makes the real wheel do [rad/s] for a commanded rim speed [m/s]:
         the motor speed its beliefs give (rim / believed radius x believed ratio; the minSpeed
@@ -276,8 +285,8 @@ class Mcu(McuCommands, McuStatus, McuFrames):
 
     def step(self) -> None:
         """One control period: safety, motion, sensors, BMS, then the frames that are due."""
-        if self.lean and not (self.faults or self._delayed or self._imu_bias_applied
-                              or self.imu.frozen):
+        if self.lean and not (self._delayed or self.imu.frozen or (
+                (self.faults or self._imu_bias_applied) and self._faults_act())):
             self._lean.step()  # the same, bit for bit, without the fault hooks (fastloop.py)
             return
         self._lean.release()  # the compiled lean loop's due times and counters, back here
@@ -335,21 +344,30 @@ class Mcu(McuCommands, McuStatus, McuFrames):
         period k (in period order): a run then spans repeated MotionCommands
         (:func:`.fastbatch.advance`)."""
         if incoming:
-            fastbatch.advance(self, periods, incoming)
+            fastbatch.advance(self, periods, incoming, self._kernel_for_run)
             return
         clock = self.clock
         while periods > 0:
-            kernel = self._lean.kernel
+            runs = self._kernel_for_run()
             done = 0
-            if (kernel is not None and self.lean and self._lean.compiled
-                    and not (self.faults or self._delayed or self._imu_bias_applied
-                             or self.imu.frozen)):
-                done = fastbatch.run(kernel, periods)
+            if runs is not None:
+                done = fastbatch.run(runs[0], min(periods, runs[1]))
             if not done:
                 self.step()
                 clock.advance(self.dt)  # type: ignore[attr-defined]  # a SimClock
                 done = 1
             periods -= done
+
+    def _kernel_for_run(self) -> tuple[KernelLoop, int] | None:
+        """The compiled loop and how many periods a run may take from now (none with a fault
+        active), or None when no run may be taken now."""
+        kernel = self._lean.kernel
+        if (kernel is None or not self.lean or not self._lean.compiled or self._delayed
+                or self._imu_bias_applied or self.imu.frozen):
+            return None
+        most = MAX_RUN if not self.faults else quiet_periods(
+            self.faults, self.clock.now() - self.boot_time, self.dt, MAX_RUN)
+        return (kernel, most) if most else None
 
     def _target(self, now: float) -> tuple[float, float, bool]:
         """Twist to drive (after limits and smoothing) and whether to brake."""

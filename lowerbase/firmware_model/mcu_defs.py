@@ -24,11 +24,13 @@ if TYPE_CHECKING:  # pragma: no cover
     from lowerbase.clock import Clock
     from lowerbase.firmware_model.encoder import EncoderCounter
     from lowerbase.firmware_model.faults import Fault
+    from lowerbase.firmware_model.imu import ImuModel
     from lowerbase.firmware_model.kinematics import LimitedTwist
     from lowerbase.firmware_model.motor import WheelMotor
     from lowerbase.firmware_model.parameters import ParameterStore
     from lowerbase.firmware_model.profile import ChassisParams, Profile
     from lowerbase.firmware_model.smoother import VelocitySmoother
+    from lowerbase.firmware_model.truth import GroundTruth, SlipModel
     from lowerbase.protocol.codec import Codec
 
 #: StatusBit as plain ints: IntFlag arithmetic costs microseconds per operation, and the
@@ -101,6 +103,11 @@ class McuParts:
         boot_counter: int
         boot_time: float
         smoother: VelocitySmoother
+        truth: GroundTruth
+        slip: SlipModel
+        imu: ImuModel
+        dt: float
+        lean: bool
         leds: dict[tuple[int, int], dict[str, int]]
         imu_sample: tuple[Any, Any]
         bms: Any
@@ -117,6 +124,13 @@ class McuParts:
         _limited: LimitedTwist
         _speed_limited: bool
         _watchdog: bool
+        _watchdog_ramp: bool
+        _repeat_of: tuple[Any, ...] | None
+        _imu_due: float
+        _imu_last: tuple[Any, Any] | None
+        _imu_bias_applied: float
+        _saved_odometer: float
+        _last_save: float
         _imu_same: int
         _bms_bits: int
         _bms_charge: float
@@ -131,6 +145,12 @@ class McuParts:
         _seq: int
 
         def power_on(self) -> None: ...
+        def receive(self, frame_id: int, data: bytes) -> None: ...
+        def step(self) -> None: ...
+        def _target(self, now: float) -> tuple[float, float, bool]: ...
+        def _sample_imu(self) -> None: ...
+        def _cycle(self, name: str) -> float: ...
+        def _build(self, msg: MessageCodec) -> list[dict[str, Any]]: ...
         def _save_state(self) -> None: ...
         def _active(self, kind: str, arg: str | None = None) -> Fault | None: ...
         def wheel_velocity(self, side: str) -> float: ...

@@ -213,7 +213,7 @@ def test_the_general_loop_gives_the_same_trace(monkeypatch: pytest.MonkeyPatch) 
     assert record() == EXPECTED
 
 
-def test_the_lean_loop_runs_whenever_no_fault_is_in_play(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_lean_loop_runs_whenever_no_fault_is_active(monkeypatch: pytest.MonkeyPatch) -> None:
     calls: list[None] = []
     monkeypatch.setattr(LeanLoop, "compiled", False)  # runs of compiled periods skip step()
     lean_step = LeanLoop.step
@@ -222,12 +222,22 @@ def test_the_lean_loop_runs_whenever_no_fault_is_in_play(monkeypatch: pytest.Mon
     rig.enable()
     rig.drive(0.5, 0.1, 1.0)
     assert len(calls) == round(rig.now / rig.mcu.dt)  # every step
-    rig.mcu.inject("drop:0.5@100")  # not active yet, but a fault in play: the general loop
+    rig.mcu.inject("drop:0.5@100")  # armed for later: nothing changes yet, the lean loop
+    rig.drive(0.5, 0.1, 1.0)
+    assert len(calls) == round(rig.now / rig.mcu.dt)
+    rig.mcu.inject("drop:0.5")  # active now: the general loop
     rig.drive(0.5, 0.1, 1.0)
     assert len(calls) == round((rig.now - 1.0) / rig.mcu.dt)
     rig.mcu.clear_fault()
     rig.drive(0.5, 0.1, 1.0)
     assert len(calls) == round((rig.now - 1.0) / rig.mcu.dt)
+    before = len(calls)
+    rig.mcu.inject("imu-bias:0.05")  # added in one general period, then the IMU model's data
+    rig.drive(0.5, 0.1, 1.0)
+    assert len(calls) == before + round(1.0 / rig.mcu.dt) - 1
+    rig.mcu.clear_fault()  # taken back in one general period
+    rig.drive(0.5, 0.1, 1.0)
+    assert len(calls) == before + 2 * round(1.0 / rig.mcu.dt) - 2
 
 
 def test_the_trace_covers_every_kind_of_frame() -> None:

@@ -17,6 +17,7 @@ from lowerbase.bms.adapter import McuBmsAdapter
 from lowerbase.firmware_model import fastbatch, fastkernel
 from lowerbase.firmware_model.fastkernel import KernelLoop
 from lowerbase.firmware_model.fastloop import LeanLoop
+from lowerbase.firmware_model.faults import Fault
 from lowerbase.firmware_model.mcu import Mcu
 from lowerbase.firmware_model.profile import load_profile
 from lowerbase.firmware_model.truth import SlipEvent, TruePose
@@ -65,9 +66,10 @@ def test_the_python_lean_loop_gives_the_same_trace(monkeypatch: pytest.MonkeyPat
 
 def _drive_switching(general_every: int | None, runs: bool = False
                      ) -> tuple[list[Any], tuple[Any, ...]]:
-    """A drive in which a fault is armed (not yet active: the general loop) and cleared again
-    at irregular periods; every frame and the end state. ``runs``: the periods between two
-    changes go through ``Mcu.advance`` (runs of compiled periods), else ``step()`` each."""
+    """A drive in which a fault is injected (active but without effect: the general loop) and
+    cleared again at irregular periods; every frame and the end state. ``runs``: the periods
+    between two changes go through ``Mcu.advance`` (runs of compiled periods), else
+    ``step()`` each."""
     p = load_profile()
     rig = TraceRig(profile=p, bms=McuBmsAdapter.from_battery_table(p.battery), keep=False)
     rig.enable()
@@ -80,7 +82,7 @@ def _drive_switching(general_every: int | None, runs: bool = False
             if rig.mcu.faults:
                 rig.mcu.clear_fault()
             else:
-                rig.mcu.inject("drop:0.5@1000")  # in play, never active
+                rig.mcu.inject("delay:0")  # active (the general loop), changes nothing
         if k == 1200:  # commands stop: the watchdog brakes
             k += 200
             rig.mcu.advance(200) if runs else rig.run(1.0)
@@ -108,6 +110,34 @@ def test_switching_kernel_and_general_loop_is_seamless(monkeypatch: pytest.Monke
     assert seen["kernel"] + seen["run"] > 300
     monkeypatch.setattr(Mcu, "lean", False)
     assert switching == _drive_switching(None, runs)  # Mcu.advance: step() each
+
+
+def _drive_through_a_stall() -> tuple[Any, ...]:
+    """A drive through Mcu.advance with a stall armed for later (1 s from now, for 0.5 s) and
+    a drop armed beyond the drive: every frame and the end state."""
+    p = load_profile()
+    rig = TraceRig(profile=p, bms=McuBmsAdapter.from_battery_table(p.battery), keep=False)
+    rig.enable()
+    mcu = rig.mcu
+    t = mcu.clock.now() - mcu.boot_time
+    mcu.inject(Fault("stall", "left", start=t + 1.0, duration=0.5))
+    mcu.inject(Fault("drop", "0.5", start=t + 100.0))
+    rig.drive(0.5, 0.2, 3.0)
+    rig.drive(0.0, 0.0, 1.0)
+    mcu._lean.release()
+    tr = mcu.truth
+    return (rig.trace, tr.x, tr.y, tr.yaw, mcu.odometer, mcu.encoder_counts(), mcu.status,
+            mcu.motion_fault, int(mcu.state), dict(mcu._counters), list(mcu._due))
+
+
+def test_runs_take_the_periods_before_a_fault_starts(monkeypatch: pytest.MonkeyPatch
+                                                    ) -> None:
+    seen = _count_kernel_periods(monkeypatch)
+    got = _drive_through_a_stall()
+    assert got[6] & StatusBit.LEFT_MOTOR_FAULT  # the stall happened (and latched)
+    assert seen["run"] > 150  # the second before the stall: runs
+    monkeypatch.setattr(Mcu, "lean", False)
+    assert got == _drive_through_a_stall()
 
 
 class Wall:

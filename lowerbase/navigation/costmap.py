@@ -337,9 +337,32 @@ def scan_observation(scan: LaserScan, pose: Pose, src: SourceParams) -> Observat
         r = np.where(r == np.inf, scan.range_max - 1e-4, r)
     with np.errstate(invalid="ignore"):
         ok = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max)
-    a = scan.angles[ok]
-    pts = np.column_stack((r[ok] * np.cos(a), r[ok] * np.sin(a), np.zeros(a.size)))
+    cos, sin = _beam_directions(scan.angle_min, scan.angle_increment, r.size)
+    rk = r[ok]
+    pts = np.zeros((rk.size, 3))
+    pts[:, 0] = rk * cos[ok]
+    pts[:, 1] = rk * sin[ok]
     return _observation(pts, (0.0, 0.0, 0.0), pose, src)
+
+
+#: the last scan geometry's beam cosines and sines: ((angle_min, angle_increment, size), cos, sin)
+_DIRECTIONS: list[tuple[tuple[float, float, int], np.ndarray, np.ndarray]] = []
+
+
+def _beam_directions(angle_min: float, increment: float, size: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin of a LaserScan's beam angles (:attr:`LaserScan.angles`), computed once per
+    scan geometry: numpy's cos and sin are elementwise, so ``cos(angles)[ok]`` is, bit for bit,
+    the ``cos(angles[ok])`` computed per scan before (tests/navigation/test_mark_points.py)."""
+    key = (float(angle_min), float(increment), int(size))
+    for k, cos, sin in _DIRECTIONS:
+        if k == key:
+            return cos, sin
+    angles = angle_min + np.arange(size) * increment
+    cos, sin = np.cos(angles), np.sin(angles)
+    cos.flags.writeable = sin.flags.writeable = False
+    _DIRECTIONS[:] = [(key, cos, sin)]
+    return cos, sin
 
 
 def cloud_observation(points_base: np.ndarray, origin_base: Sequence[float], pose: Pose,

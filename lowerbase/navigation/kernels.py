@@ -315,3 +315,29 @@ def inflate(master: np.ndarray, d2: np.ndarray, table: np.ndarray, no_informatio
                     master[r, c] = v
             elif v > m:
                 master[r, c] = v
+
+
+@_jit
+def scan_points(ranges: np.ndarray, cos: np.ndarray, sin: np.ndarray, inf_is_valid: bool,
+                range_min: float, range_max: float, x: float, y: float, c: float, s: float,
+                out: np.ndarray) -> int:
+    """A LaserScan's returns as map points at the robot's pose (x, y, heading's cosine ``c``
+    and sine ``s``) into ``out`` (n, 3) from row 0; how many. As
+    :func:`lowerbase.navigation.costmap.scan_observation` did in numpy: +inf is ``range_max -
+    1e-4`` when ``inf_is_valid``; returns with range_min <= r < range_max kept; the point in
+    base_link ``(r * cos, r * sin, 0)``, then ``(x + c * px - s * py, y + s * px + c * py,
+    0)`` (tests/navigation/test_mark_points.py)."""
+    k = 0
+    for i in range(ranges.size):
+        r = np.float64(ranges[i])
+        if inf_is_valid and r == np.inf:
+            r = range_max - 1e-4
+        if not (np.isfinite(r) and r >= range_min and r < range_max):
+            continue
+        px = r * cos[i]
+        py = r * sin[i]
+        out[k, 0] = x + c * px - s * py
+        out[k, 1] = y + s * px + c * py
+        out[k, 2] = 0.0
+        k += 1
+    return k

@@ -104,13 +104,14 @@ def test_scan_observation_points_are_the_per_scan_cosines() -> None:
     for _ in range(10):
         for n, amin, inc in geometries:  # the cache changes geometry every scan here
             ranges = rng.uniform(0.0, 45.0, n).astype(np.float32)
-            kinds = rng.integers(0, 6, n)
+            kinds = rng.integers(0, 7, n)
             ranges[kinds == 0] = np.inf
             ranges[kinds == 1] = -np.inf
             ranges[kinds == 2] = np.nan
             ranges[kinds == 3] = 0.01
+            ranges[kinds == 4] = rng.choice([0.0625, 40.0], int((kinds == 4).sum()))  # limits
             scan = LaserScan("base_link", 1.0, amin, amin + (n - 1) * inc, inc, 0.0, 0.04,
-                             0.05, 40.0, ranges)
+                             0.0625, 40.0, ranges)
             pose = (float(rng.uniform(-5, 5)), float(rng.uniform(-5, 5)),
                     float(rng.uniform(-4, 4)))
             for inf_is_valid in (False, True):

@@ -331,15 +331,45 @@ def _observation(points_base: np.ndarray, origin_base: Sequence[float], pose: Po
 def scan_observation(scan: LaserScan, pose: Pose, src: SourceParams) -> Observation:
     """A LaserScan in base_link as an observation at the robot's ``pose``, as laser_geometry's
     projectLaser: returns with range_min <= r < range_max; +inf becomes range_max - 1e-4
-    (clearing only, beyond obstacle_range) when ``inf_is_valid``; -inf and NaN are dropped."""
-    r = np.asarray(scan.ranges, float)
-    if src.inf_is_valid:
-        r = np.where(r == np.inf, scan.range_max - 1e-4, r)
-    with np.errstate(invalid="ignore"):
-        ok = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max)
-    a = scan.angles[ok]
-    pts = np.column_stack((r[ok] * np.cos(a), r[ok] * np.sin(a), np.zeros(a.size)))
-    return _observation(pts, (0.0, 0.0, 0.0), pose, src)
+    (clearing only, beyond obstacle_range) when ``inf_is_valid``; -inf and NaN are dropped.
+    Compiled (:func:`~lowerbase.navigation.kernels.scan_points`): the numpy expressions it
+    replaced, in their order, so the same points bit for bit."""
+    from lowerbase.navigation.kernels import scan_points
+
+    ranges = np.asarray(scan.ranges)
+    if ranges.dtype not in (np.float32, np.float64) or ranges.ndim != 1:
+        ranges = np.asarray(ranges, float).ravel()
+    cos, sin = _beam_directions(scan.angle_min, scan.angle_increment, ranges.size)
+    x, y, yaw = pose
+    c, s = math.cos(yaw), math.sin(yaw)
+    pts = np.empty((ranges.size, 3))
+    n = scan_points(ranges, cos, sin, bool(src.inf_is_valid), float(scan.range_min),
+                    float(scan.range_max), float(x), float(y), c, s, pts)
+    # the sensor at base_link's origin: _to_map of (0, 0, 0), in the same floats
+    origin = (x + c * 0.0 - s * 0.0, y + s * 0.0 + c * 0.0, 0.0)
+    return Observation((float(origin[0]), float(origin[1]), float(origin[2])), pts[:n],
+                       src.obstacle_range, src.raytrace_range, src.min_obstacle_height,
+                       src.max_obstacle_height, src.marking, src.clearing)
+
+
+#: the last scan geometry's beam cosines and sines: ((angle_min, angle_increment, size), cos, sin)
+_DIRECTIONS: list[tuple[tuple[float, float, int], np.ndarray, np.ndarray]] = []
+
+
+def _beam_directions(angle_min: float, increment: float, size: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin of a LaserScan's beam angles (:attr:`LaserScan.angles`), computed once per
+    scan geometry: numpy's cos and sin are elementwise, so ``cos(angles)[ok]`` is, bit for bit,
+    the ``cos(angles[ok])`` computed per scan before (tests/navigation/test_mark_points.py)."""
+    key = (float(angle_min), float(increment), int(size))
+    for k, cos, sin in _DIRECTIONS:
+        if k == key:
+            return cos, sin
+    angles = angle_min + np.arange(size) * increment
+    cos, sin = np.cos(angles), np.sin(angles)
+    cos.flags.writeable = sin.flags.writeable = False
+    _DIRECTIONS[:] = [(key, cos, sin)]
+    return cos, sin
 
 
 def cloud_observation(points_base: np.ndarray, origin_base: Sequence[float], pose: Pose,

@@ -260,3 +260,84 @@ def ray_end_cells(ox: float, oy: float, px: np.ndarray, py: np.ndarray, max_len:
         r = np.int64(np.floor((oy + t * dy - y0) / res))
         cols[i] = min(max(c, 0), w - 1)
         rows[i] = min(max(r, 0), h - 1)
+
+
+@_jit
+def mark_points(data: np.ndarray, px: np.ndarray, py: np.ndarray, pz: np.ndarray, ox: float,
+                oy: float, oz: float, z_min: float, z_max: float, range_sq: float, x0: float,
+                y0: float, res: float, value: int) -> None:
+    """The obstacle layer's marking (:meth:`ObstacleLayer.update`): ``value`` on the cell of
+    every point within the height limits (``z_min <= z <= z_max``) whose squared distance from
+    the origin ``(dx * dx + dy * dy) + dz * dz`` is below ``range_sq`` and whose cell
+    ``floor((x - x0) / res)``, ``floor((y - y0) / res)`` is on the grid: the numpy marking's
+    expressions in its order (tests/navigation/test_mark_points.py)."""
+    h, w = data.shape
+    for i in range(px.size):
+        z = pz[i]
+        dx, dy, dz = px[i] - ox, py[i] - oy, z - oz
+        d2 = (dx * dx + dy * dy) + dz * dz
+        if not (z >= z_min and z <= z_max and d2 < range_sq):
+            continue
+        c = np.floor((px[i] - x0) / res)
+        r = np.floor((py[i] - y0) / res)
+        if 0.0 <= c < w and 0.0 <= r < h:
+            data[np.int64(r), np.int64(c)] = value
+
+
+@_jit
+def combine_max(master: np.ndarray, layer: np.ndarray, no_information: int) -> None:
+    """costmap_2d's updateWithMax in place (:func:`lowerbase.navigation.layers.combine_max`):
+    each known cell of ``layer`` raises ``master``'s, and a ``master`` cell without information
+    takes the layer's; both 2D ``uint8`` of one shape (tests/navigation/test_costmap_kernels.py)."""
+    h, w = master.shape
+    for r in range(h):
+        for c in range(w):
+            v = layer[r, c]
+            if v != no_information:
+                m = master[r, c]
+                if m == no_information or m < v:
+                    master[r, c] = v
+
+
+@_jit
+def inflate(master: np.ndarray, d2: np.ndarray, table: np.ndarray, no_information: int,
+            floor: int) -> None:
+    """The inflation layer's last step (:meth:`InflationLayer.apply`): each cell's cost from
+    ``table`` by its squared distance ``d2`` raises a known ``master`` cell, and replaces an
+    unknown one when at least ``floor`` (tests/navigation/test_costmap_kernels.py)."""
+    h, w = master.shape
+    for r in range(h):
+        for c in range(w):
+            v = table[d2[r, c]]
+            m = master[r, c]
+            if m == no_information:
+                if v >= floor:
+                    master[r, c] = v
+            elif v > m:
+                master[r, c] = v
+
+
+@_jit
+def scan_points(ranges: np.ndarray, cos: np.ndarray, sin: np.ndarray, inf_is_valid: bool,
+                range_min: float, range_max: float, x: float, y: float, c: float, s: float,
+                out: np.ndarray) -> int:
+    """A LaserScan's returns as map points at the robot's pose (x, y, heading's cosine ``c``
+    and sine ``s``) into ``out`` (n, 3) from row 0; how many. As
+    :func:`lowerbase.navigation.costmap.scan_observation` did in numpy: +inf is ``range_max -
+    1e-4`` when ``inf_is_valid``; returns with range_min <= r < range_max kept; the point in
+    base_link ``(r * cos, r * sin, 0)``, then ``(x + c * px - s * py, y + s * px + c * py,
+    0)`` (tests/navigation/test_mark_points.py)."""
+    k = 0
+    for i in range(ranges.size):
+        r = np.float64(ranges[i])
+        if inf_is_valid and r == np.inf:
+            r = range_max - 1e-4
+        if not (np.isfinite(r) and r >= range_min and r < range_max):
+            continue
+        px = r * cos[i]
+        py = r * sin[i]
+        out[k, 0] = x + c * px - s * py
+        out[k, 1] = y + s * px + c * py
+        out[k, 2] = 0.0
+        k += 1
+    return k

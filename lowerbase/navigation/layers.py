@@ -16,10 +16,13 @@ from skimage import draw
 from lowerbase.errors import ConfigError, WorldError
 from lowerbase.navigation.kernels import (
     clear_lines,
+    inflate,
+    mark_points,
     polygon_cells,
     ray_end_cells,
     squared_distances,
 )
+from lowerbase.navigation.kernels import combine_max as _combine_max
 from lowerbase.world.footprint import Footprint
 from lowerbase.world.grid import OccupancyGrid
 
@@ -287,19 +290,24 @@ class ObstacleLayer:
         for obs in observations:
             if not obs.marking or obs.points.size == 0:
                 continue
-            p = obs.points
+            # LETHAL on the cell of every return within the height limits and obstacle_range,
+            # compiled (kernels.py; the numpy marking is tests/navigation/test_mark_points.py's)
+            p = np.asarray(obs.points, dtype=float)
             top = min(obs.max_obstacle_height, self.max_obstacle_height)
-            d2 = ((p - np.asarray(obs.origin)) ** 2).sum(axis=1)
-            keep = (p[:, 2] >= obs.min_obstacle_height) & (p[:, 2] <= top) \
-                & (d2 < obs.obstacle_range ** 2)
-            cols, rows = cm.world_to_map(p[keep, 0], p[keep, 1])
-            ok = cm.inside(cols, rows)
-            cm.data[rows[ok], cols[ok]] = LETHAL_OBSTACLE
+            mark_points(cm.data, p[:, 0], p[:, 1], p[:, 2], float(obs.origin[0]),
+                        float(obs.origin[1]), float(obs.origin[2]),
+                        float(obs.min_obstacle_height), float(top),
+                        float(obs.obstacle_range ** 2), float(cm.origin[0]),
+                        float(cm.origin[1]), float(cm.resolution), LETHAL_OBSTACLE)
 
 
 def combine_max(master: np.ndarray, layer: np.ndarray) -> None:
     """costmap_2d's updateWithMax: the layer's known cells raise the master (in place);
     a master cell without information takes the layer's value."""
+    if master.dtype == np.uint8 and layer.dtype == np.uint8 and master.ndim == 2 \
+            and master.shape == layer.shape:  # compiled (kernels.py), the same cells
+        _combine_max(master, layer, NO_INFORMATION)
+        return
     known = layer != NO_INFORMATION
     take = known & ((master == NO_INFORMATION) | (master < layer))
     master[take] = layer[take]
@@ -363,9 +371,12 @@ class InflationLayer:
         # integers rint(edt^2) gave, compiled (kernels.py)
         d2 = np.empty(master.shape, np.int64)
         squared_distances(lethal, table.size - 1, d2)
+        floor = 1 if self.params.inflate_unknown else INSCRIBED_INFLATED_OBSTACLE
+        if master.dtype == np.uint8 and master.ndim == 2:  # compiled (kernels.py)
+            inflate(master, d2, table, NO_INFORMATION, floor)
+            return
         infl = table[d2]
         unknown = master == NO_INFORMATION
-        floor = 1 if self.params.inflate_unknown else INSCRIBED_INFLATED_OBSTACLE
         np.maximum(master, infl, out=master, where=~unknown)
         take = unknown & (infl >= floor)
         master[take] = infl[take]

@@ -316,7 +316,8 @@ class WorldNode:
             if m2o is None:
                 continue
             self._tf.sendTransform(io.transform_2d(stamp, s.map_frame, s.odom_frame, m2o))
-            if self.localizer.running and self.odom is not None:
+            if self.localizer.running and self.odom is not None \
+                    and wanted(self._pubs["pose2d"]):  # nobody takes it: not built
                 self._pubs["pose2d"].publish(io.pose_2d(compose(m2o, self.odom)))
 
     def frame_once(self) -> None:

@@ -337,8 +337,12 @@ def test_serial_pty_run(lowerbase_proc: Any, tmp_path: Path,
     link = tmp_path / "chassis-tty"
     proc = lowerbase_proc("emulate", "--serial", f"pty:{link}")
     proc.wait_for("lower computer on")
-    only = ("link.*,param.read,version.all,frame.Heartbeat.*,frame.WheelFeedback.*,"
-            "safety.enable,safety.watchdog,robust.bad_dlc")
+    # the serial framing carries the suite: everything but the frame timing, which is the host's
+    # here (a real-time emulator process: once a 0.5 s stall in CI, a 340 ms gap beside 12 busy
+    # loops); the timing checks run in test_emulator_passes_completely (udp_multicast)
+    frames = ",".join(f"frame.{m}.{c}" for m in ("Heartbeat", "WheelFeedback")
+                      for c in ("present", "dlc", "range", "counter"))
+    only = f"link.*,param.read,version.all,{frames},safety.enable,safety.watchdog,robust.bad_dlc"
     code, results, out = _conformance(capsys, ["--serial", str(link)], "--only", only,
                                       "--observe", "2")
     assert code == 0, out

@@ -240,14 +240,23 @@ class LayeredCostmap:
         """clear_costmap_recovery's reset: forget the marks outside the ``size`` x ``size`` m
         square centred on (x, y) [m] (the cells whose centre lies outside it); the number of
         marked cells forgotten."""
+        return self._forget(x, y, size, inside=False)
+
+    def clear_inside(self, x: float, y: float, size: float) -> int:
+        """Forget the marks inside the ``size`` x ``size`` m square centred on (x, y) [m] (the
+        cells whose centre lies inside it, edges included); the number of marked cells
+        forgotten."""
+        return self._forget(x, y, size, inside=True)
+
+    def _forget(self, x: float, y: float, size: float, *, inside: bool) -> int:
         if self.obstacle_layer is None:
             return 0
         m = self.obstacle_layer.map
         cols = m.origin[0] + (np.arange(m.width) + 0.5) * m.resolution
         rows = m.origin[1] + (np.arange(m.height) + 0.5) * m.resolution
-        outside = (np.abs(rows - y)[:, None] > 0.5 * size) | \
-            (np.abs(cols - x)[None, :] > 0.5 * size)
-        forget = outside & (m.data != m.default)
+        within = (np.abs(rows - y)[:, None] <= 0.5 * size) & \
+            (np.abs(cols - x)[None, :] <= 0.5 * size)
+        forget = (within if inside else ~within) & (m.data != m.default)
         m.data[forget] = m.default
         self._dirty = True
         return int(forget.sum())

@@ -327,7 +327,7 @@ class Recoveries:
         self.back_off.blocked = self.rotate.blocked = False
         self._resensed = True
         self.log.append("clear_around")
-        clear_inside(local, pose[0], pose[1], size)
+        local.clear_inside(pose[0], pose[1], size)
         self._resense = (local.stats.updates, move, now)
         return True
 
@@ -353,19 +353,3 @@ class Recoveries:
             return None if v is None else (v, 0.0)
         w = self.rotate.step(pose, now, costs, origin, footprint)
         return None if w is None else (0.0, w)
-
-
-def clear_inside(local: LayeredCostmap, x: float, y: float, size: float) -> int:
-    """Forget the ``local`` costmap's marks inside the ``size`` x ``size`` m square centred on
-    (x, y) [m] (cells whose centre lies inside); the number of marked cells forgotten."""
-    layer = local.obstacle_layer
-    if layer is None:
-        return 0
-    m = layer.map
-    cols = m.origin[0] + (np.arange(m.width) + 0.5) * m.resolution
-    rows = m.origin[1] + (np.arange(m.height) + 0.5) * m.resolution
-    inside = (np.abs(rows - y)[:, None] <= 0.5 * size) & (np.abs(cols - x)[None, :] <= 0.5 * size)
-    forget = inside & (m.data != m.default)
-    m.data[forget] = m.default
-    local.clear_outside(x, y, math.inf)  # marks the master grid for a rebuild; forgets nothing
-    return int(forget.sum())

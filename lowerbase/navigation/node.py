@@ -34,6 +34,7 @@ from lowerbase.navigation.tf_map import MapToOdom
 from lowerbase.ros1.wire import wanted
 from lowerbase.world.camera import CameraConfig
 from lowerbase.world.grid import OccupancyGrid
+from lowerbase.world.lazy_scan import LazyScan, resolve
 from lowerbase.world.lidar import LaserScan
 from lowerbase.world.localization.poses import compose
 from lowerbase.world.pacing import Pace
@@ -63,9 +64,13 @@ class NavigationSetup:
     base_frame: str = "base_link"
     rate_hz: float = 20.0  #: control rate (/base_cmd_vel while active) [Hz]
     costmap_rate_hz: float = 2.0  #: the local costmap's publishing rate [Hz]
+    #: the local costmap's ``update_frequency`` [Hz]: each update marks and clears the newest
+    #: scan (and cloud) whose stamp /odom and TF have reached, as costmap_2d's observation
+    #: buffers with ``observation_keep_time`` 0; a tick between updates only steers
+    update_rate_hz: float = 5.0
 
     def __post_init__(self) -> None:
-        for name in ("rate_hz", "costmap_rate_hz"):
+        for name in ("rate_hz", "costmap_rate_hz", "update_rate_hz"):
             value = getattr(self, name)
             if not (math.isfinite(value) and 0 < value <= 100):
                 raise ConfigError(f"{name} = {value!r}: expected a rate in (0, 100] Hz")
@@ -112,7 +117,7 @@ class NavigationNode:
         self.odom: Pose | None = None
         self.odom_stamp: float | None = None  #: /odom's header stamp [s, ROS time]
         self.map_to_odom: Pose | None = None
-        self.scan: LaserScan | None = None  #: the newest /scan
+        self.scan: LaserScan | LazyScan | None = None  #: the newest /scan (cast when read)
         self.scan_stamp: float | None = None  #: its header stamp [s, ROS time]
         #: /odom's poses by stamp, and the scans and clouds waiting for it to reach theirs
         self.odom_history = PoseHistory()
@@ -121,9 +126,11 @@ class NavigationNode:
                                       tf_newest=self.tf.newest, wait=SENSOR_TF_WAIT)
         self.last_command: Any = None  #: the Navigator's NavCommand of the last tick
         self.tick_count = 0
+        #: ticks per local costmap update (the first tick updates)
+        self._update_every = max(1, round(setup.rate_hz / setup.update_rate_hz))
         self.stats: dict[str, int] = {"bad_scan": 0, "bad_cloud": 0, "bad_odom": 0,
                                       "bad_footprint": 0, "bad_parameter": 0, "no_pose": 0,
-                                      "cmd_vel": 0, "plans": 0}
+                                      "cmd_vel": 0, "plans": 0, "superseded": 0}
         self._tail = 0
         self.pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
@@ -292,12 +299,8 @@ class NavigationNode:
             now = self.now()
         with self.lock:
             pose = self.map_pose()
-            items = [(at, data, None) if sensor == "scan" else (at, None, data)
-                     for sensor, at, data in self.sensors.ready()]  # each at its stamp's pose
-            try:
-                self.navigator.update_observations(items)
-            except WorldError as exc:
-                self._count_bad("bad_scan", exc)
+            if self.tick_count % self._update_every == 0:
+                self._update_costmap()
             command: tuple[float, float] | None = None
             if self.steps.active:
                 command = self.steps.tick(self.odom, now, self.odom_stamp) \
@@ -325,6 +328,22 @@ class NavigationNode:
             self.tick_count += 1
             self.ticked.notify_all()
         self._ready_line(pose)
+
+    def _update_costmap(self) -> None:
+        """One local costmap update: the newest scan and cloud /odom and TF have reached,
+        each at its stamp's pose; older ones since the last update are dropped unread
+        (costmap_2d keeps only the newest with ``observation_keep_time`` 0)."""
+        newest: dict[str, tuple[Pose, Any]] = {}
+        for sensor, at, data in self.sensors.ready():  # oldest first per sensor
+            if sensor in newest:
+                self.stats["superseded"] += 1
+            newest[sensor] = (at, data)
+        try:  # a scan is cast only now, when read (lowerbase.world.lazy_scan)
+            items = [(at, resolve(data), None) if sensor == "scan" else (at, None, data)
+                     for sensor, (at, data) in newest.items()]
+            self.navigator.update_observations(items)
+        except WorldError as exc:
+            self._count_bad("bad_scan", exc)
 
     def navigator_active(self) -> bool:
         from lowerbase.navigation.navigator import GoalState

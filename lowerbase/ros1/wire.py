@@ -94,6 +94,14 @@ class RosWire:
         ``converted`` is not used."""
         publisher.publish(msg)
 
+    def publish_lazy(self, publisher: Any, header: Any, build: Callable[[], Any],
+                     converted: dict[str, Callable[[], Any]]) -> None:
+        """:meth:`publish_converted` of the message ``build()`` makes, built only if anyone
+        reads it: alone it always is (it goes to ROS); in-process, when no outside node
+        takes the topic, the faces here get a :class:`LazyMessage` with ``header`` at hand,
+        and one that converts it by a key of ``converted`` never has it built."""
+        self.publish_converted(publisher, build(), converted)
+
     def convert(self, msg: Any, key: str, conversion: Callable[[Any], Any]) -> Any:
         """``conversion(msg)``: in-process (:class:`LocalWire`) made once per delivered message
         and ``key``, or the publisher's value (:meth:`publish_converted`)."""
@@ -116,6 +124,28 @@ class RosWire:
         buffer = tf2_ros.Buffer(cache_time=self.rospy.Duration(10.0))
         buffer._lowerbase_listener = tf2_ros.TransformListener(buffer)
         return buffer
+
+
+class LazyMessage:
+    """A message for the faces of this process whose body is built the first time one of
+    them reads it (``build()``, once); its ``header`` is at hand (:meth:`RosWire.
+    publish_lazy`). A face that reads any other field gets the built message's."""
+
+    def __init__(self, header: Any, build: Callable[[], Any]) -> None:
+        self.header = header
+        self._build = build
+        self._msg: Any = None
+
+    def built(self) -> Any:
+        """The message itself (built now if no one read it yet)."""
+        if self._msg is None:
+            self._msg = self._build()
+        return self._msg
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("__") or name in ("_build", "_msg"):
+            raise AttributeError(name)
+        return getattr(self.built(), name)
 
 
 def wanted(publisher: Any) -> bool:
@@ -220,11 +250,15 @@ class _TeePublisher:
 
     def publish(self, msg: Any, converted: dict[str, Callable[[], Any]] | None = None) -> None:
         self.board.deliver(self.name, msg, self.latch, converted)
-        if self.latch or self._connected():
-            self.real.publish(msg)
+        if self.latch or self._connected():  # one may have connected since publish_lazy
+            self.real.publish(msg.built() if isinstance(msg, LazyMessage) else msg)
 
     def _connected(self) -> bool:
         return connected(self.real)
+
+    def reaches_ros(self) -> bool:
+        """Whether a message published now goes out to ROS (a connection, or latched)."""
+        return bool(self.latch or self._connected())
 
     def wanted(self) -> bool:
         """Whether a message published now reaches anyone: a face in this process, a
@@ -308,6 +342,13 @@ class LocalWire(RosWire):
     def publish_converted(self, publisher: Any, msg: Any,
                           converted: dict[str, Callable[[], Any]]) -> None:
         publisher.publish(msg, converted)
+
+    def publish_lazy(self, publisher: Any, header: Any, build: Callable[[], Any],
+                     converted: dict[str, Callable[[], Any]]) -> None:
+        if getattr(publisher, "reaches_ros", lambda: True)():
+            publisher.publish(build(), converted)
+        else:
+            publisher.publish(LazyMessage(header, build), converted)
 
     def convert(self, msg: Any, key: str, conversion: Callable[[Any], Any]) -> Any:
         return self.board.convert(msg, key, conversion)

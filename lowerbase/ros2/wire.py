@@ -255,6 +255,10 @@ class Ros2Wire:
                           converted: dict[str, Callable[[], Any]]) -> None:
         publisher.publish(msg)
 
+    def publish_lazy(self, publisher: Any, header: Any, build: Callable[[], Any],
+                     converted: dict[str, Callable[[], Any]]) -> None:
+        publisher.publish(build())
+
     def convert(self, msg: Any, key: str, conversion: Callable[[Any], Any]) -> Any:
         return conversion(msg)
 

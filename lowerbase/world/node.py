@@ -30,7 +30,8 @@ from lowerbase.ros1.wire import wanted
 from lowerbase.world.camera import DepthCamera
 from lowerbase.world.footprint import validate_pose
 from lowerbase.world.grid import OccupancyGrid
-from lowerbase.world.lidar import LidarRig
+from lowerbase.world.lazy_scan import LazyScan
+from lowerbase.world.lidar import LaserScan, LidarRig
 from lowerbase.world.localization import Localizer
 from lowerbase.world.localization.lostwatch import LOCALIZED, LostWatch
 from lowerbase.world.localization.poses import compose
@@ -111,7 +112,7 @@ class WorldNode:
         self.lost_watch = LostWatch()  #: says when the estimate turns lost or found again
         self.odom: Pose | None = None
         self.scan_odom = ScanOdom()  #: each scan with /odom at its stamp, for the localizer
-        self.stats: dict[str, int] = {"scans": 0, "frames": 0, "bad_odom": 0,
+        self.stats: dict[str, int] = {"scans": 0, "scans_cast": 0, "frames": 0, "bad_odom": 0,
                                       "bad_initialpose": 0, "amcl_poses": 0, "frames_dropped": 0}
         self._pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
@@ -279,14 +280,26 @@ class WorldNode:
         with self.lock:
             if not self.scan_odom.fresh(stamp.to_sec()):
                 return  # a second scan in one /clock step (a catch-up): the same instant
-        scan = self.lidars.scan(self.scene_at(t), pose, t)
+        # The scan's random numbers now, its ray cast when first read (LazyScan): alone, or
+        # with /scan taken outside, at once; in lockstep with no outside reader only the
+        # scans navigation's costmap and the localizer read are ever cast.
+        rig, scene, draws = self.lidars, self.scene_at(t), self.lidars.draw()
+        scan = LazyScan(rig.merger.merged.frame_id, t,
+                        lambda: self._cast(rig.scan(scene, pose, t, draws)))
         io = self.io  # in-process, navigation takes the scan as it would read it back
-        self.wire.publish_converted(self._pubs["scan"], io.laser_scan(scan, stamp),
-                                    {io.SCAN: lambda: io.scan_as_received(scan, stamp)})
+        received = LazyScan(scan.frame_id, stamp.to_sec(),
+                            lambda: io.scan_as_received(scan.scan(), stamp))
+        self.wire.publish_lazy(self._pubs["scan"], io.header(stamp, scan.frame_id),
+                               lambda: io.laser_scan(scan.scan(), stamp),
+                               {io.SCAN: lambda: received})
         self.stats["scans"] += 1
         with self.lock:
             self.scan_odom.add_scan(stamp.to_sec(), scan)
             self._localize()
+
+    def _cast(self, scan: LaserScan) -> LaserScan:
+        self.stats["scans_cast"] += 1
+        return scan
 
     def _stamp_of(self, t: float) -> Any:
         """The ROS stamp of the truth sample at emulator time ``t``: its own /clock time under

@@ -68,3 +68,45 @@ def test_rospy_gets_a_message_only_with_a_connection() -> None:
 def test_a_publisher_that_cannot_be_asked_is_wanted_and_connected() -> None:
     plain = SimpleNamespace(publish=lambda msg: None)
     assert wanted(plain) and connected(plain) and connected(None)
+
+
+def lazy_wire(b: Switchboard) -> Any:
+    from lowerbase.ros1.wire import LocalWire
+
+    wire = LocalWire.__new__(LocalWire)  # publish_lazy needs no rospy
+    wire.board = b
+    return wire
+
+
+def test_a_lazy_message_is_built_only_when_read_or_sent_out() -> None:
+    b, real = board(), FakePublisher()
+    pub = _TeePublisher(real, b, "/scan", latch=False)
+    wire = lazy_wire(b)
+    built: list[int] = []
+
+    def build() -> Any:
+        built.append(1)
+        return SimpleNamespace(header="h", ranges=[1.0, 2.0])
+
+    got: list[Any] = []
+    b.add_local("/scan", lambda m: got.append((m.header, b.convert(m, "scan", lambda _: "x"))))
+    wire.publish_lazy(pub, "h", build, {"scan": lambda: "native"})
+    assert got == [("h", "native")] and built == [] and real.sent == []
+    # a face that reads the body gets the built message's, built once
+    b.add_local("/scan", lambda m: got.append(m.ranges))
+    wire.publish_lazy(pub, "h", build, {"scan": lambda: "native"})
+    assert got[-1] == [1.0, 2.0] and built == [1] and real.sent == []
+    real.impl.connections.append("outside")  # someone on ROS takes it: built, sent as is
+    wire.publish_lazy(pub, "h", build, {"scan": lambda: "native"})
+    assert built == [1, 1] and len(real.sent) == 1
+    assert isinstance(real.sent[0], SimpleNamespace) and real.sent[0].ranges == [1.0, 2.0]
+
+
+def test_a_connection_made_meanwhile_gets_the_built_message() -> None:
+    from lowerbase.ros1.wire import LazyMessage
+
+    b, real = board(), FakePublisher()
+    pub = _TeePublisher(real, b, "/scan", latch=False)
+    real.impl.connections.append("outside")
+    pub.publish(LazyMessage("h", lambda: SimpleNamespace(header="h", ranges=[3.0])))
+    assert real.sent[0].ranges == [3.0] and not isinstance(real.sent[0], LazyMessage)

@@ -203,22 +203,23 @@ class Localizer:
         if not self.running:
             self.stats.dropped_stopped += 1
             return None
-        problem = _bad_input(odom, scan)
-        if problem:
-            self.stats.dropped_bad_input += 1
-            log.warning("localization: scan dropped (%s); %d dropped so far", problem,
-                        self.stats.dropped_bad_input)
+        if not is_finite_pose(odom):
+            self._drop(f"odometry pose {odom!r} is not three finite numbers")
             return None
         odom = (float(odom[0]), float(odom[1]), float(odom[2]))
-        if self.ground_truth:
-            return self._truth_update(odom, scan, truth)
         ref = self._odom_ref
-        if ref is not None and not self._force:
+        if not self.ground_truth and ref is not None and not self._force:
             moved = math.hypot(odom[0] - ref[0], odom[1] - ref[1])
             turned = abs(float(wrap(odom[2] - ref[2])))
             if moved < self.params.update_min_d and turned < self.params.update_min_a:
                 self.stats.skipped_small_motion += 1
-                return None
+                return None  # the scan is not read (a lazy one is never cast)
+        problem = _bad_scan(scan)
+        if problem:
+            self._drop(problem)
+            return None
+        if self.ground_truth:
+            return self._truth_update(odom, scan, truth)
         p = self.params
         if ref is not None:
             sample_diff(self._set.poses, ref, odom,
@@ -238,6 +239,11 @@ class Localizer:
         return est
 
     # -- internals -----------------------------------------------------------------------------
+    def _drop(self, problem: str) -> None:
+        self.stats.dropped_bad_input += 1
+        log.warning("localization: scan dropped (%s); %d dropped so far", problem,
+                    self.stats.dropped_bad_input)
+
     def _truth_update(self, odom: Pose2D, scan: ScanLike, truth: Pose2D | None
                       ) -> PoseEstimate | None:
         assert self._truth is not None
@@ -294,9 +300,7 @@ class Localizer:
                              "(an occupied or unknown cell): place the robot in free space")
 
 
-def _bad_input(odom: object, scan: ScanLike) -> str:
-    if not is_finite_pose(odom):
-        return f"odometry pose {odom!r} is not three finite numbers"
+def _bad_scan(scan: ScanLike) -> str:
     try:
         ranges = np.asarray(scan.ranges, dtype=np.float64)
         inc, rmax = float(scan.angle_increment), float(scan.range_max)

@@ -18,6 +18,7 @@ import hashlib
 import importlib
 import os
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from functools import cache
 from pathlib import Path
@@ -29,20 +30,31 @@ from numba.core import config as _numba_config
 F = TypeVar("F", bound=Callable[..., Any])
 
 numba_config: Any = _numba_config  # read at runtime (CACHE_DIR), not typed by numba
+#: held while numba's global CACHE_DIR is set for one kernel: two threads importing kernel
+#: modules at once would otherwise restore it under each other, and numba would join its
+#: subdirectory to "" (a stray ``world_<sha1>/`` in the working directory)
+_CACHE_DIR_LOCK = threading.Lock()
 
 
 def compiled(**options: Any) -> Callable[[F], F]:
     """A decorator: ``fn`` compiled by ``numba.njit`` with ``options`` (e.g. error_model)."""
     def wrap(fn: F) -> F:
-        saved = numba_config.CACHE_DIR
-        numba_config.CACHE_DIR = cache_dir(fn.__module__)
-        try:
-            return cast(F, numba.njit(cache=True, nogil=True, **options)(fn))
-        except RuntimeError:  # "cannot cache function ...: no locator available" (read-only)
-            return cast(F, numba.njit(nogil=True, **options)(fn))
-        finally:
-            numba_config.CACHE_DIR = saved
+        where = cache_dir(fn.__module__)
+        with _CACHE_DIR_LOCK:
+            return _njit(fn, where, options)
     return wrap
+
+
+def _njit(fn: F, where: str, options: dict[str, Any]) -> F:
+    """``numba.njit`` of ``fn`` with numba's cache in ``where`` (under the lock)."""
+    saved = numba_config.CACHE_DIR
+    numba_config.CACHE_DIR = where
+    try:
+        return cast(F, numba.njit(cache=True, nogil=True, **options)(fn))
+    except RuntimeError:  # "cannot cache function ...: no locator available" (read-only)
+        return cast(F, numba.njit(nogil=True, **options)(fn))
+    finally:
+        numba_config.CACHE_DIR = saved
 
 
 #: every module with kernels (``lowerbase warm`` compiles them all; a test keeps the list whole)

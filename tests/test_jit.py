@@ -63,3 +63,42 @@ def test_the_digest_follows_imports_within_the_package() -> None:
     assert "raycast_kernel.py" not in names
     assert jit.source_digest("lowerbase.firmware_model.lean_batch") != jit.source_digest(
         "lowerbase.firmware_model.lean_kernel")
+
+
+def test_kernels_defined_in_two_threads_at_once_each_see_their_own_cache_dir(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # numba reads the global CACHE_DIR twice while it defines a cached kernel; a second thread
+    # restoring it in between made numba cache under "" (a stray directory in the cwd)
+    import threading
+
+    seen: dict[str, object] = {}
+    b_inside, a_done = threading.Event(), threading.Event()
+    monkeypatch.setattr(jit, "cache_dir", lambda module: f"/cache/{module}")
+
+    def njit(**options: object) -> object:
+        def define(fn: object) -> object:
+            name = getattr(fn, "__name__", "")
+            if name == "a":
+                b = threading.Thread(target=lambda: jit.compiled()(kernel_b))
+                b.start()
+                seen["b_got_in"] = b_inside.wait(0.3)  # the lock keeps it out
+                seen["thread"] = b
+            else:
+                b_inside.set()
+                a_done.wait(10.0)
+            seen[name] = jit.numba_config.CACHE_DIR  # as numba's locator reads it
+            return fn
+        return define
+
+    def a() -> None: ...
+
+    def kernel_b() -> None: ...
+
+    monkeypatch.setattr(jit.numba, "njit", njit)
+    jit.compiled()(a)
+    a_done.set()
+    thread = seen["thread"]
+    assert isinstance(thread, threading.Thread)
+    thread.join(10.0)
+    assert seen["a"] == f"/cache/{__name__}" and seen["kernel_b"] == f"/cache/{__name__}"
+    assert seen["b_got_in"] is False

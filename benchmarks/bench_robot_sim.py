@@ -90,7 +90,11 @@ r.shutdown(); rospy.signal_shutdown("done")
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          env=master.env(), cwd=ROOT, timeout=3600)
-    sim, wall, ok = json.loads(out.stdout.strip().splitlines()[-1])
+    # the faces print their stop lines after the result: take the result's own line
+    lines = [ln for ln in out.stdout.splitlines() if ln.startswith("[") and ln.endswith("]")]
+    if not lines:
+        raise RuntimeError(f"the lockstep robot gave no result: {out.stderr[-2000:]}")
+    sim, wall, ok = json.loads(lines[-1])
     return float(sim), float(wall), int(ok)
 
 

@@ -276,19 +276,25 @@ class DriverNode:
                 stamp, s.odom_frame, s.base_frame, (odo.x, odo.y, odo.yaw),
                 (odo.linear, odo.angular), odo.pose_covariance, odo.twist_covariance,
                 core.config.odometry_noise.unobserved_variance))
-        if "odom" in self._pubs or self._tf is not None:
-            ekf = core.ekf
-            msg = io.odometry_msg(
-                stamp, s.odom_frame, s.base_frame, ekf.pose, ekf.twist,
-                [float(v) for v in ekf.pose_covariance().ravel()],
-                [float(v) for v in ekf.twist_covariance().ravel()],
-                core.config.odometry_noise.unobserved_variance)
-            self._publish("odom", msg)
-            # under /use_sim_time two samples can share one /clock tick: tf2 drops the second
-            # (TF_REPEATED_DATA in every listener's log), so it is not sent
-            if self._tf is not None and stamp != self._last_tf_stamp:
-                self._last_tf_stamp = stamp
-                self._tf.sendTransform(io.transform_from_odometry(msg))
+        ekf = core.ekf
+        pose = ekf.pose
+        pub = self._pubs.get("odom")
+        if pub is not None:
+            # built only if read: in lockstep the faces here take the pose (ODOM_POSE), and
+            # the message is made only when a node outside takes /odom (publish_lazy)
+            twist, unobserved = ekf.twist, core.config.odometry_noise.unobserved_variance
+            pose_cov, twist_cov = ekf.pose_covariance().copy(), ekf.twist_covariance().copy()
+            self.wire.publish_lazy(
+                pub, io.odom_header(stamp, s.odom_frame),
+                lambda: io.odometry_msg(stamp, s.odom_frame, s.base_frame, pose, twist,
+                                        [float(v) for v in pose_cov.ravel()],
+                                        [float(v) for v in twist_cov.ravel()], unobserved),
+                {io.ODOM_POSE: lambda: io.odom_pose_of(pose)})
+        # under /use_sim_time two samples can share one /clock tick: tf2 drops the second
+        # (TF_REPEATED_DATA in every listener's log), so it is not sent
+        if self._tf is not None and stamp != self._last_tf_stamp:
+            self._last_tf_stamp = stamp
+            self._tf.sendTransform(io.odom_transform(stamp, s.odom_frame, s.base_frame, pose))
 
     def publish_periodic(self) -> None:
         """What the main loop publishes: battery/BMS, parameters/information, link state."""

@@ -16,14 +16,17 @@ from typing import Any
 from geometry_msgs.msg import Quaternion, TransformStamped, Twist
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu
-from std_msgs.msg import Float64, String, UInt64
+from std_msgs.msg import Float64, Header, String, UInt64
 from woosh_msgs.msg import BMS, LED, Battery, Information, Parameter
 
+from lowerbase.errors import WorldError
+
 __all__ = [
-    "BMS", "LED", "Battery", "Float64", "Imu", "Information", "Odometry", "Parameter",
-    "String", "Twist", "UInt64", "battery_msg", "bms_msg", "embed_planar", "imu_msg",
-    "information_msg", "led_args", "odometry_msg", "parameter_msg", "quaternion_from_yaw",
-    "status_code_msg", "transform_from_odometry", "twist_args", "twist_msg",
+    "BMS", "LED", "ODOM_POSE", "Battery", "Float64", "Imu", "Information", "Odometry",
+    "Parameter", "String", "Twist", "UInt64", "battery_msg", "bms_msg", "embed_planar",
+    "imu_msg", "information_msg", "led_args", "odom_header", "odom_pose", "odom_pose_of",
+    "odom_transform", "odometry_msg", "parameter_msg", "pose_of", "quaternion_from_yaw",
+    "status_code_msg", "transform_from_odometry", "twist_args", "twist_msg", "yaw_of",
 ]
 
 #: (x, y, yaw) in the 6x6 (x, y, z, roll, pitch, yaw) matrices of nav_msgs/Odometry
@@ -107,6 +110,58 @@ def transform_from_odometry(odom: Odometry) -> TransformStamped:
     t.transform.translation.x, t.transform.translation.y = p.x, p.y
     t.transform.translation.z = p.z
     t.transform.rotation = odom.pose.pose.orientation
+    return t
+
+
+def yaw_of(q: Any, what: str) -> float:
+    """The heading of a quaternion message; WorldError unless it is a finite rotation."""
+    values = (q.x, q.y, q.z, q.w)
+    if not all(math.isfinite(v) for v in values):
+        raise WorldError(f"{what}: the orientation has a non-finite component {values}")
+    norm = math.sqrt(sum(v * v for v in values))
+    if not 0.9 < norm < 1.1:
+        raise WorldError(f"{what}: the orientation is not a unit quaternion (norm {norm:.3g})")
+    x, y, z, w = (v / norm for v in values)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def pose_of(pose: Any, what: str) -> tuple[float, float, float]:
+    """(x, y, yaw) of a geometry_msgs/Pose; WorldError if it is not finite."""
+    x, y = pose.position.x, pose.position.y
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise WorldError(f"{what}: the position ({x}, {y}) is not finite")
+    return float(x), float(y), yaw_of(pose.orientation, what)
+
+
+def odom_pose(msg: Any) -> tuple[float, float, float]:
+    """The pose of a nav_msgs/Odometry (/odom), as every face reads it (:func:`pose_of`)."""
+    return pose_of(msg.pose.pose, "/odom")
+
+
+#: the key of :func:`odom_pose` in a wire's conversions (lowerbase.ros1.wire)
+ODOM_POSE = "odom_pose"
+
+
+def odom_pose_of(pose: tuple[float, float, float]) -> tuple[float, float, float]:
+    """What :func:`odom_pose` reads from :func:`odometry_msg` of ``pose``, without the
+    message: the same floats (the heading through the message's quaternion)."""
+    return float(pose[0]), float(pose[1]), yaw_of(quaternion_from_yaw(pose[2]), "/odom")
+
+
+def odom_header(stamp: Any, frame_id: str) -> Header:
+    return Header(stamp=stamp, frame_id=frame_id)
+
+
+def odom_transform(stamp: Any, frame_id: str, child_frame_id: str,
+                   pose: tuple[float, float, float]) -> TransformStamped:
+    """:func:`transform_from_odometry` of :func:`odometry_msg` with this ``pose``, without the
+    message (the same values)."""
+    t = TransformStamped()
+    t.header.stamp = stamp
+    t.header.frame_id = frame_id
+    t.child_frame_id = child_frame_id
+    t.transform.translation.x, t.transform.translation.y = float(pose[0]), float(pose[1])
+    t.transform.rotation = quaternion_from_yaw(pose[2])
     return t
 
 

@@ -170,7 +170,7 @@ class StampedIo:
     :class:`Stamp` first and get a ``builtin_interfaces/Time``; everything else passes."""
 
     STAMPED = frozenset({"odometry_msg", "imu_msg", "parameter_msg", "information_msg",
-                         "battery_msg", "bms_msg"})
+                         "battery_msg", "bms_msg", "odom_header", "odom_transform"})
 
     def __init__(self, io: ModuleType) -> None:
         self._io = io

@@ -20,15 +20,17 @@ from nav_msgs.msg import OccupancyGrid as GridMsg
 from sensor_msgs.msg import CameraInfo, Image, LaserScan, PointCloud2, PointField
 from std_msgs.msg import Header, String
 
-from lowerbase.errors import MapError, WorldError
+from lowerbase.driver.ros_io import ODOM_POSE, odom_pose, pose_of, yaw_of
+from lowerbase.errors import MapError
 from lowerbase.world.camera import CameraConfig
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lidar import LaserScan as Scan
 
 Pose = tuple[float, float, float]
 
-__all__ = ["CameraInfo", "GridMsg", "Image", "LaserScan", "PointCloud2", "Pose2D",
-           "PoseWithCovarianceStamped", "String", "TransformStamped"]
+__all__ = ["ODOM_POSE", "CameraInfo", "GridMsg", "Image", "LaserScan", "PointCloud2", "Pose2D",
+           "PoseWithCovarianceStamped", "String", "TransformStamped", "odom_pose", "pose_of",
+           "yaw_of"]
 
 
 def header(stamp: Any, frame_id: str) -> Header:
@@ -51,35 +53,6 @@ def rpy_quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float,
 
 #: camera_link (x forward, y left, z up) -> optical frame (z forward, x right, y down)
 OPTICAL = (-0.5, 0.5, -0.5, 0.5)
-
-
-def yaw_of(q: Any, what: str) -> float:
-    """The heading of a quaternion message; WorldError unless it is a finite rotation."""
-    values = (q.x, q.y, q.z, q.w)
-    if not all(math.isfinite(v) for v in values):
-        raise WorldError(f"{what}: the orientation has a non-finite component {values}")
-    norm = math.sqrt(sum(v * v for v in values))
-    if not 0.9 < norm < 1.1:
-        raise WorldError(f"{what}: the orientation is not a unit quaternion (norm {norm:.3g})")
-    x, y, z, w = (v / norm for v in values)
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
-def pose_of(pose: Any, what: str) -> Pose:
-    """(x, y, yaw) of a geometry_msgs/Pose; WorldError if it is not finite."""
-    x, y = pose.position.x, pose.position.y
-    if not (math.isfinite(x) and math.isfinite(y)):
-        raise WorldError(f"{what}: the position ({x}, {y}) is not finite")
-    return float(x), float(y), yaw_of(pose.orientation, what)
-
-
-def odom_pose(msg: Any) -> Pose:
-    """The pose of a nav_msgs/Odometry (/odom), as every face reads it (:func:`pose_of`)."""
-    return pose_of(msg.pose.pose, "/odom")
-
-
-#: the key of :func:`odom_pose` in a wire's conversions (lowerbase.ros1.wire)
-ODOM_POSE = "odom_pose"
 
 
 def transform(stamp: Any, parent: str, child: str, xyz: Sequence[float],
@@ -110,7 +83,7 @@ def scan_as_received(scan: Scan, stamp: Any) -> Scan:
     """What a subscriber reads back from :func:`laser_scan` (``scan``, ``stamp``):
     ``lowerbase.navigation.ros_msgs.scan_of`` of that message (the stamp in seconds, the
     numbers as Python floats, the ranges through float32), made without the message
-    (tests/world/test_world_ros_msgs.py)."""
+    (tests/navigation/test_navigation_ros_msgs.py)."""
     return Scan(frame_id=scan.frame_id, stamp=stamp.to_sec(), angle_min=float(scan.angle_min),
                 angle_max=float(scan.angle_max), angle_increment=float(scan.angle_increment),
                 time_increment=float(scan.time_increment), scan_time=float(scan.scan_time),

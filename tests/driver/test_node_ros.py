@@ -12,6 +12,7 @@ import contextlib
 import json
 import math
 import os
+import random
 import select
 import subprocess
 import sys
@@ -683,3 +684,25 @@ def test_the_node_listens_on_loopback_when_the_master_is_local(rig: dict[str, An
     master = xmlrpc.client.ServerProxy(rig["env"]["ROS_MASTER_URI"])
     _, _, uri = master.lookupNode("/pytest", "/driver_base")
     assert uri.startswith("http://127.0.0.1:")
+
+
+def test_odom_read_without_its_message_is_what_the_message_gives(woosh_msgs: Any) -> None:
+    # the lockstep faces take /odom's pose (and TF) without the Odometry message being built:
+    # the same floats, bit for bit, as reading the message and its transform
+    from lowerbase.driver import ros_io
+
+    rng = random.Random(7)
+    poses = [(rng.uniform(-50, 50), rng.uniform(-50, 50), rng.uniform(-math.pi, math.pi))
+             for _ in range(2000)] + [(0.0, 0.0, math.pi), (1.0, -1.0, -math.pi), (0, 0, 0)]
+    for pose in poses:
+        msg = ros_io.odometry_msg(0, "odom", "base_link", pose, (0.0, 0.0), [0.0] * 9,
+                                  [0.0] * 4, 1e6)
+        assert ros_io.odom_pose_of(pose) == ros_io.odom_pose(msg)
+        a, b = ros_io.odom_transform(0, "odom", "base_link", pose), \
+            ros_io.transform_from_odometry(msg)
+        assert (a.header.frame_id, a.child_frame_id) == (b.header.frame_id, b.child_frame_id)
+        ta, tb = a.transform, b.transform
+        assert (ta.translation.x, ta.translation.y, ta.translation.z) == \
+            (tb.translation.x, tb.translation.y, tb.translation.z)
+        assert (ta.rotation.x, ta.rotation.y, ta.rotation.z, ta.rotation.w) == \
+            (tb.rotation.x, tb.rotation.y, tb.rotation.z, tb.rotation.w)

@@ -101,3 +101,23 @@ def test_waits_are_exact_at_any_decided_time() -> None:
     assert crowd.decided_until == pytest.approx(3.0 + STEP)
     for t, waited in ((0.5, 0.0), (1.02, 0.0), (1.27, 0.25), (1.52, 0.5), (2.5, 0.5)):
         assert crowd.waited("p", t) == pytest.approx(waited)
+
+
+def test_two_processes_reading_the_truth_at_different_rates_agree_on_a_standing_robot() -> None:
+    """The real-time split: the emulator's contact decides the waits every control period
+    (5 ms), the world node from the truth samples it reads (here every 40 ms, its scan
+    period); with the robot standing both put the person at the same place at every time."""
+    from lowerbase.world.maps import load_map
+    from lowerbase.world.truth import WorldSurroundings
+
+    grid = load_map("empty_room")
+    emulator = WorldSurroundings(grid, Obstacles([WALKER]), map_from_truth=START)
+    world = WorldSurroundings(grid, Obstacles([WALKER]), map_from_truth=START)
+    here = (0.0, 0.0, 0.0)  # the emulator's frame: the robot at its start
+    for k in range(1, 1601):  # 8 s
+        t = k * 0.005
+        emulator.allowed(here, here, t)
+        if k % 8 == 0:
+            world.advance_people(t, here)
+            assert world.obstacles.position(WALKER, t) == emulator.obstacles.position(WALKER, t)
+    assert emulator.obstacles.crowd.waited("walker", 8.0) > 4.0

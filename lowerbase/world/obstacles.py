@@ -197,13 +197,22 @@ class Obstacles:
     (one per simulated world)."""
 
     def __init__(self, items: Iterable[Obstacle] = ()) -> None:
-        self.items: tuple[Obstacle, ...] = tuple(items)
-        names = [o.name for o in self.items]
+        self.items: tuple[Obstacle, ...] = ()
+        self.people: tuple[Person, ...] = ()
+        self.crowd = Crowd(())
+        self.replace(items)
+
+    def replace(self, items: Iterable[Obstacle]) -> None:
+        """These obstacles from now on (a box dropped or taken away); a person who stays (by
+        name) keeps its waits."""
+        new = tuple(items)
+        names = [o.name for o in new]
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes:
             raise WorldError(f"obstacle names must be unique: {', '.join(dupes)} used twice")
-        self.people: tuple[Person, ...] = tuple(o for o in self.items if isinstance(o, Person))
-        self.crowd = Crowd(tuple(p.name for p in self.people))
+        self.items = new
+        self.people = tuple(o for o in new if isinstance(o, Person))
+        self.crowd = self.crowd.keep(tuple(p.name for p in self.people))
 
     def fresh(self) -> Obstacles:
         """The same obstacles, nobody having waited yet."""

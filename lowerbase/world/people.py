@@ -58,6 +58,15 @@ class Crowd:
         self.waits = {n: Waits() for n in names}
         self._k: int | None = None  #: the next grid step to decide
 
+    def keep(self, names: tuple[str, ...]) -> Crowd:
+        """A crowd of ``names``: the waits of those already here, decided as far as now."""
+        out = Crowd(names)
+        for n in names:
+            if n in self.waits:
+                out.waits[n] = self.waits[n]
+        out._k = self._k
+        return out
+
     @property
     def decided_until(self) -> float:
         """[s] simulated time up to which the walks are decided (-inf before the first)."""

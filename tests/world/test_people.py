@@ -121,3 +121,20 @@ def test_two_processes_reading_the_truth_at_different_rates_agree_on_a_standing_
             world.advance_people(t, here)
             assert world.obstacles.position(WALKER, t) == emulator.obstacles.position(WALKER, t)
     assert emulator.obstacles.crowd.waited("walker", 8.0) > 4.0
+
+
+def test_replacing_the_obstacles_keeps_the_waits_of_who_stays() -> None:
+    from lowerbase.world.obstacles import Box
+
+    obs = Obstacles([WALKER])
+    obs.crowd.advance(0.0, lambda name, t: False)
+    obs.crowd.advance(1.0, lambda name, t: True)
+    waited = obs.crowd.waited("walker", 1.0)
+    assert waited > 0.9
+    other = Person("other", path=((1.0, 1.0), (2.0, 1.0)))
+    obs.replace([WALKER, other, Box("crate", (3.0, 3.0), (0.4, 0.4))])
+    assert obs.crowd.waited("walker", 1.0) == waited
+    assert obs.crowd.waited("other", 1.0) == 0.0
+    assert obs.crowd.decided_until == pytest.approx(1.0 + STEP)
+    assert obs.people == (WALKER, other)
+    assert obs.fresh().crowd.waited("walker", 1.0) == 0.0

@@ -226,7 +226,7 @@ class Localizer:
         if ref is not None:
             moved_to = odom
             if p.slip_check and self.last is not None and self.last.source == "filter" \
-                    and not self._force:
+                    and not self._force and self._set.converged():  # one pose to move
                 frac = slip_fraction(self._field, beams, self.last.pose, ref, odom,
                                      p.slip_min_log_ratio)
                 if frac < 1.0:

@@ -64,7 +64,8 @@ class AmclParams:
     #: lowerbase (amcl has none): before each update, cut the odometry step to the fraction
     #: of its translation the scan fits best, when that beats the whole step by more than
     #: slip_min_log_ratio (the laser model's log-likelihood): wheels spinning against a wall
-    #: count distance the base never moved (slipcheck.py)
+    #: count distance the base never moved (slipcheck.py). Only while the particles have
+    #: converged (amcl's pf: all within 0.5 m of their mean): a spread cloud has no one pose
     slip_check: bool = True
     slip_min_log_ratio: float = 1.0
     # -- likelihood-field laser model ------------------------------------------------------------

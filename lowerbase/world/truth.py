@@ -18,6 +18,7 @@ so nothing is written into the emulator.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -35,7 +36,8 @@ from lowerbase.world.truth_stream import TruthSample
 if TYPE_CHECKING:
     from lowerbase.simloop.loop import SimLoop
 
-__all__ = ["ContactEvent", "LoopTruth", "TruthSample", "TruthSource", "WorldSurroundings"]
+__all__ = ["ContactEvent", "LoopTruth", "PeopleFromTruth", "TruthSample", "TruthSource",
+           "WorldSurroundings"]
 
 
 def _wait_reach(person: Person) -> float:
@@ -257,3 +259,35 @@ class WorldSurroundings:
         if open_event is not None:
             open_event.end = t
         self.events.append(ContactEvent(t, hit.touched, hit.point))
+
+
+class PeopleFromTruth:
+    """The people's waits in a process that reads the truth stream (the world node): advanced
+    with every sample its receiver takes (the receiver's ``on_sample``, chained after a hook
+    already there), else with each sample :meth:`read` is given. A lock of its own, taken
+    only here (the receiver drains from the scan and the camera threads)."""
+
+    def __init__(self, surroundings: WorldSurroundings, truth: Any) -> None:
+        self.surroundings = surroundings
+        self._lock = threading.Lock()
+        receiver: Any = truth if hasattr(truth, "on_sample") \
+            else getattr(truth, "receiver", None)
+        self.each_sample = receiver is not None and hasattr(receiver, "on_sample")
+        if receiver is not None and self.each_sample:
+            inner = receiver.on_sample
+
+            def on_sample(sample: TruthSample) -> None:
+                if inner is not None:
+                    inner(sample)
+                self._advance(sample)
+
+            receiver.on_sample = on_sample
+
+    def read(self, sample: TruthSample) -> None:
+        """A sample the node read (used when the truth has no per-sample hook)."""
+        if not self.each_sample:
+            self._advance(sample)
+
+    def _advance(self, sample: TruthSample) -> None:
+        with self._lock:
+            self.surroundings.advance_people(sample.t, sample.pose)

@@ -10,6 +10,7 @@ lidars both read, so the scan shows the person where contact has it. Simulated c
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -105,21 +106,35 @@ def test_waits_are_exact_at_any_decided_time() -> None:
 
 def test_two_processes_reading_the_truth_at_different_rates_agree_on_a_standing_robot() -> None:
     """The real-time split: the emulator's contact decides the waits every control period
-    (5 ms), the world node from the truth samples it reads (here every 40 ms, its scan
-    period); with the robot standing both put the person at the same place at every time."""
+    (5 ms), the world node from every truth sample its receiver takes (20 ms, on a grid of its
+    own: here offset by 13 ms), through ``PeopleFromTruth`` chained after the receiver's hook;
+    with the robot standing both put the person at the same place at every time."""
     from lowerbase.world.maps import load_map
-    from lowerbase.world.truth import WorldSurroundings
+    from lowerbase.world.truth import PeopleFromTruth, TruthSample, WorldSurroundings
 
+    class Receiver:  # what TruthReceiver offers: on_sample, called with every new sample
+        def __init__(self) -> None:
+            self.on_sample: Callable[[TruthSample], None] | None = seen.append
+
+    seen: list[TruthSample] = []
     grid = load_map("empty_room")
     emulator = WorldSurroundings(grid, Obstacles([WALKER]), map_from_truth=START)
-    world = WorldSurroundings(grid, Obstacles([WALKER]), map_from_truth=START)
+    receiver = Receiver()
+    world = PeopleFromTruth(WorldSurroundings(grid, Obstacles([WALKER]), map_from_truth=START),
+                            receiver)
+    assert world.each_sample
     here = (0.0, 0.0, 0.0)  # the emulator's frame: the robot at its start
     for k in range(1, 1601):  # 8 s
         t = k * 0.005
         emulator.allowed(here, here, t)
-        if k % 8 == 0:
-            world.advance_people(t, here)
-            assert world.obstacles.position(WALKER, t) == emulator.obstacles.position(WALKER, t)
+        if k % 4 == 0:
+            sample = TruthSample(t - 0.007, *here, 0.0, 0.0, False)
+            assert receiver.on_sample is not None
+            receiver.on_sample(sample)
+            people = world.surroundings.obstacles
+            assert people.position(WALKER, sample.t) == \
+                emulator.obstacles.position(WALKER, sample.t)
+    assert len(seen) == 400  # the hook already there still gets every sample
     assert emulator.obstacles.crowd.waited("walker", 8.0) > 4.0
 
 

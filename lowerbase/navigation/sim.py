@@ -33,7 +33,7 @@ from lowerbase.navigation.costmap import camera_cloud
 from lowerbase.navigation.navigator import GoalState, NavCommand, Navigator, Pose
 from lowerbase.simloop.loop import TickedLoop
 from lowerbase.world.lidar import LaserScan
-from lowerbase.world.obstacles import Obstacle, Obstacles
+from lowerbase.world.obstacles import Obstacle
 from lowerbase.world.sim import DeferredScan, WorldSim
 
 CONTROL_PERIOD = 0.05
@@ -106,7 +106,7 @@ class NavSim(TickedLoop):
     def set_obstacles(self, items: Iterable[Obstacle]) -> None:
         """Replace the world's obstacles from now on (a box dropped or taken away): the
         sensors and the contact check see the new set at once."""
-        self.world.obstacles.items = Obstacles(items).items
+        self.world.obstacles.replace(items)
 
     def tick(self) -> NavCommand:
         """One control period: sensors if due, the navigator, the twist, the world."""

@@ -41,6 +41,7 @@ from lowerbase.world.raycast import Scene, Solid
 from lowerbase.world.scan_odom import ScanOdom
 from lowerbase.world.sensors import SensorsConfig
 from lowerbase.world.sim_clock import TruthTime
+from lowerbase.world.truth import PeopleFromTruth, WorldSurroundings
 
 log = logging.getLogger(__name__)
 
@@ -105,6 +106,11 @@ class WorldNode:
         cam = setup.sensors.camera
         self.camera = DepthCamera(cam) if (cam is not None and setup.camera) else None
         self.served_map = setup.grid  #: what /map and get_map serve (set_map replaces it)
+        #: the people's waits, decided from every truth sample this node receives (the
+        #: emulator's contact decides its own from every period: people.py, docs/world.md)
+        self.people = PeopleFromTruth(
+            WorldSurroundings(setup.grid, setup.obstacles, map_from_truth=setup.start),
+            truth) if setup.obstacles.people else None
         self.localizer = Localizer(setup.grid, clock=clock or RealClock(self.stop),
                                    seed=setup.seed,
                                    initial_pose=setup.start, truth=self._true_map_pose,
@@ -265,6 +271,8 @@ class WorldNode:
                             "sensors paused"}.get(state, ""), flush=True)
         if not fresh or sample is None:
             return None
+        if self.people is not None:
+            self.people.read(sample)
         return compose(self.setup.start, sample.pose), sample.t
 
     def scene_at(self, t: float) -> Scene:

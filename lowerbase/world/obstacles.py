@@ -1,7 +1,9 @@
 """Obstacles the map does not know: boxes a scenario places, and people walking a path.
 
-Every obstacle is a prism from the floor to its height, and a pure function of simulated time
-``t`` [s]: the same ``t`` gives the same shapes, whatever was asked before. Shapes are shapely
+Every obstacle is a prism from the floor to its height. A box is a pure function of simulated
+time ``t`` [s]; a person is one of its own path time, which :class:`Obstacles` takes as ``t``
+less the time the person waited for the robot (:mod:`lowerbase.world.people`): the same ``t``
+gives the same shapes once the waits up to ``t`` are decided. Shapes are shapely
 geometry in the map frame (a person's circle is a 64-gon: within 0.3 mm of the circle at
 r = 0.25 m); :meth:`Obstacles.prisms_at` gives the exact form (polygon vertices or a circle)
 for ray casting. A person walks the polyline ``path`` at ``speed`` from ``start`` [s] on; at
@@ -21,6 +23,7 @@ from shapely.geometry import Point, Polygon
 
 from lowerbase.errors import WorldError
 from lowerbase.world.grid import FREE, OCCUPIED, OccupancyGrid
+from lowerbase.world.people import Crowd
 
 Point2 = tuple[float, float]
 CIRCLE_SEGMENTS = 16  # per quarter circle (shapely's quad_segs)
@@ -186,30 +189,64 @@ def _cells_under(shape: Any, grid: OccupancyGrid) -> tuple[np.ndarray, np.ndarra
 
 
 class Obstacles:
-    """A scenario's obstacles (unique names), all evaluated at one simulated time."""
+    """A scenario's obstacles (unique names), all evaluated at one simulated time.
+
+    People wait for the robot (:mod:`lowerbase.world.people`): ``crowd`` holds their waits,
+    which whoever moves the robot advances; every shape and position here is read through
+    them, so contact and sensors see the same people. :meth:`fresh` is a copy with no waits
+    (one per simulated world)."""
 
     def __init__(self, items: Iterable[Obstacle] = ()) -> None:
-        self.items: tuple[Obstacle, ...] = tuple(items)
-        names = [o.name for o in self.items]
+        self.items: tuple[Obstacle, ...] = ()
+        self.people: tuple[Person, ...] = ()
+        self.crowd = Crowd(())
+        self.replace(items)
+
+    def replace(self, items: Iterable[Obstacle]) -> None:
+        """These obstacles from now on (a box dropped or taken away); a person who stays (by
+        name) keeps its waits."""
+        new = tuple(items)
+        names = [o.name for o in new]
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes:
             raise WorldError(f"obstacle names must be unique: {', '.join(dupes)} used twice")
+        self.items = new
+        self.people = tuple(o for o in new if isinstance(o, Person))
+        self.crowd = self.crowd.keep(tuple(p.name for p in self.people))
+
+    def fresh(self) -> Obstacles:
+        """The same obstacles, nobody having waited yet."""
+        return Obstacles(self.items)
 
     def __len__(self) -> int:
         return len(self.items)
 
+    def path_time(self, person: Person, t: float) -> float:
+        """The time on ``person``'s own schedule at ``t``: less the time it waited."""
+        return t - self.crowd.waited(person.name, t)
+
+    def position(self, person: Person, t: float) -> Point2:
+        """Where ``person`` is at ``t``, its waits counted."""
+        return person.position_at(self.path_time(person, _check_time(t)))
+
+    def shape(self, o: Obstacle, t: float) -> Any:
+        return o.shape_at(self.path_time(o, t) if isinstance(o, Person) else t)
+
+    def prism(self, o: Obstacle, t: float) -> Prism:
+        return o.prism_at(self.path_time(o, t) if isinstance(o, Person) else t)
+
     def shapes_at(self, t: float) -> list[tuple[str, Any]]:
         """(name, shapely geometry) of every obstacle at time ``t``."""
-        return [(o.name, o.shape_at(t)) for o in self.items]
+        return [(o.name, self.shape(o, t)) for o in self.items]
 
     def prisms_at(self, t: float) -> list[Prism]:
-        return [o.prism_at(t) for o in self.items]
+        return [self.prism(o, t) for o in self.items]
 
     def heights(self, grid: OccupancyGrid, t: float) -> np.ndarray:
         """(height, width) float array: the tallest obstacle over each cell [m], 0 if none."""
         out = np.zeros(grid.data.shape, np.float64)
         for o in self.items:
-            rows, cols = _cells_under(o.shape_at(t), grid)
+            rows, cols = _cells_under(self.shape(o, t), grid)
             out[rows, cols] = np.maximum(out[rows, cols], o.height)
         return out
 

@@ -144,13 +144,14 @@ class WorldSim(SteppedLoop):
         self.config = cfg
         self.grid = grid
         self.start = start
-        self.obstacles = cfg.obstacles
+        #: this world's own copy: the people's waits (what both contact and sensors read)
+        self.obstacles = cfg.obstacles.fresh()
         self.sensors = sensors
         self.rig = rig
         self.camera = camera
         self.localizer = localizer
         self.truth = LoopTruth(self.loop)
-        self.surroundings = WorldSurroundings(grid, cfg.obstacles, cfg.footprint,
+        self.surroundings = WorldSurroundings(grid, self.obstacles, cfg.footprint,
                                               self.map_from_truth)
         #: installs the surroundings in the emulator only while a move may touch something
         self.gate = ContactGate(self.loop, self.surroundings)
@@ -224,9 +225,19 @@ class WorldSim(SteppedLoop):
     # -- running -------------------------------------------------------------------------------
     def step(self) -> None:
         """One control period of the emulator and driver, then the sensors that are due."""
+        self._advance_people(1)
         self.gate.check()
         self.loop.step()
         self._after_step()
+
+    def _advance_people(self, periods: int) -> None:
+        """The people's walks up to the end of the next ``periods`` periods, decided with the
+        robot where it stands now (what the emulator's contact does before each period; the
+        same decisions whether or not the contact gate installed it)."""
+        if self.obstacles.people:
+            tr = self.loop.mcu.truth
+            self.surroundings.advance_people(self.loop.now + periods * self.control_dt,
+                                             (tr.x, tr.y, tr.yaw))
 
     def _after_step(self) -> None:
         now = self.loop.now
@@ -255,6 +266,7 @@ class WorldSim(SteppedLoop):
         while periods > 0:
             k = self._runnable(periods)
             if k > 1 and self.gate.clear_run(k):
+                self._advance_people(k)  # nobody waits in the gate's slack (CLEARANCE in it)
                 self.loop.advance(k)
                 self._after_step()
             else:

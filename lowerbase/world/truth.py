@@ -18,8 +18,9 @@ so nothing is written into the emulator.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import shapely
@@ -29,12 +30,20 @@ from lowerbase.world.footprint import DEFAULT_FOOTPRINT, Contact, Footprint, con
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.localization.poses import Pose2D, compose
 from lowerbase.world.obstacles import Box, Obstacles, Person
+from lowerbase.world.people import CLEARANCE, STEP
 from lowerbase.world.truth_stream import TruthSample
 
 if TYPE_CHECKING:
     from lowerbase.simloop.loop import SimLoop
 
-__all__ = ["ContactEvent", "LoopTruth", "TruthSample", "TruthSource", "WorldSurroundings"]
+__all__ = ["ContactEvent", "LoopTruth", "PeopleFromTruth", "TruthSample", "TruthSource",
+           "WorldSurroundings"]
+
+
+def _wait_reach(person: Person) -> float:
+    """[m] beyond its circle, how near a person may be to the footprint and still be decided
+    to wait: CLEARANCE, at a step's end (a grid step decided up to STEP after the period)."""
+    return CLEARANCE + person.speed * STEP
 
 
 class TruthSource(Protocol):
@@ -113,7 +122,7 @@ class WorldSurroundings:
             if isinstance(o, Box):
                 (cx, cy), reach = o.center, 0.5 * math.hypot(*o.size)
             elif isinstance(o, Person):
-                (cx, cy), reach = o.position_at(t), o.radius
+                (cx, cy), reach = self.obstacles.position(o, t), o.radius
             else:  # pragma: no cover - Obstacles holds only these
                 return True
             if math.hypot(x - cx, y - cy) <= r + reach + 1e-6:
@@ -145,9 +154,10 @@ class WorldSurroundings:
             if isinstance(o, Box):
                 (cx, cy), reach = o.center, 0.5 * math.hypot(*o.size)
                 static = min(static, math.hypot(x - cx, y - cy) - (r + reach + 1e-6))
-            elif isinstance(o, Person):
-                (cx, cy) = o.position_at(t)
-                moving = min(moving, math.hypot(x - cx, y - cy) - (r + o.radius + 1e-6))
+            elif isinstance(o, Person):  # no wait decided in the slack (people.py)
+                (cx, cy) = self.obstacles.position(o, t)
+                moving = min(moving, math.hypot(x - cx, y - cy)
+                             - (r + o.radius + _wait_reach(o) + 1e-6))
                 speed = max(speed, o.speed)
             else:  # pragma: no cover - Obstacles holds only these
                 return None
@@ -182,7 +192,8 @@ class WorldSurroundings:
             if isinstance(o, Box):
                 static = min(static, poly.distance(o.shape_at(t)))
             elif isinstance(o, Person):
-                moving = min(moving, horizon, poly.distance(o.shape_at(t)))
+                moving = min(moving, horizon,
+                             poly.distance(self.obstacles.shape(o, t)) - _wait_reach(o))
                 speed = max(speed, o.speed)
             else:  # pragma: no cover - Obstacles holds only these
                 return None
@@ -197,9 +208,34 @@ class WorldSurroundings:
         self.checks += 1
         return contact(pose, self.grid, self.obstacles, t, self.footprint)
 
+    def advance_people(self, t: float, pose: Pose2D) -> None:
+        """Decide the people's walks up to ``t`` [s] with the robot at ``pose`` (the emulator's
+        truth frame): a person whose next step would come within ``CLEARANCE`` of the
+        footprint waits (:mod:`lowerbase.world.people`). Idempotent for a time decided."""
+        obs = self.obstacles
+        if not obs.people or t < obs.crowd.decided_until:
+            return
+        x, y, yaw = self.to_map(pose)
+        by_name = {p.name: p for p in obs.people}
+        poly: list[Any] = []
+
+        def blocked(name: str, t_eff: float) -> bool:
+            person = by_name[name]
+            px, py = person.position_at(t_eff)
+            reach = person.radius + CLEARANCE
+            if math.hypot(px - x, py - y) > self._radius + reach:
+                return False
+            if not poly:
+                poly.append(self.footprint.at((x, y, yaw)))
+            return bool(poly[0].distance(shapely.Point(px, py)) < reach)
+
+        obs.crowd.advance(t, blocked)
+
     def allowed(self, pose_from: Pose2D, pose_to: Pose2D, t: float) -> bool:
-        """Surroundings.allowed (poses in the emulator's truth frame)."""
+        """Surroundings.allowed (poses in the emulator's truth frame); the people's walks are
+        decided first, with the robot where it stands."""
         t = 0.0 if math.isnan(t) else t
+        self.advance_people(t, pose_from)
         to = self.to_map(pose_to)
         hit = self.touching(to, t)
         ok = True
@@ -223,3 +259,35 @@ class WorldSurroundings:
         if open_event is not None:
             open_event.end = t
         self.events.append(ContactEvent(t, hit.touched, hit.point))
+
+
+class PeopleFromTruth:
+    """The people's waits in a process that reads the truth stream (the world node): advanced
+    with every sample its receiver takes (the receiver's ``on_sample``, chained after a hook
+    already there), else with each sample :meth:`read` is given. A lock of its own, taken
+    only here (the receiver drains from the scan and the camera threads)."""
+
+    def __init__(self, surroundings: WorldSurroundings, truth: Any) -> None:
+        self.surroundings = surroundings
+        self._lock = threading.Lock()
+        receiver: Any = truth if hasattr(truth, "on_sample") \
+            else getattr(truth, "receiver", None)
+        self.each_sample = receiver is not None and hasattr(receiver, "on_sample")
+        if receiver is not None and self.each_sample:
+            inner = receiver.on_sample
+
+            def on_sample(sample: TruthSample) -> None:
+                if inner is not None:
+                    inner(sample)
+                self._advance(sample)
+
+            receiver.on_sample = on_sample
+
+    def read(self, sample: TruthSample) -> None:
+        """A sample the node read (used when the truth has no per-sample hook)."""
+        if not self.each_sample:
+            self._advance(sample)
+
+    def _advance(self, sample: TruthSample) -> None:
+        with self._lock:
+            self.surroundings.advance_people(sample.t, sample.pose)

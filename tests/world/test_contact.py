@@ -22,6 +22,7 @@ from lowerbase.simloop.loop import SimLoop
 from lowerbase.world.footprint import DEFAULT_FOOTPRINT
 from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.obstacles import Box, Obstacles, Person
+from lowerbase.world.people import CLEARANCE, STEP
 from lowerbase.world.truth import LoopTruth, WorldSurroundings
 
 RES = 0.05
@@ -118,19 +119,21 @@ def test_a_person_walking_into_the_way_stops_the_robot(control_loop: bool) -> No
     assert world.events[0].start > 4.0
 
 
-def test_a_person_walking_into_a_standing_robot_does_not_push_it() -> None:
-    # the person walks straight through where the robot stands, from t = 0
+def test_a_person_walking_at_a_standing_robot_stops_short_of_it() -> None:
+    # the person's path runs straight through where the robot stands, from t = 0: it waits
+    # CLEARANCE short of the footprint (issue 22 item 24: it walked through, 0.196 m^2 overlap)
     person = Person("walker", path=((5.0, 2.0), (5.0, 8.0)), speed=1.0, radius=0.25)
     world = WorldSurroundings(room(), Obstacles([person]), map_from_truth=(5.0, 5.0, 0.0))
-    loop = loop_with(world)  # 3 s at most: the person is still above y = 5 - 0.55
+    loop = loop_with(world)
     loop.run(8.0 - loop.now)
     assert (loop.mcu.truth.x, loop.mcu.truth.y) == (0.0, 0.0)
-    touched = [e for e in world.events if e.touched == ("walker",)]
-    assert len(touched) == 1
-    # the circle (r 0.25) overlaps the 0.6 m wide footprint from y = 5 - 0.55 to 5 + 0.55:
-    # the person's centre walks y = 2 + t
-    assert touched[0].start == pytest.approx(5.0 - 0.55 - 2.0, abs=0.02)
-    assert touched[0].end == pytest.approx(5.0 + 0.55 - 2.0, abs=0.02)
+    assert not world.events and world.contact is None  # never touched
+    # the footprint's back edge is y = 5 - 0.3: the centre waits CLEARANCE + r short of it,
+    # within one grid step's walk (decided on the STEP grid, at the step's end)
+    x, y = world.obstacles.position(person, loop.now)
+    assert x == 5.0
+    assert 5.0 - 0.3 - 0.25 - CLEARANCE - 1.0 * STEP <= y <= 5.0 - 0.3 - 0.25 - CLEARANCE + 1e-9
+    assert world.obstacles.crowd.waited("walker", loop.now) > 4.0
 
 
 def test_turning_in_place_next_to_a_wall_is_blocked_by_the_corners() -> None:

@@ -25,6 +25,7 @@ from shapely.geometry import Point
 from lowerbase.simloop.loop import SimLoop
 from lowerbase.world.footprint import contact
 from lowerbase.world.obstacles import Box, Obstacles, Person
+from lowerbase.world.people import CLEARANCE, STEP
 from lowerbase.world.sim import WorldConfig, WorldSim
 from lowerbase.world.truth import WorldSurroundings
 from tests.world.test_contact import room
@@ -72,7 +73,8 @@ def test_polygon_free_space_is_a_sound_bound_on_the_polygon_test() -> None:
         space = world.polygon_free_space(pose, t)
         if space is None:
             assert contact(pose, world.grid, world.obstacles, t) is not None or \
-                world.footprint.at(pose).distance(Point(5.0, 2.0 + (0.6 * t) % 7.0)) < 0.3
+                world.footprint.at(pose).distance(Point(5.0, 2.0 + (0.6 * t) % 7.0)) \
+                < 0.25 + 1e-3 + CLEARANCE + 0.6 * STEP  # r + a 64-gon's error + a wait's reach
             continue
         static, moving, speed = space
         roomy += static > 0.05

@@ -245,7 +245,10 @@ def test_kidnapping_is_detected_and_recovered() -> None:
     assert in_free_space(grid, truth)
     odom = drifting_odometry(truth, teleports=(len(leg_a),))
     clock = SimClock()
-    loc = Localizer(grid, clock=clock, seed=9, initial_pose=truth[0], initial_cov=TIGHT)
+    # augmented MCL on, with amcl's suggested values (amcl's and lowerbase's default: off)
+    recovery = AmclParams(recovery_alpha_slow=0.001, recovery_alpha_fast=0.1)
+    loc = Localizer(grid, recovery, clock=clock, seed=9, initial_pose=truth[0],
+                    initial_cov=TIGHT)
     results = drive(loc, grid, truth, odom, clock)
     before = [r for r in results if r[0] < len(leg_a)]
     after = [r for r in results if r[0] >= len(leg_a)]

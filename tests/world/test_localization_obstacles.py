@@ -71,8 +71,10 @@ def test_the_estimate_stays_on_the_robot_round_an_unmapped_crate(seed: int) -> N
 
 
 def test_without_beam_skipping_the_crate_reads_as_a_kidnap() -> None:
-    """amcl's default (no beam skipping): the crate's beams alone set recovery off."""
-    loc, results = crate_drive(0, AmclParams(do_beamskip=False))
+    """amcl's default (no beam skipping) with augmented MCL on (amcl's suggested values): the
+    crate's beams alone set recovery off."""
+    loc, results = crate_drive(0, AmclParams(do_beamskip=False, recovery_alpha_slow=0.001,
+                                             recovery_alpha_fast=0.1))
     assert loc.stats.injected > 0
     assert max(r[0] for r in results) > 1.0
 

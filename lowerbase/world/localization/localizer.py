@@ -31,6 +31,7 @@ from lowerbase.world.localization.motion import sample_diff
 from lowerbase.world.localization.params import AmclParams
 from lowerbase.world.localization.particles import ParticleSet
 from lowerbase.world.localization.poses import Pose2D, compose, inverse, is_finite_pose, wrap
+from lowerbase.world.localization.slipcheck import scaled_odom, slip_fraction
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +76,7 @@ class LocalizerStats:
     dropped_bad_input: int = 0
     resamples: int = 0
     injected: int = 0
+    slips: int = 0  #: updates whose odometry step the slip check cut (wheel slip)
 
 
 def cov3_from(cov: Sequence[float] | np.ndarray | None, default: tuple[float, float, float]
@@ -221,10 +223,19 @@ class Localizer:
         if self.ground_truth:
             return self._truth_update(odom, scan, truth)
         p = self.params
-        if ref is not None:
-            sample_diff(self._set.poses, ref, odom,
-                        (p.odom_alpha1, p.odom_alpha2, p.odom_alpha3, p.odom_alpha4), self._rng)
         beams = self._field.beams(scan, self.laser_pose)
+        if ref is not None:
+            moved_to = odom
+            if p.slip_check and self.last is not None and self.last.source == "filter" \
+                    and not self._force and self._set.converged():  # one pose to move
+                frac = slip_fraction(self._field, beams, self.last.pose, ref, odom,
+                                     p.slip_min_log_ratio)
+                if frac < 1.0:
+                    self.stats.slips += 1
+                    moved_to = scaled_odom(ref, odom, frac)
+            sample_diff(self._set.poses, ref, moved_to,
+                        (p.odom_alpha1, p.odom_alpha2, p.odom_alpha3, p.odom_alpha4), self._rng,
+                        noise_of=odom)
         skip = p.do_beamskip and self._set.converged()
         log_p, cube, used = self._field.score(self._set.poses, beams, skip)
         self._set.correct(log_p, cube, used)

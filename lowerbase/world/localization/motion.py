@@ -31,18 +31,24 @@ def odom_delta(old: Pose2D, new: Pose2D) -> tuple[float, float, float]:
 
 
 def sample_diff(particles: np.ndarray, old: Pose2D, new: Pose2D,
-                alphas: tuple[float, float, float, float], rng: np.random.Generator) -> None:
-    """Move ``particles`` (N x 3, in place) by the odometry step ``old -> new`` with noise."""
+                alphas: tuple[float, float, float, float], rng: np.random.Generator,
+                noise_of: Pose2D | None = None) -> None:
+    """Move ``particles`` (N x 3, in place) by the odometry step ``old -> new`` with noise;
+    ``noise_of``: the noise is that of the step ``old -> noise_of`` instead (the slip check
+    cuts a step to what the base moved, the wheels' count stays as uncertain as it was)."""
     a1, a2, a3, a4 = alphas
     rot1, trans, rot2 = odom_delta(old, new)
+    n_rot1, n_trans, n_rot2 = (rot1, trans, rot2) if noise_of is None \
+        else odom_delta(old, noise_of)
     # the size of a rotation, ignoring its direction of travel (amcl's rot*_noise)
-    r1n = min(abs(_angle_diff(rot1, 0.0)), abs(_angle_diff(rot1, math.pi)))
-    r2n = min(abs(_angle_diff(rot2, 0.0)), abs(_angle_diff(rot2, math.pi)))
+    r1n = min(abs(_angle_diff(n_rot1, 0.0)), abs(_angle_diff(n_rot1, math.pi)))
+    r2n = min(abs(_angle_diff(n_rot2, 0.0)), abs(_angle_diff(n_rot2, math.pi)))
     n = particles.shape[0]
     noise = rng.standard_normal((3, n))
-    rot1_hat = rot1 - noise[0] * math.sqrt(a1 * r1n * r1n + a2 * trans * trans)
-    trans_hat = trans - noise[1] * math.sqrt(a3 * trans * trans + a4 * (r1n * r1n + r2n * r2n))
-    rot2_hat = rot2 - noise[2] * math.sqrt(a1 * r2n * r2n + a2 * trans * trans)
+    rot1_hat = rot1 - noise[0] * math.sqrt(a1 * r1n * r1n + a2 * n_trans * n_trans)
+    trans_hat = trans - noise[1] * math.sqrt(a3 * n_trans * n_trans
+                                             + a4 * (r1n * r1n + r2n * r2n))
+    rot2_hat = rot2 - noise[2] * math.sqrt(a1 * r2n * r2n + a2 * n_trans * n_trans)
     heading = particles[:, 2] + rot1_hat
     particles[:, 0] += trans_hat * np.cos(heading)
     particles[:, 1] += trans_hat * np.sin(heading)

@@ -1,0 +1,203 @@
+"""Run in the ROS 2 venv: an rclpy client of ``lowerbase robot --ros2 --sim-time``; prints one
+JSON line.
+
+``topics``           /odom (20 messages), one /scan (sensor-data QoS), /clock advancing
+``latched``          a late subscriber's /map and /tf_static
+``tf``               map -> odom and odom -> base_link on /tf, base_link -> laser on /tf_static
+``navigate X Y YAW`` a NavigateToPose goal: its feedback, its end, the robot's map pose after
+``plan X Y``         compute_path_to_pose to (X, Y) from the robot; the robot's map pose
+``task``             exec_task to a storage place and robot_status until the task ends
+
+Every wait has a deadline (``TIMEOUT``) and fails in one line when it passes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from collections.abc import Callable
+from itertools import pairwise
+from typing import Any
+
+import rclpy
+from nav2_msgs.action import ComputePathToPose, NavigateToPose
+from nav_msgs.msg import OccupancyGrid, Odometry
+from rclpy.action import ActionClient
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import LaserScan
+from tf2_msgs.msg import TFMessage
+
+from lowerbase.ros2.wire import clock_qos, qos_for
+
+TIMEOUT = 180.0
+
+
+def spin_until(node: Node, done: Callable[[], bool], what: str,
+               timeout: float = TIMEOUT) -> None:
+    deadline = time.monotonic() + timeout
+    while not done():
+        if time.monotonic() > deadline:
+            sys.exit(f"probe: {what} not seen within {timeout:.0f} s")
+        rclpy.spin_once(node, timeout_sec=0.1)
+
+
+def sec(stamp: Any) -> float:
+    return float(stamp.sec) + stamp.nanosec * 1e-9
+
+
+def yaw(q: Any) -> float:
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def topics(node: Node) -> dict[str, Any]:
+    odom: list[Odometry] = []
+    scans: list[LaserScan] = []
+    clock: list[float] = []
+    node.create_subscription(Odometry, "/odom", odom.append, qos_for("/odom", 100))
+    node.create_subscription(LaserScan, "/scan", scans.append, qos_profile_sensor_data)
+    node.create_subscription(Clock, "/clock", lambda m: clock.append(sec(m.clock)), clock_qos())
+    spin_until(node, lambda: len(odom) > 20 and bool(scans) and len(clock) > 10,
+               "/odom, /scan and /clock")
+    stamps = [sec(m.header.stamp) for m in odom[:21]]
+    return {"odom_rate": 20 / (stamps[-1] - stamps[0]), "odom_frame": odom[0].header.frame_id,
+            "odom_child": odom[0].child_frame_id, "scan_frame": scans[0].header.frame_id,
+            "scan_beams": len(scans[0].ranges), "clock_first": clock[0],
+            "clock_last": clock[-1], "clock_backwards": sum(b < a for a, b in
+                                                            pairwise(clock))}
+
+
+def latched(node: Node) -> dict[str, Any]:
+    maps: list[OccupancyGrid] = []
+    static: list[TFMessage] = []
+    node.create_subscription(OccupancyGrid, "/map", maps.append, qos_for("/map", latch=True))
+    node.create_subscription(TFMessage, "/tf_static", static.append,
+                             qos_for("/tf_static", latch=True))
+    spin_until(node, lambda: bool(maps and static), "/map and /tf_static")
+    m = maps[-1]
+    return {"map_frame": m.header.frame_id, "width": m.info.width, "height": m.info.height,
+            "resolution": round(m.info.resolution, 6), "cells": len(m.data),
+            "static": sorted(f"{t.header.frame_id}->{t.child_frame_id}"
+                             for msg in static for t in msg.transforms)}
+
+
+class Tf:
+    """The newest transform of each parent -> child pair on /tf and /tf_static."""
+
+    def __init__(self, node: Node) -> None:
+        self.edges: dict[tuple[str, str], Any] = {}
+        node.create_subscription(TFMessage, "/tf", self._on, qos_for("/tf", 100))
+        node.create_subscription(TFMessage, "/tf_static", self._on,
+                                 qos_for("/tf_static", latch=True))
+
+    def _on(self, msg: TFMessage) -> None:
+        for t in msg.transforms:
+            self.edges[(t.header.frame_id, t.child_frame_id)] = t
+
+    def has(self, *pairs: tuple[str, str]) -> bool:
+        return all(p in self.edges for p in pairs)
+
+    def pose(self, parent: str, child: str) -> tuple[float, float, float]:
+        t = self.edges[(parent, child)].transform
+        return t.translation.x, t.translation.y, yaw(t.rotation)
+
+    def map_pose(self) -> tuple[float, float, float]:
+        """The robot in the map frame: map -> odom composed with odom -> base_link."""
+        mx, my, mt = self.pose("map", "odom")
+        ox, oy, ot = self.pose("odom", "base_link")
+        return (mx + ox * math.cos(mt) - oy * math.sin(mt),
+                my + ox * math.sin(mt) + oy * math.cos(mt), mt + ot)
+
+
+def tf(node: Node) -> dict[str, Any]:
+    buf = Tf(node)
+    spin_until(node, lambda: buf.has(("map", "odom"), ("odom", "base_link")) and any(
+        p == "base_link" for p, _ in buf.edges), "map -> odom -> base_link -> laser")
+    return {"edges": sorted(f"{p}->{c}" for p, c in buf.edges),
+            "map_pose": buf.map_pose()}
+
+
+def navigate(node: Node, x: float, y: float, th: float) -> dict[str, Any]:
+    buf = Tf(node)
+    client = ActionClient(node, NavigateToPose, "/navigate_to_pose")
+    spin_until(node, lambda: client.server_is_ready(), "the navigate_to_pose server")
+    feedback: list[Any] = []
+    goal = NavigateToPose.Goal()
+    goal.pose.header.frame_id = "map"
+    goal.pose.pose.position.x, goal.pose.pose.position.y = x, y
+    goal.pose.pose.orientation.z, goal.pose.pose.orientation.w = math.sin(th / 2), \
+        math.cos(th / 2)
+    sent = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(m.feedback))
+    spin_until(node, sent.done, "the goal's acceptance")
+    handle = sent.result()
+    if not handle.accepted:
+        sys.exit("probe: navigate_to_pose refused the goal")
+    result = handle.get_result_async()
+    spin_until(node, result.done, "the navigate_to_pose result")
+    end = result.result()
+    spin_until(node, lambda: buf.has(("map", "odom"), ("odom", "base_link")), "TF")
+    first, last = feedback[0], feedback[-1]
+    return {"status": end.status, "error_code": end.result.error_code,
+            "error_msg": end.result.error_msg, "feedback": len(feedback),
+            "first_distance": first.distance_remaining, "last_distance":
+            last.distance_remaining, "first_time": sec(first.navigation_time),
+            "last_time": sec(last.navigation_time),
+            "frame": last.current_pose.header.frame_id,
+            "last_pose": (last.current_pose.pose.position.x, last.current_pose.pose.position.y),
+            "map_pose": buf.map_pose()}
+
+
+def plan(node: Node, x: float, y: float) -> dict[str, Any]:
+    buf = Tf(node)
+    client = ActionClient(node, ComputePathToPose, "/compute_path_to_pose")
+    spin_until(node, lambda: client.server_is_ready() and buf.has(
+        ("map", "odom"), ("odom", "base_link")), "the compute_path_to_pose server and TF")
+    goal = ComputePathToPose.Goal(use_start=False)
+    goal.goal.header.frame_id = "map"
+    goal.goal.pose.position.x, goal.goal.pose.position.y = x, y
+    goal.goal.pose.orientation.w = 1.0
+    sent = client.send_goal_async(goal)
+    spin_until(node, sent.done, "the goal's acceptance")
+    result = sent.result().get_result_async()
+    spin_until(node, result.done, "the compute_path_to_pose result")
+    end = result.result()
+    poses = [(p.pose.position.x, p.pose.position.y) for p in end.result.path.poses]
+    return {"status": end.status, "error_code": end.result.error_code, "n": len(poses),
+            "frame": end.result.path.header.frame_id, "first": poses[0] if poses else None,
+            "last": poses[-1] if poses else None, "map_pose": buf.map_pose()}
+
+
+def task(node: Node) -> dict[str, Any]:
+    from woosh_msgs.msg import RobotStatus
+    from woosh_msgs.srv import ExecTask
+
+    statuses: list[Any] = []
+    node.create_subscription(RobotStatus, "/robot_status", statuses.append,
+                             qos_for("/robot_status", latch=True))
+    client = node.create_client(ExecTask, "/exec_task")
+    spin_until(node, lambda: client.service_is_ready(), "the exec_task service")
+    fields = ExecTask.Request.get_fields_and_field_types()
+    return {"request_fields": sorted(fields), "statuses": len(statuses)}
+
+
+def main() -> None:
+    mode, args = sys.argv[1], [float(a) for a in sys.argv[2:]]
+    rclpy.init()
+    node = rclpy.create_node(f"lowerbase_probe_{mode}")
+    result: Any
+    if mode == "navigate":
+        result = navigate(node, *args)
+    elif mode == "plan":
+        result = plan(node, *args)
+    else:
+        result = {"topics": topics, "latched": latched, "tf": tf, "task": task}[mode](node)
+    print(json.dumps(result), flush=True)
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    main()

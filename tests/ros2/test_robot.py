@@ -1,0 +1,97 @@
+"""``lowerbase robot --ros2 --sim-time`` (the lockstep robot on ROS 2) with rclpy clients in
+processes of their own (tests/ros2/ros2_robot_probe.py).
+
+One robot on the smallest packaged map (empty_room, camera off) serves the module, at
+``--speed max``: everything it does is on its simulated clock, so a busy host only slows it
+down. The tests run in file order: the ones that look at the robot standing at its start
+come before the one that drives it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import pytest
+
+from tests.conftest import ROOT
+from tests.ros2.conftest import Ros2, ros2_or_skip
+from tests.ros2.test_driver import START_TIMEOUT, Ros2Proc, udp_bound_beyond_loopback
+
+START = (5.0, 4.0, 0.0)  #: empty_room's "start" pose (lowerbase/world/maps/empty_room.*)
+GOAL = (7.0, 5.0, 0.0)
+XY_TOLERANCE = 0.05  #: the navigator's goal tolerance [m]
+
+
+@pytest.fixture(scope="module")
+def robot() -> Iterator[Ros2]:
+    ros2 = ros2_or_skip()
+    proc = Ros2Proc([str(ros2.python), "-m", "lowerbase", "robot", "--ros2", "--sim-time",
+                     "--map", "empty_room", "--speed", "max"], ros2.env)
+    try:
+        line = proc.wait_for("on ROS 2", timeout=START_TIMEOUT)
+        assert "/lowerbase_robot" in line and "empty_room" in line, line
+        assert udp_bound_beyond_loopback(proc.popen.pid) == []
+        yield ros2
+        code, err = proc.stop(timeout=60)
+        assert code == 0, err
+        assert "lowerbase robot: stopped at" in err, err
+        assert "Traceback" not in err, err
+    finally:
+        proc.stop(timeout=60)
+
+
+def test_odom_scan_and_clock(robot: Ros2) -> None:
+    got = robot.run_json("ros2_robot_probe.py", "topics", timeout=300)
+    assert got["odom_frame"] == "odom" and got["odom_child"] == "base_link"
+    assert got["odom_rate"] == pytest.approx(50.0, rel=0.05)  # per second of /clock's time
+    assert got["scan_frame"] == "base_link" and got["scan_beams"] == 720
+    assert got["clock_last"] > got["clock_first"] and got["clock_backwards"] == 0
+
+
+def test_late_subscriber_gets_map_and_tf_static(robot: Ros2) -> None:
+    got = robot.run_json("ros2_robot_probe.py", "latched", timeout=300)
+    assert (got["map_frame"], got["width"], got["height"], got["resolution"]) == \
+        ("map", 200, 172, 0.05)  # empty_room.pgm: 200 x 172 cells of 5 cm
+    assert got["cells"] == 200 * 172
+    assert got["static"] == ["base_link->laser_back", "base_link->laser_front"]
+
+
+def test_tf_map_odom_base_link_laser(robot: Ros2) -> None:
+    got = robot.run_json("ros2_robot_probe.py", "tf", timeout=300)
+    assert {"map->odom", "odom->base_link", "base_link->laser_front",
+            "base_link->laser_back"} <= set(got["edges"])
+    x, y, th = got["map_pose"]  # standing at the start, localized there
+    assert math.hypot(x - START[0], y - START[1]) < 0.1 and abs(th - START[2]) < 0.05
+
+
+def test_compute_path_to_pose(robot: Ros2) -> None:
+    got = robot.run_json("ros2_robot_probe.py", "plan", *map(str, GOAL[:2]), timeout=300)
+    assert got["status"] == 4 and got["error_code"] == 0  # SUCCEEDED, NONE
+    assert got["frame"] == "map" and got["n"] >= 2
+    rx, ry, _ = got["map_pose"]  # the robot stands still: the path starts where it is
+    assert math.hypot(got["first"][0] - rx, got["first"][1] - ry) < 0.01
+    assert got["last"] == pytest.approx(list(GOAL[:2]), abs=1e-6)
+
+
+def test_navigate_to_pose(robot: Ros2) -> None:
+    got = robot.run_json("ros2_robot_probe.py", "navigate", *map(str, GOAL), timeout=600)
+    assert got["status"] == 4 and got["error_code"] == 0, got  # SUCCEEDED
+    assert got["feedback"] >= 10 and got["frame"] == "map"
+    straight = math.hypot(GOAL[0] - START[0], GOAL[1] - START[1])
+    assert got["first_distance"] >= straight - 0.1  # along the plan, from the start
+    assert got["last_distance"] < 0.2
+    assert got["last_time"] > got["first_time"] >= 0.0
+    x, y, th = got["map_pose"]  # the robot's pose by TF once the result came
+    assert math.hypot(x - GOAL[0], y - GOAL[1]) <= XY_TOLERANCE + 0.02, got
+    assert abs(math.atan2(math.sin(th - GOAL[2]), math.cos(th - GOAL[2]))) < 0.06, got
+
+
+def test_the_command_line(robot: Ros2) -> None:
+    """Without --sim-time, --ros2 says what it needs in one line."""
+    import subprocess
+
+    proc = subprocess.run([str(robot.python), "-m", "lowerbase", "robot", "--ros2"],
+                          env=robot.env, cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode != 0
+    assert "--ros2 runs the lockstep robot only so far: add --sim-time" in proc.stderr

@@ -5,8 +5,10 @@ JSON line.
 ``latched``          a late subscriber's /map and /tf_static
 ``tf``               map -> odom and odom -> base_link on /tf, base_link -> laser on /tf_static
 ``navigate X Y YAW`` a NavigateToPose goal: its feedback, its end, the robot's map pose after
+``move_base X Y YAW`` the same through the vendor's /move_base (woosh_msgs/action/MoveBase)
+``drive``            a Twist on /base_cmd_vel from outside until /odom moved 0.2 m
 ``plan X Y``         compute_path_to_pose to (X, Y) from the robot; the robot's map pose
-``task``             exec_task to a storage place and robot_status until the task ends
+``task ID DIR``      exec_task: transport to R1 (direction DIR); robot_status to its end
 
 Every wait has a deadline (``TIMEOUT``) and fails in one line when it passes.
 """
@@ -146,8 +148,68 @@ def navigate(node: Node, x: float, y: float, th: float) -> dict[str, Any]:
             last.distance_remaining, "first_time": sec(first.navigation_time),
             "last_time": sec(last.navigation_time),
             "frame": last.current_pose.header.frame_id,
+            "first_pose": (first.current_pose.pose.position.x,
+                           first.current_pose.pose.position.y),
             "last_pose": (last.current_pose.pose.position.x, last.current_pose.pose.position.y),
             "map_pose": buf.map_pose()}
+
+
+def move_base(node: Node, x: float, y: float, th: float) -> dict[str, Any]:
+    """The vendor's /move_base (woosh_msgs/action/MoveBase): feedback and the end."""
+    from woosh_msgs.action import MoveBase
+
+    buf = Tf(node)
+    client = ActionClient(node, MoveBase, "/move_base")
+    spin_until(node, lambda: client.server_is_ready(), "the move_base server")
+    feedback: list[Any] = []
+    goal = MoveBase.Goal(execution_mode=0)
+    goal.target_pose.header.frame_id = "map"
+    goal.target_pose.pose.position.x, goal.target_pose.pose.position.y = x, y
+    goal.target_pose.pose.orientation.z = math.sin(th / 2)
+    goal.target_pose.pose.orientation.w = math.cos(th / 2)
+    sent = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(m.feedback))
+    spin_until(node, sent.done, "the goal's acceptance")
+    result = sent.result().get_result_async()
+    spin_until(node, result.done, "the move_base result")
+    spin_until(node, lambda: buf.has(("map", "odom"), ("odom", "base_link")), "TF")
+    last = feedback[-1].base_position
+    return {"status": result.result().status, "feedback": len(feedback),
+            "frame": last.header.frame_id,
+            "last_pose": (last.pose.position.x, last.pose.position.y),
+            "map_pose": buf.map_pose()}
+
+
+def drive(node: Node) -> dict[str, Any]:
+    """A Twist on /base_cmd_vel from this process (20 Hz, as a teleop) until /odom moved
+    0.2 m; then zeros."""
+    from geometry_msgs.msg import Twist
+
+    got: list[Odometry] = []
+    node.create_subscription(Odometry, "/odom", got.append, qos_for("/odom", 50))
+    spin_until(node, lambda: bool(got), "/odom")
+    x0, y0 = got[-1].pose.pose.position.x, got[-1].pose.pose.position.y
+    pub = node.create_publisher(Twist, "/base_cmd_vel", qos_for("/base_cmd_vel"))
+    cmd = Twist()
+    cmd.linear.x = 0.3
+    deadline = time.monotonic() + TIMEOUT
+    next_cmd = 0.0
+
+    def moved() -> float:
+        p = got[-1].pose.pose.position
+        return math.hypot(p.x - x0, p.y - y0)
+
+    while moved() < 0.2:
+        if time.monotonic() > deadline:
+            sys.exit(f"probe: /odom moved {moved():.3f} m, not 0.2, within {TIMEOUT:.0f} s")
+        if time.monotonic() >= next_cmd:
+            pub.publish(cmd)
+            next_cmd = time.monotonic() + 0.05
+        rclpy.spin_once(node, timeout_sec=0.02)
+    speed = got[-1].twist.twist.linear.x
+    for _ in range(5):
+        pub.publish(Twist())
+        rclpy.spin_once(node, timeout_sec=0.02)
+    return {"moved": moved(), "speed": speed}
 
 
 def plan(node: Node, x: float, y: float) -> dict[str, Any]:
@@ -170,17 +232,32 @@ def plan(node: Node, x: float, y: float) -> dict[str, Any]:
             "last": poses[-1] if poses else None, "map_pose": buf.map_pose()}
 
 
-def task(node: Node) -> dict[str, Any]:
+def task(node: Node, task_id: int, direction: int) -> dict[str, Any]:
+    """A transporting task (type 4) to R1 through exec_task, as examples/transport_task.py;
+    robot_status until the task ends; the robot's map pose then."""
     from woosh_msgs.msg import RobotStatus
     from woosh_msgs.srv import ExecTask
 
+    buf = Tf(node)
     statuses: list[Any] = []
     node.create_subscription(RobotStatus, "/robot_status", statuses.append,
                              qos_for("/robot_status", latch=True))
     client = node.create_client(ExecTask, "/exec_task")
-    spin_until(node, lambda: client.service_is_ready(), "the exec_task service")
-    fields = ExecTask.Request.get_fields_and_field_types()
-    return {"request_fields": sorted(fields), "statuses": len(statuses)}
+    spin_until(node, lambda: client.service_is_ready() and bool(statuses)
+               and statuses[-1].robot_state != 1, "exec_task and an initialized robot")
+    call = client.call_async(ExecTask.Request(task_exect=1, task_id=task_id, task_type=4,
+                                              direction=direction, mark_no="R1"))
+    spin_until(node, call.done, "the exec_task answer")
+    answer = call.result()
+    if answer.success:
+        spin_until(node, lambda: statuses[-1].task_id == task_id
+                   and statuses[-1].task_state in (7, 8, 9), "the task's end", timeout=600)
+    spin_until(node, lambda: buf.has(("map", "odom"), ("odom", "base_link")), "TF")
+    last = statuses[-1]
+    return {"success": answer.success, "message": answer.message,
+            "task_state": last.task_state, "dest": last.dest, "statuses": len(statuses),
+            "task_states": sorted({s.task_state for s in statuses if s.task_id == task_id}),
+            "map_pose": buf.map_pose()}
 
 
 def main() -> None:
@@ -190,10 +267,14 @@ def main() -> None:
     result: Any
     if mode == "navigate":
         result = navigate(node, *args)
+    elif mode == "move_base":
+        result = move_base(node, *args)
     elif mode == "plan":
         result = plan(node, *args)
+    elif mode == "task":
+        result = task(node, int(args[0]), int(args[1]))
     else:
-        result = {"topics": topics, "latched": latched, "tf": tf, "task": task}[mode](node)
+        result = {"topics": topics, "latched": latched, "tf": tf, "drive": drive}[mode](node)
     print(json.dumps(result), flush=True)
     node.destroy_node()
     rclpy.shutdown()

@@ -4,7 +4,7 @@ processes of their own (tests/ros2/ros2_robot_probe.py).
 One robot on the smallest packaged map (empty_room, camera off) serves the module, at
 ``--speed max``: everything it does is on its simulated clock, so a busy host only slows it
 down. The tests run in file order: the ones that look at the robot standing at its start
-come before the one that drives it.
+come before the ones that drive it.
 """
 
 from __future__ import annotations
@@ -21,6 +21,8 @@ from tests.ros2.test_driver import START_TIMEOUT, Ros2Proc, udp_bound_beyond_loo
 START = (5.0, 4.0, 0.0)  #: empty_room's "start" pose (lowerbase/world/maps/empty_room.*)
 GOAL = (7.0, 5.0, 0.0)
 XY_TOLERANCE = 0.05  #: the navigator's goal tolerance [m]
+BACK = (4.0, 3.0, 0.0)  #: where /move_base drives it after GOAL
+R1 = (8.0, 2.0, 0.0)  #: empty_room's storage place R1
 
 
 @pytest.fixture(scope="module")
@@ -74,17 +76,36 @@ def test_compute_path_to_pose(robot: Ros2) -> None:
     assert got["last"] == pytest.approx(list(GOAL[:2]), abs=1e-6)
 
 
+def test_a_twist_from_outside_moves_the_robot(robot: Ros2) -> None:
+    """/base_cmd_vel from another process reaches the driver (an outside input of the lockstep
+    robot, applied at its next step); the robot's own twists come back over DDS and are
+    dropped (counted as own_dropped), not applied twice."""
+    got = robot.run_json("ros2_robot_probe.py", "drive", timeout=300)
+    assert got["moved"] >= 0.2
+    assert got["speed"] == pytest.approx(0.3, abs=0.1)
+
+
 def test_navigate_to_pose(robot: Ros2) -> None:
     got = robot.run_json("ros2_robot_probe.py", "navigate", *map(str, GOAL), timeout=600)
     assert got["status"] == 4 and got["error_code"] == 0, got  # SUCCEEDED
     assert got["feedback"] >= 10 and got["frame"] == "map"
-    straight = math.hypot(GOAL[0] - START[0], GOAL[1] - START[1])
-    assert got["first_distance"] >= straight - 0.1  # along the plan, from the start
+    fx, fy = got["first_pose"]
+    straight = math.hypot(GOAL[0] - fx, GOAL[1] - fy)
+    assert got["first_distance"] >= straight - 0.1  # along the plan, from the robot
     assert got["last_distance"] < 0.2
     assert got["last_time"] > got["first_time"] >= 0.0
     x, y, th = got["map_pose"]  # the robot's pose by TF once the result came
     assert math.hypot(x - GOAL[0], y - GOAL[1]) <= XY_TOLERANCE + 0.02, got
     assert abs(math.atan2(math.sin(th - GOAL[2]), math.cos(th - GOAL[2]))) < 0.06, got
+
+
+def test_vendor_move_base(robot: Ros2) -> None:
+    """The vendor's move_base as a ROS 2 action of the same type (woosh_msgs/action/MoveBase:
+    no move_base_msgs wheel exists), on the navigator nav2's goals use."""
+    got = robot.run_json("ros2_robot_probe.py", "move_base", *map(str, BACK), timeout=600)
+    assert got["status"] == 4 and got["feedback"] >= 10 and got["frame"] == "map", got
+    x, y, _ = got["map_pose"]
+    assert math.hypot(x - BACK[0], y - BACK[1]) <= XY_TOLERANCE + 0.02, got
 
 
 def test_the_command_line(robot: Ros2) -> None:
@@ -95,3 +116,13 @@ def test_the_command_line(robot: Ros2) -> None:
                           env=robot.env, cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0
     assert "--ros2 runs the lockstep robot only so far: add --sim-time" in proc.stderr
+
+
+def test_exec_task_and_robot_status(robot: Ros2) -> None:
+    """A transporting task to R1 through the vendor's exec_task (woosh_msgs/srv/ExecTask), its
+    end on /robot_status (transient local), the robot at R1 by TF."""
+    got = robot.run_json("ros2_robot_probe.py", "task", "7", "2", timeout=900)
+    assert got["success"] and "task 7 accepted" in got["message"], got
+    assert got["task_state"] == 7 and got["dest"] == "R1", got  # COMPLETED
+    x, y, _ = got["map_pose"]
+    assert math.hypot(x - R1[0], y - R1[1]) < 0.1, got

@@ -69,19 +69,25 @@ class TfBuffer:
         if not times[0] - 1e-9 <= at <= times[-1] + 1e-9:
             raise TransformException(f"{key[0]} -> {key[1]} at {at:.3f} s: outside "
                                      f"[{times[0]:.3f}, {times[-1]:.3f}]")
-        i = bisect.bisect_left(times, at - 1e-9)
+        i = max(0, bisect.bisect_right(times, at + 1e-9) - 1)  # the last at or before
         if i >= len(times) - 1 or abs(times[i] - at) <= 1e-9:
-            return items[min(i, len(times) - 1)]
+            return items[i]
         return _interpolate(items[i], items[i + 1], (at - times[i]) / (times[i + 1] - times[i]))
 
     def get_latest_common_time(self, target: str, source: str) -> Any:
-        from lowerbase.ros2.wire import Stamp
-
+        """The newest stamp of the edge (its ``to_sec()``: [s])."""
         key = (target.lstrip("/"), source.lstrip("/"))
         times = self._edges.get(key, ([], []))[0]
         if not times:
             raise TransformException(f"no transform {key[0]} -> {key[1]}")
-        return Stamp.from_sec(times[-1])
+        return _Seconds(times[-1])
+
+
+class _Seconds(float):
+    """A stamp [s] as rospy's Time reads it (``to_sec``)."""
+
+    def to_sec(self) -> float:
+        return float(self)
 
 
 def _interpolate(a: Any, b: Any, f: float) -> Any:

@@ -7,6 +7,7 @@ JSON line.
 ``navigate X Y YAW`` a NavigateToPose goal: its feedback, its end, the robot's map pose after
 ``move_base X Y YAW`` the same through the vendor's /move_base (woosh_msgs/action/MoveBase)
 ``drive``            a Twist on /base_cmd_vel from outside until /odom moved 0.2 m
+``preempt``          a navigate_to_pose goal cancelled, another preempted by /move_base
 ``plan X Y``         compute_path_to_pose to (X, Y) from the robot; the robot's map pose
 ``task ID DIR``      exec_task: transport to R1 (direction DIR); robot_status to its end
 
@@ -212,6 +213,52 @@ def drive(node: Node) -> dict[str, Any]:
     return {"moved": moved(), "speed": speed}
 
 
+def _pose_goal(cls: Any, field: str, x: float, y: float) -> Any:
+    goal = cls.Goal()
+    pose = getattr(goal, field)
+    pose.header.frame_id = "map"
+    pose.pose.position.x, pose.pose.position.y = x, y
+    pose.pose.orientation.w = 1.0
+    return goal
+
+
+def preempt(node: Node) -> dict[str, Any]:
+    """How navigate_to_pose goals end on ROS 2: one cancelled by its client, one preempted by
+    a /move_base goal (that one's end too)."""
+    from woosh_msgs.action import MoveBase
+
+    nav = ActionClient(node, NavigateToPose, "/navigate_to_pose")
+    vendor = ActionClient(node, MoveBase, "/move_base")
+    spin_until(node, lambda: nav.server_is_ready() and vendor.server_is_ready(), "the servers")
+
+    def send(client: ActionClient, goal: Any, feedback: list[Any]) -> Any:
+        sent = client.send_goal_async(goal, feedback_callback=feedback.append)
+        spin_until(node, sent.done, "the goal's acceptance")
+        return sent.result()
+
+    seen: list[Any] = []
+    handle = send(nav, _pose_goal(NavigateToPose, "pose", 2.0, 2.0), seen)
+    spin_until(node, lambda: len(seen) >= 3, "feedback")
+    cancel = handle.cancel_goal_async()
+    spin_until(node, cancel.done, "the cancel answer")
+    cancelled = handle.get_result_async()
+    spin_until(node, cancelled.done, "the cancelled goal's end")
+    seen = []
+    handle = send(nav, _pose_goal(NavigateToPose, "pose", 2.0, 6.0), seen)
+    spin_until(node, lambda: len(seen) >= 3, "feedback")
+    other = send(vendor, _pose_goal(MoveBase, "target_pose", 4.0, 4.0), [])
+    preempted = handle.get_result_async()
+    spin_until(node, preempted.done, "the preempted goal's end")
+    won = other.get_result_async()
+    spin_until(node, won.done, "the move_base goal's end")
+    return {"cancel_answer": len(cancel.result().goals_canceling),
+            "cancelled": cancelled.result().status,
+            "preempted": preempted.result().status,
+            "preempted_error": preempted.result().result.error_code,
+            "preempted_msg": preempted.result().result.error_msg,
+            "move_base": won.result().status}
+
+
 def plan(node: Node, x: float, y: float) -> dict[str, Any]:
     buf = Tf(node)
     client = ActionClient(node, ComputePathToPose, "/compute_path_to_pose")
@@ -274,7 +321,8 @@ def main() -> None:
     elif mode == "task":
         result = task(node, int(args[0]), int(args[1]))
     else:
-        result = {"topics": topics, "latched": latched, "tf": tf, "drive": drive}[mode](node)
+        result = {"topics": topics, "latched": latched, "tf": tf, "drive": drive,
+                  "preempt": preempt}[mode](node)
     print(json.dumps(result), flush=True)
     node.destroy_node()
     rclpy.shutdown()

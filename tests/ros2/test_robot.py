@@ -118,6 +118,17 @@ def test_the_command_line(robot: Ros2) -> None:
     assert "--ros2 runs the lockstep robot only so far: add --sim-time" in proc.stderr
 
 
+def test_goal_ends_map_to_ros2_states(robot: Ros2) -> None:
+    """actionlib's PREEMPTED has no ROS 2 twin: a goal cancelled by its client ends CANCELED;
+    one preempted by another server's goal ends ABORTED (ROS 2 cancels only on request) with
+    the reason in error_msg, and that other goal runs to SUCCEEDED."""
+    got = robot.run_json("ros2_robot_probe.py", "preempt", timeout=900)
+    assert got["cancel_answer"] == 1 and got["cancelled"] == 5, got  # CANCELED
+    assert got["preempted"] == 6 and got["preempted_error"] == 9000, got  # ABORTED, UNKNOWN
+    assert "a goal of another server" in got["preempted_msg"], got
+    assert got["move_base"] == 4, got
+
+
 def test_exec_task_and_robot_status(robot: Ros2) -> None:
     """A transporting task to R1 through the vendor's exec_task (woosh_msgs/srv/ExecTask), its
     end on /robot_status (transient local), the robot at R1 by TF."""

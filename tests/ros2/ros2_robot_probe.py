@@ -8,6 +8,7 @@ JSON line.
 ``move_base X Y YAW`` the same through the vendor's /move_base (woosh_msgs/action/MoveBase)
 ``drive``            a Twist on /base_cmd_vel from outside until /odom moved 0.2 m
 ``preempt``          a navigate_to_pose goal cancelled, another preempted by /move_base
+``services X Y``     /move_base/make_plan to (X, Y) from the robot; clear_costmaps
 ``plan X Y``         compute_path_to_pose to (X, Y) from the robot; the robot's map pose
 ``task ID DIR``      exec_task: transport to R1 (direction DIR); robot_status to its end
 
@@ -307,6 +308,29 @@ def task(node: Node, task_id: int, direction: int) -> dict[str, Any]:
             "map_pose": buf.map_pose()}
 
 
+def services(node: Node, x: float, y: float) -> dict[str, Any]:
+    """/move_base/make_plan (nav_msgs/GetPlan, start empty: the robot) and
+    /move_base/clear_costmaps (std_srvs/Empty)."""
+    from nav_msgs.srv import GetPlan
+    from std_srvs.srv import Empty
+
+    make_plan = node.create_client(GetPlan, "/move_base/make_plan")
+    clear = node.create_client(Empty, "/move_base/clear_costmaps")
+    spin_until(node, lambda: make_plan.service_is_ready() and clear.service_is_ready(),
+               "the services")
+    request = GetPlan.Request(tolerance=0.0)
+    request.goal.header.frame_id = "map"
+    request.goal.pose.position.x, request.goal.pose.position.y = x, y
+    request.goal.pose.orientation.w = 1.0
+    call = make_plan.call_async(request)
+    spin_until(node, call.done, "make_plan's answer")
+    poses = [(p.pose.position.x, p.pose.position.y) for p in call.result().plan.poses]
+    cleared = clear.call_async(Empty.Request())
+    spin_until(node, cleared.done, "clear_costmaps' answer")
+    return {"n": len(poses), "last": poses[-1] if poses else None,
+            "cleared": isinstance(cleared.result(), Empty.Response)}
+
+
 def main() -> None:
     mode, args = sys.argv[1], [float(a) for a in sys.argv[2:]]
     rclpy.init()
@@ -318,6 +342,8 @@ def main() -> None:
         result = move_base(node, *args)
     elif mode == "plan":
         result = plan(node, *args)
+    elif mode == "services":
+        result = services(node, *args)
     elif mode == "task":
         result = task(node, int(args[0]), int(args[1]))
     else:

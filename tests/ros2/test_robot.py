@@ -76,6 +76,12 @@ def test_compute_path_to_pose(robot: Ros2) -> None:
     assert got["last"] == pytest.approx(list(GOAL[:2]), abs=1e-6)
 
 
+def test_make_plan_and_clear_costmaps(robot: Ros2) -> None:
+    got = robot.run_json("ros2_robot_probe.py", "services", *map(str, GOAL[:2]), timeout=300)
+    assert got["n"] >= 2 and got["last"] == pytest.approx(list(GOAL[:2]), abs=1e-6), got
+    assert got["cleared"]
+
+
 def test_a_twist_from_outside_moves_the_robot(robot: Ros2) -> None:
     """/base_cmd_vel from another process reaches the driver (an outside input of the lockstep
     robot, applied at its next step); the robot's own twists come back over DDS and are

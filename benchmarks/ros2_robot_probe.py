@@ -1,7 +1,7 @@
 """Run in the ROS 2 venv (by :mod:`benchmarks.bench_ros2_robot`): start ``lowerbase robot --ros2
 --sim-time`` at 1 x, measure the first /odom at this rclpy subscriber (subscribed before the
-start), then the robot process' CPU over ``SECONDS`` wall seconds without and with a /scan
-subscriber here; prints one JSON line."""
+start), then the robot process' CPU over ``ROUNDS`` x ``SECONDS`` wall seconds without and with a
+/scan subscriber here, alternating; prints one JSON line."""
 
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ from sensor_msgs.msg import LaserScan
 from lowerbase.ros2.wire import qos_for
 
 TIMEOUT = 300.0
+ROUNDS = 4  #: without and with a /scan subscriber, alternating
 
 
 def cpu_seconds(pid: int) -> float:
@@ -53,18 +54,29 @@ def main() -> None:
             rclpy.spin_once(node, timeout_sec=0.02)
         start_s = first[0] - t0
         spin_for(node, 5.0)  # settled
-        c0, w0 = cpu_seconds(robot.pid), time.monotonic()
-        spin_for(node, seconds)
-        without = (cpu_seconds(robot.pid) - c0) / (time.monotonic() - w0)
         scans: list[Any] = []
-        node.create_subscription(LaserScan, "/scan", scans.append, qos_profile_sensor_data)
-        spin_for(node, 3.0)  # matched
-        n0, c0, w0 = len(scans), cpu_seconds(robot.pid), time.monotonic()
-        spin_for(node, seconds)
-        wall = time.monotonic() - w0
-        with_scan = (cpu_seconds(robot.pid) - c0) / wall
+        cpu = {"without": 0.0, "with": 0.0}
+        walls = {"without": 0.0, "with": 0.0}
+        got = 0
+        for _ in range(ROUNDS):  # alternating: the robot's own load drifts
+            for case in ("without", "with"):
+                sub = None
+                if case == "with":
+                    sub = node.create_subscription(LaserScan, "/scan", scans.append,
+                                                   qos_profile_sensor_data)
+                    spin_for(node, 2.0)  # matched
+                n0, c0, w0 = len(scans), cpu_seconds(robot.pid), time.monotonic()
+                spin_for(node, seconds)
+                cpu[case] += cpu_seconds(robot.pid) - c0
+                walls[case] += time.monotonic() - w0
+                got += len(scans) - n0
+                if sub is not None:
+                    node.destroy_subscription(sub)
+                    spin_for(node, 2.0)  # unmatched
+        without, with_scan = (cpu[c] / walls[c] for c in ("without", "with"))
+        wall = walls["with"]
         print(json.dumps({"start_s": start_s, "cpu_without": without, "cpu_with": with_scan,
-                          "scan_rate": (len(scans) - n0) / wall,
+                          "scan_rate": got / wall, "rounds": ROUNDS,
                           "beams": len(scans[-1].ranges) if scans else 0,
                           "load": os.getloadavg()[0]}), flush=True)
     finally:

@@ -21,6 +21,7 @@ thread, paced by :class:`~lowerbase.robot.pace.Pacer` (``--speed``), until SIGIN
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import signal
 import sys
@@ -30,6 +31,8 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from lowerbase.robot.lockstep import NODE, LockstepOptions, LockstepRobot
+
+log = logging.getLogger(__name__)
 
 #: MCU periods (5 ms) run between two looks at the pace and the stop flag
 CHUNK = 10
@@ -122,10 +125,14 @@ def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = ()
     stop = threading.Event()
     executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=context)
     robot: LockstepRobot | None = None
+    nav2: Any = None
 
     def serve() -> None:
         while not stop.is_set() and rclpy.ok(context=context):
-            executor.spin_once(timeout_sec=0.1)
+            try:
+                executor.spin_once(timeout_sec=0.1)
+            except Exception:  # a callback's error: logged (with its traceback), served on
+                log.exception("an rclpy callback failed")
 
     spinner = threading.Thread(target=serve, name="lowerbase_robot-rclpy", daemon=True)
     previous = {s: signal.signal(s, lambda *_: stop.set())
@@ -155,14 +162,16 @@ def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = ()
         side.shim.signal_shutdown("robot stopped")
         for s, h in previous.items():
             signal.signal(s, h)
+        if spinner.is_alive():  # out of rclpy's wait before the faces' entities go
+            spinner.join(timeout=3.0)
+        if nav2 is not None:
+            nav2.shutdown()
         if robot is not None:
             stats = robot.shutdown()
             stats.update(robot.board.stats)
             counts = ", ".join(f"{k} {v}" for k, v in sorted(stats.items()) if v)
             print(f"lowerbase robot: stopped at {robot.now:.2f} s of simulated time; "
                   f"{counts or 'nothing counted'}", file=sys.stderr, flush=True)
-        if spinner.is_alive():
-            spinner.join(timeout=3.0)
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)

@@ -6,6 +6,7 @@ JSON line.
 ``tf``               map -> odom and odom -> base_link on /tf, base_link -> laser on /tf_static
 ``navigate X Y YAW`` a NavigateToPose goal: its feedback, its end, the robot's map pose after
 ``move_base X Y YAW`` the same through the vendor's /move_base (woosh_msgs/action/MoveBase)
+``steps D``          one straight step of D m through /cmd_vel_control
 ``drive``            a Twist on /base_cmd_vel from outside until /odom moved 0.2 m
 ``preempt``          a navigate_to_pose goal cancelled, another preempted by /move_base
 ``services X Y``     /move_base/make_plan to (X, Y) from the robot; clear_costmaps
@@ -260,6 +261,34 @@ def preempt(node: Node) -> dict[str, Any]:
             "move_base": won.result().status}
 
 
+def steps(node: Node, distance: float) -> dict[str, Any]:
+    """/cmd_vel_control (woosh_msgs/action/StepControl): one straight step of
+    ``distance`` m; /odom's pose before and after."""
+    from woosh_msgs.action import StepControl as StepAction
+    from woosh_msgs.msg import StepControl
+
+    odom: list[Odometry] = []
+    node.create_subscription(Odometry, "/odom", odom.append, qos_for("/odom", 50))
+    client = ActionClient(node, StepAction, "/cmd_vel_control")
+    spin_until(node, lambda: client.server_is_ready() and bool(odom), "the server and /odom")
+    before = odom[-1].pose.pose.position
+    x0, y0 = before.x, before.y
+    feedback: list[Any] = []
+    goal = StepAction.Goal(mode=1, useAvoid=False, stepControl=[
+        StepControl(executeMode=1, data=distance, speed=0.0, angle=0.0)])
+    sent = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(m.feedback))
+    spin_until(node, sent.done, "the goal's acceptance")
+    result = sent.result().get_result_async()
+    spin_until(node, result.done, "the step list's end")
+    n = len(odom)
+    spin_until(node, lambda: len(odom) > n + 50, "/odom after the end")  # 1 s: standing
+    end = result.result()
+    after = odom[-1].pose.pose.position
+    return {"status": end.status, "result": end.result.result,
+            "executeMode": end.result.executeMode, "percent": end.result.percent,
+            "feedback": len(feedback), "moved": math.hypot(after.x - x0, after.y - y0)}
+
+
 def plan(node: Node, x: float, y: float) -> dict[str, Any]:
     buf = Tf(node)
     client = ActionClient(node, ComputePathToPose, "/compute_path_to_pose")
@@ -342,6 +371,8 @@ def main() -> None:
         result = move_base(node, *args)
     elif mode == "plan":
         result = plan(node, *args)
+    elif mode == "steps":
+        result = steps(node, *args)
     elif mode == "services":
         result = services(node, *args)
     elif mode == "task":

@@ -135,6 +135,15 @@ def test_goal_ends_map_to_ros2_states(robot: Ros2) -> None:
     assert got["move_base"] == 4, got
 
 
+def test_step_control(robot: Ros2) -> None:
+    """The vendor's /cmd_vel_control (woosh_msgs/action/StepControl) on ROS 2: one
+    straight step of 0.5 m ends SUCCEEDED with result 1 at 100 %, /odom 0.5 m on."""
+    got = robot.run_json("ros2_robot_probe.py", "steps", "0.5", timeout=600)
+    assert got["status"] == 4 and got["result"] == 1 and got["executeMode"] == 1, got
+    assert got["percent"] == pytest.approx(100.0) and got["feedback"] > 10, got
+    assert got["moved"] == pytest.approx(0.5, abs=0.01), got
+
+
 def test_exec_task_and_robot_status(robot: Ros2) -> None:
     """A transporting task to R1 through the vendor's exec_task (woosh_msgs/srv/ExecTask), its
     end on /robot_status (transient local), the robot at R1 by TF."""

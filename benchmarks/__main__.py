@@ -15,7 +15,8 @@ MODULES = ("bench_protocol", "bench_emulator", "bench_fleet", "bench_bus", "benc
            "bench_bms_modbus",
            "bench_driver", "bench_scenarios", "bench_world", "bench_localization",
            "bench_recording", "bench_world_loop", "bench_navigation", "bench_shift",
-           "bench_legged", "bench_trace", "bench_robot_sim", "bench_campaign", "bench_ros2")
+           "bench_legged", "bench_trace", "bench_robot_sim", "bench_campaign", "bench_ros2",
+           "bench_ros2_robot")
 
 
 def _fmt(v: float) -> str:

@@ -73,6 +73,10 @@ def add_subparser(subparsers: Any) -> None:
     p.add_argument("--robot", choices=("wheeled", "legged"), default="wheeled",
                    help="with --sim-time: the wheeled AMR (default) or seed 003's legged robot "
                    "(its lower computer and legged driver in lockstep; docs/legged.md)")
+    p.add_argument("--ros2", action="store_true",
+                   help="with --sim-time: the robot's interface on ROS 2 (rclpy, Fast DDS; "
+                   "nav2's navigate_to_pose beside move_base); run from .venv-ros2 after "
+                   "`make ros2`, docs/ros2.md")
     p.add_argument("--seed", type=int, default=0, metavar="S",
                    help="with --sim-time: the seed of the localization's random numbers "
                    "(default 0)")
@@ -232,6 +236,34 @@ def _run_lockstep(args: argparse.Namespace, sup: Any, speed: float, parts: tuple
     return 0
 
 
+def _run_ros2(args: argparse.Namespace) -> int:
+    """--ros2: the lockstep robot with its interface on ROS 2 (no ROS master)."""
+    from lowerbase.robot.lockstep import LockstepOptions
+    from lowerbase.robot.plan import UPPER
+    from lowerbase.world.maps import load_map
+
+    if not args.sim_time:
+        raise ConfigError("--ros2 runs the lockstep robot only so far: add --sim-time "
+                          "(docs/ros2.md)")
+    for given, flag in ((args.robot == "legged", "--robot legged"),
+                        (args.mcap or args.foxglove, "--mcap/--foxglove"),
+                        (args.paused, "--paused"), (args.respawn, "--respawn")):
+        if given:
+            raise ConfigError(f"{flag} is not on ROS 2 yet (docs/ros2.md)")
+    from lowerbase.driver.ros2_node import import_rclpy
+
+    import_rclpy()  # one clear line when rclpy or the messages are missing
+    load_map(args.map)
+    from lowerbase.robot.lockstep_ros2 import run as run_ros2
+
+    speed = args.speed or DEFAULT_SPEED
+    opts = LockstepOptions(map=args.map, parts=tuple(p for p in UPPER if p not in args.without),
+                           soc=args.soc, ground_truth=args.ground_truth, seed=args.seed,
+                           truth=args.truth)
+    return run_ros2(opts, None if speed == MAX_SPEED else speed, (),
+                    duration=args.duration)
+
+
 def run(args: argparse.Namespace) -> int:
     from lowerbase.robot.master import (
         master_answers,
@@ -246,6 +278,8 @@ def run(args: argparse.Namespace) -> int:
     from lowerbase.scenarios.demo import StatusLine
     from lowerbase.world.maps import load_map
 
+    if getattr(args, "ros2", False):
+        return _run_ros2(args)
     if not args.sim_time:
         for given, flag in ((args.speed is not None, "--speed K"), (args.paused, "--paused"),
                             (args.seed != 0, "--seed S"),

@@ -31,6 +31,7 @@ goal (PREEMPTED), a move_base goal cancels a running step list (result -2).
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from typing import Any
 
 from lowerbase.errors import LowerbaseError, WorldError
@@ -49,20 +50,19 @@ class ActionServers:
     """The three servers around one node (rospy already initialised)."""
 
     def __init__(self, node: Any) -> None:
-        import actionlib  # type: ignore[import-untyped]
         from woosh_msgs.msg import MoveBaseAction, NavigationModeAction, StepControlAction
 
         self.node = node
         self.step_generation = 0  #: +1 per accepted EXCUTE (which list a goal follows)
+        self.goal_generation = 0  #: +1 per goal sent to the navigator (which goal one follows)
         wire = node.wire
-        self.move_base = actionlib.SimpleActionServer(wire.node_name, MoveBaseAction,
-                                                      self._move_base, auto_start=False)
-        self.steps = actionlib.SimpleActionServer(wire.resolve("cmd_vel_control"),
-                                                  StepControlAction, self._step_control,
-                                                  auto_start=False)
-        self.mode = actionlib.SimpleActionServer(wire.resolve("navigation_mode"),
-                                                 NavigationModeAction, self._navigation_mode,
-                                                 auto_start=False)
+        server = wire.action_server  # actionlib's SimpleActionServer (or ROS 2's adapter)
+        self.move_base = server(wire.node_name, MoveBaseAction, self._move_base,
+                                auto_start=False)
+        self.steps = server(wire.resolve("cmd_vel_control"), StepControlAction,
+                            self._step_control, auto_start=False)
+        self.mode = server(wire.resolve("navigation_mode"), NavigationModeAction,
+                           self._navigation_mode, auto_start=False)
 
     def start(self) -> None:
         for server in (self.move_base, self.steps, self.mode):
@@ -98,60 +98,87 @@ class ActionServers:
     def _move_base(self, goal: Any) -> None:
         from woosh_msgs.msg import MoveBaseFeedback
 
-        from lowerbase.navigation.navigator import GoalState
-
         node, io, server = self.node, self.node.io, self.move_base
         frame = node.setup.map_frame
+
+        def feedback(pose: tuple[float, float, float]) -> None:
+            server.publish_feedback(MoveBaseFeedback(
+                base_position=io.pose_stamped(pose, node.rospy.Time.now(), frame)))
+
         try:
             target = io.stamped_pose(goal.target_pose, "target_pose", (frame,))
             poses = [io.stamped_pose(p, f"poses[{i}]", (frame,))
                      for i, p in enumerate(goal.poses)]
-            with node.lock:
-                if node.steps.active:
-                    node.steps.goal(CANCEL)
-                node.last_command = None
-                node.navigator.send_goal(target, poses, int(goal.execution_mode),
-                                         node.now())
         except LowerbaseError as exc:
             log.warning("move_base goal refused: %s", exc)
             server.set_aborted(text=str(exc))
             return
-        log.info("move_base: goal (%.2f, %.2f, %.2f), %d path poses", *target, len(poses))
+        self.drive(server, "move_base", target, poses, int(goal.execution_mode), feedback)
+
+    def drive(self, server: Any, name: str, target: tuple[float, float, float],
+              poses: list[Any], mode: int,
+              feedback: Callable[[tuple[float, float, float]], None],
+              result: Callable[[str], Any] = lambda _state: None) -> None:
+        """Send a goal to the navigator and follow it for ``server`` (a SimpleActionServer's
+        execute callback) until it ends: ``feedback`` with the robot's map pose every tick,
+        the end with ``result(state)`` ("succeeded", "aborted", "preempted") and the reason as
+        the status text. The /move_base server also shows a blocked path in its goal's text.
+        A goal sent by another server (nav2's ``navigate_to_pose``) preempts this one."""
+        from lowerbase.navigation.navigator import GoalState
+
+        node = self.node
+        try:
+            with node.lock:
+                if node.steps.active:
+                    node.steps.goal(CANCEL)
+                node.last_command = None
+                node.navigator.send_goal(target, poses, mode, node.now())
+                self.goal_generation += 1
+                generation = self.goal_generation
+        except LowerbaseError as exc:
+            log.warning("%s goal refused: %s", name, exc)
+            server.set_aborted(result("aborted"), text=str(exc))
+            return
+        log.info("%s: goal (%.2f, %.2f, %.2f), %d path poses", name, *target, len(poses))
+        texts = server is self.move_base
         seen = node.tick_count
-        accepted = shown = self._goal_text()
+        accepted = shown = self._goal_text() if texts else ""
         while True:
             seen = self._wait_tick(seen)
             if node.stop.is_set():
-                server.set_aborted(text="the navigation node is shutting down")
+                server.set_aborted(result("aborted"),
+                                   text="the navigation node is shutting down")
                 return
             with node.lock:
                 pose = node.map_pose()
+                if generation != self.goal_generation:
+                    server.set_preempted(result("preempted"),
+                                         text="preempted: a goal of another server")
+                    return
                 if server.is_preempt_requested():
                     node.navigator.cancel(node.now())
                     why = "a newer goal" if server.is_new_goal_available() else "cancelled"
-                    server.set_preempted(text=f"preempted: {why}")
+                    server.set_preempted(result("preempted"), text=f"preempted: {why}")
                     return
                 state, reason = node.navigator.state, node.navigator.reason
                 command = node.last_command
             if pose is not None:
-                fb = MoveBaseFeedback(base_position=io.pose_stamped(pose, node.rospy.Time.now(),
-                                                                    frame))
-                server.publish_feedback(fb)
+                feedback(pose)
             if state == GoalState.SUCCEEDED:
-                server.set_succeeded(text="goal reached")
+                server.set_succeeded(result("succeeded"), text="goal reached")
                 return
             if state == GoalState.ABORTED:
-                server.set_aborted(text=reason)
+                server.set_aborted(result("aborted"), text=reason)
                 return
             if state == GoalState.PREEMPTED:
-                server.set_preempted(text=reason)
+                server.set_preempted(result("preempted"), text=reason)
                 return
             text = accepted
             if command is not None and command.status is Status.BLOCKED:
                 text = BLOCKED_TEXT + (command.reason or "an obstacle")
             elif command is not None and command.status is Status.WAITING:
                 text = command.reason
-            if text != shown:
+            if texts and text != shown:
                 shown = text
                 self._set_goal_text(text)
 
@@ -167,13 +194,14 @@ class ActionServers:
         SimpleActionServer has no call for this (a text goes with a transition only), so the
         goal handle's status is changed under the server's lock, as its own calls do; nothing
         is published once the server is quiet (shutting down) or the goal has ended."""
-        from actionlib_msgs.msg import GoalStatus  # type: ignore[import-untyped]
-
         inner = self.move_base.action_server
         with inner.lock:
             tracker = self.move_base.current_goal.status_tracker
-            if not inner.started or tracker is None or \
-                    tracker.status.status != GoalStatus.ACTIVE:
+            if not inner.started or tracker is None:  # ROS 2's goals have no text
+                return
+            from actionlib_msgs.msg import GoalStatus  # type: ignore[import-untyped]
+
+            if tracker.status.status != GoalStatus.ACTIVE:
                 return
             tracker.status.text = text
             inner.publish_status()

@@ -100,12 +100,15 @@ def make_navigator(setup: NavigationSetup) -> Any:
 class NavigationNode:
     """Subscribers, publishers, services and the control loop around one Navigator."""
 
-    def __init__(self, setup: NavigationSetup, *, wire: Any = None, lock: Any = None) -> None:
+    def __init__(self, setup: NavigationSetup, *, wire: Any = None, lock: Any = None,
+                 ros: tuple[Any, Any] | None = None) -> None:
         """``wire``: how the face reaches ROS (:mod:`lowerbase.ros1.wire`; None: rospy as is);
-        ``lock``: shared with the other faces of this process (None: one of its own)."""
+        ``lock``: shared with the other faces of this process (None: one of its own);
+        ``ros``: (rospy or a stand-in, the message builders) in place of :func:`import_ros`'s
+        (ROS 2: :mod:`lowerbase.robot.lockstep_ros2`)."""
         from lowerbase.ros1.wire import RosWire
 
-        self.rospy, self.io = import_ros()
+        self.rospy, self.io = ros if ros is not None else import_ros()
         self.wire = wire if wire is not None else RosWire(self.rospy)
         self.setup = setup
         self.lock = lock if lock is not None else threading.RLock()

@@ -28,31 +28,41 @@ class Services:
         response has no message field). An empty start frame means the robot's pose."""
         from nav_msgs.srv import GetPlanResponse
 
+        start = None if req.start.header.frame_id == "" else req.start
+        path, _reason, _refused = self.plan(req.goal, start, float(req.tolerance), "make_plan")
+        return GetPlanResponse(plan=path)
+
+    def plan(self, goal_msg: Any, start_msg: Any, tolerance: float,
+             what: str) -> tuple[Any, str, bool]:
+        """The global planner's path (nav_msgs/Path, published on the plan topic) from
+        ``start_msg`` (a PoseStamped; None: the robot's pose) to ``goal_msg``, and why it is
+        empty ("" when it is not), and whether the goal or the start was refused. Shared
+        by make_plan and nav2's compute_path_to_pose."""
         node = self.node
         io, frame = node.io, node.setup.map_frame
         stamp = node.rospy.Time.now()
         try:
-            goal = io.stamped_pose(req.goal, "make_plan goal", (frame,))
-            if req.start.header.frame_id == "":
+            goal = io.stamped_pose(goal_msg, f"{what} goal", (frame,))
+            if start_msg is None:
                 start = node.map_pose()
                 if start is None:
-                    raise WorldError("make_plan: the start has no frame_id and the robot's "
+                    raise WorldError(f"{what}: the start has no frame_id and the robot's "
                                      "pose is unknown (no /odom or map -> odom yet)")
             else:
-                start = io.stamped_pose(req.start, "make_plan start", (frame,))
+                start = io.stamped_pose(start_msg, f"{what} start", (frame,))
             with node.lock:  # the check and a copy of the costs; the search without it
-                job = node.navigator.plan_job(start, goal, float(req.tolerance))
+                job = node.navigator.plan_job(start, goal, tolerance)
             plan = job()
         except LowerbaseError as exc:
-            log.warning("make_plan refused: %s", exc)
-            return GetPlanResponse(plan=io.path_msg([], stamp, frame))
+            log.warning("%s refused: %s", what, exc)
+            return io.path_msg([], stamp, frame), str(exc), True
         if not plan.ok:
-            log.warning("make_plan: no path from %s to %s: %s", point(start[0], start[1]),
+            log.warning("%s: no path from %s to %s: %s", what, point(start[0], start[1]),
                         point(goal[0], goal[1]), plan.reason)
         path = io.path_msg(plan.poses, stamp, frame)
         node.stats["plans"] += 1
         node.pubs["plan"].publish(path)
-        return GetPlanResponse(plan=path)
+        return path, "" if plan.ok else (plan.reason or "no path"), False
 
     def enable(self, req: Any) -> Any:
         from std_srvs.srv import SetBoolResponse  # type: ignore[import-untyped]

@@ -22,22 +22,28 @@ class MapToOdom:
 
     def listen(self, buffer: Any = None) -> None:
         """Look up in ``buffer`` (a tf2_ros.Buffer that something else fills, e.g.
-        :meth:`lowerbase.ros1.wire.RosWire.tf_buffer`); None: a buffer of its own on /tf."""
-        import tf2_ros
-
+        :meth:`lowerbase.ros1.wire.RosWire.tf_buffer`, or one with a ``TransformException``
+        of its own, as :class:`lowerbase.ros2.tf.TfBuffer`); None: a buffer of its own on
+        /tf."""
         if buffer is None:
+            import tf2_ros
+
             buffer = tf2_ros.Buffer(cache_time=self.rospy.Duration(10.0))
             self._listener = tf2_ros.TransformListener(buffer)
         self.buffer = buffer
+        errors = getattr(buffer, "TransformException", None)  # a buffer of its own kind
+        if errors is None:
+            import tf2_ros
+
+            errors = tf2_ros.TransformException
+        self._errors: type[Exception] = errors
 
     def _lookup(self, stamp: Any) -> Pose | None:
-        import tf2_ros
-
         if self.buffer is None:
             return None
         try:
             t = self.buffer.lookup_transform(*self.frames, stamp)
-        except tf2_ros.TransformException:  # none (yet), or not at that stamp
+        except self._errors:  # none (yet), or not at that stamp
             return None
         return pose2d(t.transform)
 
@@ -52,12 +58,10 @@ class MapToOdom:
 
     def newest(self) -> float | None:
         """[s] the newest stamp TF has map -> odom at; None: none yet."""
-        import tf2_ros
-
         if self.buffer is None:
             return None
         try:
             t = self.buffer.get_latest_common_time(*self.frames)
-        except tf2_ros.TransformException:
+        except self._errors:
             return None
         return float(t.to_sec())

@@ -72,6 +72,51 @@ class RosTime:
         self._wake_next = (math.floor(now / self.wake_period + 1e-9) + 1) * self.wake_period
 
 
+class Ros1Side:
+    """How the lockstep robot reaches ROS 1: rospy's faces on a :class:`~lowerbase.ros1.wire.
+    LocalWire` each, ROS time set by :class:`RosTime`, /clock as rosgraph_msgs/Clock. ROS 2's
+    twin is :class:`lowerbase.robot.lockstep_ros2.Ros2Side`."""
+
+    def __init__(self, rospy: Any) -> None:
+        self.rospy = rospy
+        self._time: RosTime | None = None
+
+    def board(self) -> Any:
+        from lowerbase.ros1.wire import Switchboard
+
+        return Switchboard(self.rospy)
+
+    def wire(self, board: Any, name: str) -> Any:
+        from lowerbase.ros1.wire import LocalWire
+
+        return LocalWire(self.rospy, board, name)
+
+    def face_ros(self, face: str) -> Any:
+        """What a face takes as ``ros`` (None: it imports rospy and its builders itself)."""
+        return None
+
+    def set_time(self, now: float) -> None:
+        if self._time is None:
+            self._time = RosTime(self.rospy)
+        self._time.set(now)
+
+    def clock_publisher(self) -> Any:
+        from rosgraph_msgs.msg import Clock
+
+        return self.rospy.Publisher("/clock", Clock, queue_size=10)
+
+    def clock_sender(self, publisher: Any) -> Callable[[float], None] | None:
+        """A function publishing /clock at a time [s]; None when nobody listens."""
+        from rosgraph_msgs.msg import Clock
+
+        from lowerbase.ros1.wire import connected
+
+        if not connected(publisher):  # nobody on ROS listens: no message is built
+            return None
+        rospy = self.rospy
+        return lambda t: publisher.publish(Clock(clock=rospy.Time.from_sec(t)))
+
+
 class _Job:
     """Work due every ``period`` [s] of simulated time, on the MCU's period grid."""
 
@@ -93,13 +138,14 @@ class LockstepRobot:
     """The robot's parts and their faces on one simulated clock (see the module docstring).
 
     ``rospy`` must be initialised (``init_node``) by the caller; :meth:`advertise` makes every
-    face's topics, services and actions; :meth:`run_periods` moves time on."""
+    face's topics, services and actions; :meth:`run_periods` moves time on. ``side``: how it
+    reaches ROS (None: :class:`Ros1Side` on ``rospy``; ROS 2: :mod:`lowerbase.robot.
+    lockstep_ros2`, with ``rospy`` its stand-in)."""
 
-    def __init__(self, opts: LockstepOptions, rospy: Any) -> None:
+    def __init__(self, opts: LockstepOptions, rospy: Any, side: Any = None) -> None:
         from lowerbase.driver.node import DriverNode
         from lowerbase.driver.settings import load_settings
         from lowerbase.firmware_model.profile import load_profile
-        from lowerbase.ros1.wire import LocalWire, Switchboard
         from lowerbase.simloop.loop import SimLoop
         from lowerbase.world.charger import ChargerContact
         from lowerbase.world.grid import OccupancyGrid
@@ -112,6 +158,7 @@ class LockstepRobot:
 
         self.opts = opts
         self.rospy = rospy
+        self.side = side if side is not None else Ros1Side(rospy)
         self.lock = threading.RLock()  #: every face's: held around each period and callback
         grid: OccupancyGrid = load_map(opts.map)
         start = resolve_start(opts.map, grid, "start")
@@ -127,7 +174,7 @@ class LockstepRobot:
         #: the periods far from every wall run compiled (as WorldSim's; the same bits)
         self.gate = ContactGate(self.loop, WorldSurroundings(grid, map_from_truth=start))
         self.dt = self.loop.control_dt
-        self.board = Switchboard(rospy)
+        self.board = self.side.board()
         self._hooks: list[Callable[[Any], None]] = []
         if places.charger is not None:
             self.charger: ChargerContact | None = ChargerContact(
@@ -143,15 +190,16 @@ class LockstepRobot:
         else:
             self.truth_log = None
 
-        def wire(name: str) -> LocalWire:
-            return LocalWire(rospy, self.board, name)
+        def wire(name: str) -> Any:
+            return self.side.wire(self.board, name)
 
+        ros = self.side.face_ros
         self.driver = DriverNode(settings, config, None, core=self.loop.driver,
-                                 wire=wire("driver_base"), lock=self.lock)
+                                 wire=wire("driver_base"), lock=self.lock, ros=ros("driver"))
         self.world = WorldNode(WorldSetup(grid, sensors, start, ground_truth=opts.ground_truth,
                                           camera=opts.camera, seed=opts.seed),
                                LoopTruth(self.loop), clock=self.loop.clock,
-                               wire=wire("world"), lock=self.lock)
+                               wire=wire("world"), lock=self.lock, ros=ros("world"))
         self.navigation: Any = None
         self.tasks: Any = None
         if "navigation" in opts.parts:
@@ -159,7 +207,8 @@ class LockstepRobot:
 
             camera = sensors.camera if opts.camera else None
             self.navigation = NavigationNode(NavigationSetup(grid, camera),
-                                             wire=wire("move_base"), lock=self.lock)
+                                             wire=wire("move_base"), lock=self.lock,
+                                             ros=ros("navigation"))
         if "tasks" in opts.parts:
             if self.navigation is None:
                 from lowerbase.errors import ConfigError
@@ -171,8 +220,8 @@ class LockstepRobot:
 
             self.tasks = TasksNode(TasksSetup(places), wire=wire("tasks"), lock=self.lock,
                                    nav=NodeNavigation(self.navigation),
-                                   steps=NodeSteps(self.navigation))
-        self._ros_time = RosTime(rospy)
+                                   steps=NodeSteps(self.navigation),
+                                   rospy=ros("tasks"))
         self._clock_pub: Any = None
         self._clock_k, self._clock_next = 0, 0.0  #: the next /clock: its index and time [s]
         self.loop.passive_listeners = True  # driver_base's face only publishes
@@ -208,10 +257,8 @@ class LockstepRobot:
 
     def advertise(self) -> None:
         """Every face's publishers, subscribers, services and actions; /clock."""
-        from rosgraph_msgs.msg import Clock
-
         self._set_ros_time()
-        self._clock_pub = self.rospy.Publisher("/clock", Clock, queue_size=10)
+        self._clock_pub = self.side.clock_publisher()
         with self.lock:
             self.driver.advertise()
             self.world.advertise()
@@ -221,19 +268,15 @@ class LockstepRobot:
                 self.tasks.advertise()
 
     def _set_ros_time(self) -> None:
-        self._ros_time.set(float(self.loop.now))
+        self.side.set_time(float(self.loop.now))
 
     def _publish_clock(self) -> None:
         """/clock at every 10 ms of simulated time up to now (several after a batch)."""
-        from rosgraph_msgs.msg import Clock
-
-        from lowerbase.ros1.wire import connected
-
         now = self.loop.now
-        send = connected(self._clock_pub)  # nobody on ROS listens: no message is built
+        send = self.side.clock_sender(self._clock_pub)  # None: nobody listens, nothing built
         while self._clock_next <= now + 1e-9:
-            if send:
-                self._clock_pub.publish(Clock(clock=self.rospy.Time.from_sec(self._clock_next)))
+            if send is not None:
+                send(self._clock_next)
             self._clock_k += 1
             self._clock_next = self._clock_k / CLOCK_RATE
 

@@ -107,6 +107,13 @@ class RosWire:
         and ``key``, or the publisher's value (:meth:`publish_converted`)."""
         return conversion(msg)
 
+    def action_server(self, name: str, cls: Any, execute: Callable[[Any], None],
+                      auto_start: bool = False) -> Any:
+        """actionlib's SimpleActionServer (``name`` resolved)."""
+        import actionlib  # type: ignore[import-untyped]
+
+        return actionlib.SimpleActionServer(name, cls, execute, auto_start=auto_start)
+
     def tf_broadcaster(self) -> Any:
         import tf2_ros
 
@@ -170,14 +177,19 @@ class Switchboard:
     each latched topic, the tf2 buffer the TF publishers feed, and the inbox of messages from
     outside nodes (applied by :meth:`drain`)."""
 
-    def __init__(self, rospy: Any, external: frozenset[str] = EXTERNAL_INPUTS) -> None:
-        import tf2_ros
-
+    def __init__(self, rospy: Any, external: frozenset[str] = EXTERNAL_INPUTS,
+                 tf: Any = None) -> None:
+        """``tf``: the buffer the TF publishers feed (None: a tf2_ros.Buffer of 10 s; ROS 2:
+        :class:`lowerbase.ros2.tf.TfBuffer`)."""
         self.rospy = rospy
         self.external = external
         self.local: dict[str, list[Callable[[Any], None]]] = {}
         self.latched: dict[str, Any] = {}
-        self.tf = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
+        if tf is None:
+            import tf2_ros
+
+            tf = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
+        self.tf = tf
         self._inbox: list[tuple[Callable[[Any], None], Any]] = []
         self._lock = threading.Lock()
         #: the messages being delivered (a callback may publish: nested), their conversions

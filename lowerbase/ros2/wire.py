@@ -119,6 +119,10 @@ class _TimeOf:
     def from_sec(seconds: float) -> Stamp:
         return Stamp.from_sec(seconds)
 
+    def __call__(self, secs: int = 0, nsecs: int = 0) -> Stamp:
+        """``rospy.Time(secs, nsecs)``; ``Time(0)`` is "the newest" to a TF lookup."""
+        return Stamp(int(secs) * 1_000_000_000 + int(nsecs))
+
     def now(self) -> Stamp:
         if self.source is not None:
             return Stamp.from_sec(self.source())
@@ -131,17 +135,40 @@ class _DurationOf:
         return Stamp.from_sec(seconds)
 
 
-class RclpyShim:
-    """The rospy calls a face's loop makes (``Time``, ``Duration``, ``is_shutdown``,
-    ``on_shutdown``, ``signal_shutdown``, ``get_name``), for an rclpy node."""
+class RosException(Exception):
+    """rospy's ROSException (a face catches it around a publish at shutdown)."""
 
-    def __init__(self, node: Node) -> None:
+
+class RclpyShim:
+    """The rospy calls a face's loop makes (``Time``, ``Duration``, ``get_time``,
+    ``is_shutdown``, ``on_shutdown``, ``signal_shutdown``, ``get_name``, the parameter server's
+    ``get_param``/``get_param_cached``/``set_param`` on a dict of its own), for an rclpy
+    node."""
+
+    ROSException = RosException
+    ROSInterruptException = RosException
+    ROSTimeMovedBackwardsException = RosException
+
+    def __init__(self, node: Node, params: dict[str, Any] | None = None) -> None:
         self.node = node
         self.Time = _TimeOf(node)
         self.Duration = _DurationOf()
         self._down = threading.Event()
         self._callbacks: list[Callable[[], None]] = []
         self.reason = ""
+        #: what the faces read from ROS 1's parameter server (``/use_sim_time``, ...)
+        self.params: dict[str, Any] = dict(params or {})
+
+    def get_time(self) -> float:
+        return self.Time.now().to_sec()
+
+    def get_param(self, name: str, default: Any = None) -> Any:
+        return self.params.get(name, default)
+
+    get_param_cached = get_param
+
+    def set_param(self, name: str, value: Any) -> None:
+        self.params[name] = value
 
     def get_name(self) -> str:
         return str(self.node.get_fully_qualified_name())
@@ -261,6 +288,15 @@ class Ros2Wire:
 
     def convert(self, msg: Any, key: str, conversion: Callable[[Any], Any]) -> Any:
         return conversion(msg)
+
+    def action_server(self, name: str, cls: Any, execute: Callable[[Any], None],
+                      auto_start: bool = False) -> Any:
+        """actionlib's SimpleActionServer calls on rclpy.action (:mod:`lowerbase.ros2.
+        actions`; the ends mapped to ROS 2's states there)."""
+        from lowerbase.ros2.actions import SimpleActionServer
+
+        return SimpleActionServer(self.node, ros2_name(name), cls, execute,
+                                  auto_start=auto_start)
 
     def tf_broadcaster(self) -> TfBroadcaster:
         return TfBroadcaster(self.node, static=False)

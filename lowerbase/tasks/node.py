@@ -94,15 +94,16 @@ class TasksNode:
     around one TaskMachine."""
 
     def __init__(self, setup: TasksSetup, *, wire: Any = None, lock: Any = None,
-                 nav: Any = None, steps: Any = None) -> None:
+                 nav: Any = None, steps: Any = None, rospy: Any = None) -> None:
         """``wire``: how the face reaches ROS (:mod:`lowerbase.ros1.wire`; None: rospy as is);
         ``lock``: shared with the other faces of this process; ``nav`` and ``steps``: the
         machine's Navigation and step moves (None: actionlib clients of /move_base and
-        /cmd_vel_control; in one process with navigation: :mod:`lowerbase.tasks.local_nav`)."""
+        /cmd_vel_control; in one process with navigation: :mod:`lowerbase.tasks.local_nav`);
+        ``rospy``: a stand-in for rospy (ROS 2: :mod:`lowerbase.robot.lockstep_ros2`)."""
         from lowerbase.ros1.wire import RosWire
         from lowerbase.tasks.machine import TaskMachine
 
-        self.rospy = import_ros()
+        self.rospy = rospy if rospy is not None else import_ros()
         from woosh_msgs.msg import RobotStatus
 
         self.wire = wire if wire is not None else RosWire(self.rospy)

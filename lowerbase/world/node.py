@@ -89,13 +89,15 @@ class WorldNode:
     """Publishers, subscribers, services and the sensor loop around one WorldSetup."""
 
     def __init__(self, setup: WorldSetup, truth: Any, *, clock: Clock | None = None,
-                 wire: Any = None, lock: Any = None) -> None:
+                 wire: Any = None, lock: Any = None, ros: tuple[Any, Any] | None = None) -> None:
         """``clock``: the localizer's (None: wall time); ``wire``: how the face reaches ROS
         (:mod:`lowerbase.ros1.wire`; None: rospy as is); ``lock``: shared with the other faces
-        of this process (None: one of its own)."""
+        of this process (None: one of its own); ``ros``: (rospy or a stand-in, the message
+        builders) in place of :func:`import_ros`'s (ROS 2: :mod:`lowerbase.robot.
+        lockstep_ros2`)."""
         from lowerbase.ros1.wire import RosWire
 
-        self.rospy, self.io = import_ros()
+        self.rospy, self.io = ros if ros is not None else import_ros()
         self.wire = wire if wire is not None else RosWire(self.rospy)
         self.setup = setup
         self.truth = truth

@@ -1,0 +1,178 @@
+"""``lowerbase robot --ros2 --sim-time``: the lockstep robot (:class:`~lowerbase.robot.lockstep.
+LockstepRobot`, unchanged) with its interface on ROS 2.
+
+Every part runs in this process on one simulated clock, as on ROS 1; the faces are the ROS 1
+ones, on :class:`Ros2Side`: one rclpy node ``/lowerbase_robot`` carries every face's
+topics, services and actions under the names they have on ROS 1
+(:class:`lowerbase.ros2.local.Ros2LocalWire`), a :class:`~lowerbase.ros2.wire.RclpyShim` stands
+in for rospy (ROS time is the simulated time), the message builders get
+``builtin_interfaces/Time`` stamps (:class:`~lowerbase.ros2.compat.AnyStampIo`), and the ROS 1
+names of the ROS 2 types are added once (:func:`lowerbase.ros2.compat.ros1_names`).
+/clock (rosgraph_msgs/Clock) is published every 10 ms of simulated time; the node's
+``use_sim_time`` is true. nav2's ``navigate_to_pose`` and ``compute_path_to_pose`` are served
+beside the vendor's move_base (:mod:`lowerbase.navigation.nav2`).
+
+An rclpy executor (several threads: an action goal's execute callback follows its goal until
+it ends) serves the subscriptions, services and actions; the lockstep loop runs in the main
+thread, paced by :class:`~lowerbase.robot.pace.Pacer` (``--speed``), until SIGINT/SIGTERM or
+``duration`` wall seconds.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from lowerbase.robot.lockstep import NODE, LockstepOptions, LockstepRobot
+
+log = logging.getLogger(__name__)
+
+#: MCU periods (5 ms) run between two looks at the pace and the stop flag
+CHUNK = 10
+EXECUTOR_THREADS = 8  #: the action goals followed at once, plus services and subscriptions
+
+
+class Ros2Side:
+    """How the lockstep robot reaches ROS 2 (the twin of :class:`~lowerbase.robot.lockstep.
+    Ros1Side`) on one rclpy ``node``."""
+
+    def __init__(self, node: Any) -> None:
+        from lowerbase.ros2.compat import ros1_names
+        from lowerbase.ros2.wire import RclpyShim, Ros2Wire
+
+        ros1_names()
+        self.node = node
+        self.shim = RclpyShim(node, params={"/use_sim_time": True})
+        self.now = 0.0  #: [s] simulated time (ROS time here)
+        self.shim.Time.source = lambda: self.now
+        self.real = Ros2Wire(node)
+
+    def board(self) -> Any:
+        from lowerbase.ros2.local import Ros2Switchboard
+
+        return Ros2Switchboard(self.shim, self.node)
+
+    def wire(self, board: Any, name: str) -> Any:
+        from lowerbase.ros2.local import Ros2LocalWire
+
+        return Ros2LocalWire(self.shim, board, name, self.real)
+
+    def face_ros(self, face: str) -> Any:
+        from lowerbase.ros2.compat import AnyStampIo
+        from lowerbase.ros2.wire import StampedIo
+
+        if face == "tasks":
+            return self.shim
+        if face == "driver":
+            from lowerbase.driver import ros_io
+
+            return self.shim, StampedIo(ros_io)
+        if face == "world":
+            from lowerbase.world import ros_msgs as world_io
+
+            return self.shim, AnyStampIo(world_io)
+        from lowerbase.navigation import ros_msgs as nav_io
+
+        return self.shim, AnyStampIo(nav_io)
+
+    def set_time(self, now: float) -> None:
+        self.now = now
+
+    def clock_publisher(self) -> Any:
+        from rosgraph_msgs.msg import Clock
+
+        from lowerbase.ros2.wire import clock_qos
+
+        return self.node.create_publisher(Clock, "/clock", clock_qos())
+
+    def clock_sender(self, publisher: Any) -> Callable[[float], None] | None:
+        from rosgraph_msgs.msg import Clock
+
+        from lowerbase.ros2.wire import Stamp
+
+        if publisher.get_subscription_count() == 0:
+            return None
+        return lambda t: publisher.publish(Clock(clock=Stamp.from_sec(t).to_msg()))
+
+
+def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = (),
+        duration: float | None = None) -> int:
+    """Build the robot on ROS 2, run it until a signal or ``duration`` [s of wall time]."""
+    from lowerbase.driver.ros2_node import import_rclpy, loopback_only, ros2_arguments
+    from lowerbase.robot.pace import Pacer
+
+    rclpy = import_rclpy()
+    loopback_only(os.environ)
+    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.signals import SignalHandlerOptions
+
+    with contextlib.suppress(AttributeError, ValueError):
+        sys.stdout.reconfigure(line_buffering=True)  # type: ignore[union-attr]
+    context = rclpy.Context()
+    rclpy.init(args=["lowerbase", "--ros-args", *ros2_arguments(ros_args)], context=context,
+               signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node(NODE, context=context, parameter_overrides=[
+        Parameter("use_sim_time", Parameter.Type.BOOL, True)])
+    side = Ros2Side(node)
+    stop = threading.Event()
+    executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=context)
+    robot: LockstepRobot | None = None
+    nav2: Any = None
+
+    def serve() -> None:
+        while not stop.is_set() and rclpy.ok(context=context):
+            try:
+                executor.spin_once(timeout_sec=0.1)
+            except Exception:  # a callback's error: logged (with its traceback), served on
+                log.exception("an rclpy callback failed")
+
+    spinner = threading.Thread(target=serve, name="lowerbase_robot-rclpy", daemon=True)
+    previous = {s: signal.signal(s, lambda *_: stop.set())
+                for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        robot = LockstepRobot(opts, side.shim, side)
+        robot.advertise()
+        if robot.navigation is not None:
+            from lowerbase.navigation.nav2 import Nav2Servers
+
+            nav2 = Nav2Servers(robot.navigation)
+            nav2.start()
+        executor.add_node(node)
+        spinner.start()
+        print(f"lowerbase robot: {node.get_fully_qualified_name()} on ROS 2 (domain "
+              f"{context.get_domain_id()}), map {opts.map}, simulated time at "
+              f"{'max' if speed is None else f'{speed:g} x'}; Ctrl-C stops", flush=True)
+        pacer = Pacer(speed)
+        started = time.monotonic()
+        while not stop.is_set():
+            if duration is not None and time.monotonic() - started >= duration:
+                break
+            pacer.wait(robot.now)
+            robot.run_periods(CHUNK)
+    finally:
+        stop.set()
+        side.shim.signal_shutdown("robot stopped")
+        for s, h in previous.items():
+            signal.signal(s, h)
+        if spinner.is_alive():  # out of rclpy's wait before the faces' entities go
+            spinner.join(timeout=3.0)
+        if nav2 is not None:
+            nav2.shutdown()
+        if robot is not None:
+            stats = robot.shutdown()
+            stats.update(robot.board.stats)
+            counts = ", ".join(f"{k} {v}" for k, v in sorted(stats.items()) if v)
+            print(f"lowerbase robot: stopped at {robot.now:.2f} s of simulated time; "
+                  f"{counts or 'nothing counted'}", file=sys.stderr, flush=True)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    return 0

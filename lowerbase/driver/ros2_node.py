@@ -155,15 +155,29 @@ def _signals_to(stop: Callable[[str], None]) -> Iterator[None]:
             signal.signal(s, h)
 
 
+def start_node(name: str, ros_args: Sequence[str], **node_options: Any) -> tuple[Any, Any]:
+    """(context, node): rclpy initialised in a context of its own on loopback (Fast DDS
+    profile), with the ROS 1-style ``ros_args`` translated, without rclpy's signal handlers
+    (the caller's own stop the process); stdout line-buffered for the stop line."""
+    rclpy = import_rclpy()
+    loopback_only(os.environ)
+    from rclpy.signals import SignalHandlerOptions
+
+    with contextlib.suppress(AttributeError, ValueError):
+        sys.stdout.reconfigure(line_buffering=True)  # type: ignore[union-attr]
+    context = rclpy.Context()
+    rclpy.init(args=["lowerbase", "--ros-args", *ros2_arguments(ros_args)], context=context,
+               signal_handler_options=SignalHandlerOptions.NO)
+    return context, rclpy.create_node(name, context=context, **node_options)
+
+
 def run(
     link_factory: Callable[[Callable[[], None]], Any], ros_args: Sequence[str],
     *, name: str = NODE_NAME, params: dict[str, Any] | None = None,
 ) -> int:
     """:func:`lowerbase.driver.node.run` on ROS 2."""
     rclpy = import_rclpy()
-    loopback_only(os.environ)
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
 
     from lowerbase.driver import ros_io
     from lowerbase.driver.node import DriverNode
@@ -171,13 +185,8 @@ def run(
     from lowerbase.driver.settings import load_settings
     from lowerbase.ros2.wire import RclpyShim, Ros2Wire, StampedIo, uses_sim_time
 
-    with contextlib.suppress(AttributeError, ValueError):
-        sys.stdout.reconfigure(line_buffering=True)  # type: ignore[union-attr]
-    context = rclpy.Context()
-    rclpy.init(args=["lowerbase", "--ros-args", *ros2_arguments(ros_args)], context=context,
-               signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node(name, context=context,
-                             automatically_declare_parameters_from_overrides=True)
+    context, node = start_node(name, ros_args,
+                               automatically_declare_parameters_from_overrides=True)
     shim = RclpyShim(node)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)

@@ -20,9 +20,7 @@ thread, paced by :class:`~lowerbase.robot.pace.Pacer` (``--speed``), until SIGIN
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import os
 import signal
 import sys
 import threading
@@ -105,21 +103,14 @@ class Ros2Side:
 def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = (),
         duration: float | None = None) -> int:
     """Build the robot on ROS 2, run it until a signal or ``duration`` [s of wall time]."""
-    from lowerbase.driver.ros2_node import import_rclpy, loopback_only, ros2_arguments
+    from lowerbase.driver.ros2_node import import_rclpy, start_node
     from lowerbase.robot.pace import Pacer
 
     rclpy = import_rclpy()
-    loopback_only(os.environ)
     from rclpy.executors import MultiThreadedExecutor
     from rclpy.parameter import Parameter
-    from rclpy.signals import SignalHandlerOptions
 
-    with contextlib.suppress(AttributeError, ValueError):
-        sys.stdout.reconfigure(line_buffering=True)  # type: ignore[union-attr]
-    context = rclpy.Context()
-    rclpy.init(args=["lowerbase", "--ros-args", *ros2_arguments(ros_args)], context=context,
-               signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node(NODE, context=context, parameter_overrides=[
+    context, node = start_node(NODE, ros_args, parameter_overrides=[
         Parameter("use_sim_time", Parameter.Type.BOOL, True)])
     side = Ros2Side(node)
     stop = threading.Event()

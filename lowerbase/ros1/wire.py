@@ -308,8 +308,12 @@ class _TeeBroadcaster:
                 self.board.tf.set_transform_static(t, "lowerbase")
             else:
                 self.board.tf.set_transform(t, "lowerbase")
-        if self.static or connected(getattr(self.real, "pub_tf", None)):
+        if self.static or self._connected():
             self.real.sendTransform(transforms)
+
+    def _connected(self) -> bool:
+        """Whether anyone outside this process takes /tf."""
+        return connected(getattr(self.real, "pub_tf", None))
 
 
 class LocalWire(RosWire):

@@ -73,15 +73,8 @@ class _TeePublisher(_Ros1TeePublisher):
 
 
 class _TeeBroadcaster(_Ros1TeeBroadcaster):
-    def sendTransform(self, transforms: Any) -> None:
-        items = transforms if isinstance(transforms, list) else [transforms]
-        for t in items:
-            if self.static:
-                self.board.tf.set_transform_static(t, "lowerbase")
-            else:
-                self.board.tf.set_transform(t, "lowerbase")
-        if self.static or self.real.pub.get_subscription_count() > 0:
-            self.real.sendTransform(transforms)
+    def _connected(self) -> bool:
+        return bool(self.real.pub.get_subscription_count() > 0)
 
 
 class Ros2LocalWire(LocalWire):

@@ -16,8 +16,8 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from lowerbase.campaign.execute import run_one, warm
-from lowerbase.campaign.plan import plan_run
+from lowerbase.campaign.execute import run_one
+from lowerbase.campaign.plan import RunSpec, plan_run
 from lowerbase.campaign.progress import CampaignProgress
 from lowerbase.campaign.spec import Campaign
 from lowerbase.errors import CampaignError
@@ -67,9 +67,14 @@ def _children_ignore_sigint() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def open_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[Any]:
+def open_client(scheduler: str | None = None, workers: int | None = None, *,
+                warm: bool = False, meanwhile: Callable[[], None] | None = None
+                ) -> Iterator[Any]:
     """A Dask client: of ``scheduler`` (``tcp://HOST:8786``), or of a LocalCluster with
-    ``workers`` single-threaded processes (default: one per core) listening on 127.0.0.1."""
+    ``workers`` single-threaded processes (default: one per core) listening on 127.0.0.1.
+    ``warm``: a LocalCluster's workers are warmed as they start (their plugin, before they
+    take runs), a scheduler's by :func:`warm_workers`. ``meanwhile`` runs in this thread while
+    the LocalCluster starts and warms in another (the campaign is planned then)."""
     try:
         from distributed import Client, LocalCluster
     except ImportError as e:  # pragma: no cover - a dependency
@@ -83,15 +88,48 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
                                 "with `dask scheduler` and workers with `dask worker "
                                 f"{scheduler}`") from None
         try:
+            if meanwhile is not None:
+                meanwhile()
+            if warm:
+                warm_workers(client)
             yield client
         finally:
             client.close()
         return
     n = workers or os.cpu_count() or 1
-    with _children_ignore_sigint():
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               host="127.0.0.1", dashboard_address=None,
-                               silence_logs=logging.CRITICAL)
+    started: list[Any] = []
+
+    def start() -> None:
+        from lowerbase.campaign.warmup import WarmPlugin
+
+        started.append(LocalCluster(
+            n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+            dashboard_address=None, silence_logs=logging.CRITICAL,
+            plugins={WarmPlugin()} if warm else set()))
+
+    with _children_ignore_sigint():  # (SIGINT waits meanwhile: Ctrl-C after the start)
+        if meanwhile is None:
+            start()
+        else:
+            box: list[BaseException] = []
+
+            def guarded() -> None:
+                try:
+                    start()
+                except BaseException as e:
+                    box.append(e)
+
+            starter = threading.Thread(target=guarded, name="lowerbase-cluster-start")
+            starter.start()
+            try:
+                meanwhile()
+            finally:
+                starter.join()
+                if box and started:  # pragma: no cover - the start raised after starting
+                    started[0].close()
+            if box:
+                raise box[0]
+    cluster = started[0]
     try:
         with Client(cluster) as client:
             yield client
@@ -100,15 +138,18 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
 
 
 def warm_workers(client: Any) -> None:
-    """Warm every worker now, and each that joins later (a restarted one), before its runs:
-    a plugin whose setup runs :func:`lowerbase.campaign.execute.warm`."""
-    from distributed.diagnostics.plugin import WorkerPlugin
+    """Warm every worker of ``client`` now, and each that joins later (a restarted one),
+    before its runs: :class:`lowerbase.campaign.warmup.WarmPlugin`."""
+    from lowerbase.campaign.warmup import WarmPlugin
 
-    class Warm(WorkerPlugin):
-        def setup(self, worker: Any) -> None:
-            warm()
+    client.register_plugin(WarmPlugin(), name=WarmPlugin.name)
 
-    client.register_plugin(Warm(), name="lowerbase-warm")
+
+def plan_runs(campaign: Campaign, indices: Sequence[int] | None = None
+              ) -> dict[int, RunSpec]:
+    """The run specs of every run (or ``indices``), by index."""
+    wanted = list(range(campaign.total)) if indices is None else list(indices)
+    return {i: plan_run(campaign, i) for i in wanted}
 
 
 def _failed_row(index: int, scenario: str, values: dict[str, Any], error: str
@@ -119,17 +160,19 @@ def _failed_row(index: int, scenario: str, values: dict[str, Any], error: str
 def run_campaign(campaign: Campaign, client: Any, *,
                  indices: Sequence[int] | None = None,
                  on_row: Callable[[dict[str, Any]], None] | None = None,
-                 progress: CampaignProgress | None = None, warm: bool = True) -> Outcome:
-    """Submit every run (or ``indices``) to ``client``; call ``on_row`` with each row as it
-    arrives. Ctrl-C cancels the runs not finished and returns what finished. ``warm``: warm
-    the workers first (:func:`warm_workers`)."""
+                 progress: CampaignProgress | None = None, warm: bool = True,
+                 specs: dict[int, RunSpec] | None = None) -> Outcome:
+    """Submit every run (or ``indices``; or the planned ``specs``) to ``client``; call
+    ``on_row`` with each row as it arrives. Ctrl-C cancels the runs not finished and returns
+    what finished. ``warm``: warm the workers first (:func:`warm_workers`; not needed when
+    :func:`open_client` warmed them)."""
     from distributed import as_completed
 
     if warm:
         warm_workers(client)
     token = uuid.uuid4().hex[:8]
-    wanted = list(range(campaign.total)) if indices is None else list(indices)
-    specs = {i: plan_run(campaign, i) for i in wanted}
+    if specs is None:
+        specs = plan_runs(campaign, indices)
     futures = {client.submit(run_one, spec, key=f"lowerbase-run-{i}-{token}", pure=False,
                              retries=RETRIES): i for i, spec in specs.items()}
     info = client.scheduler_info().get("workers", {})

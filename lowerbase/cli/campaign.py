@@ -79,7 +79,7 @@ def _range(text: str | None, total: int) -> list[int] | None:
 
 
 def run_command(args: argparse.Namespace) -> int:
-    from lowerbase.campaign.engine import open_client, quiet_dask, run_campaign
+    from lowerbase.campaign.engine import open_client, plan_runs, quiet_dask, run_campaign
     from lowerbase.campaign.plan import load_campaign
     from lowerbase.campaign.progress import CampaignProgress
     from lowerbase.campaign.report import write_report
@@ -94,10 +94,13 @@ def run_command(args: argparse.Namespace) -> int:
     print(f"campaign {campaign.name}: {n} run(s) of {len(campaign.scenarios)} scenario(s) "
           f"on {where}", file=sys.stderr)
     t0 = time.monotonic()
-    with quiet_dask(args.debug), open_client(args.scheduler, args.workers) as client:
+    specs: dict[int, Any] = {}  # planned while the cluster starts and its workers warm
+    with quiet_dask(args.debug), open_client(
+            args.scheduler, args.workers, warm=True,
+            meanwhile=lambda: specs.update(plan_runs(campaign, indices))) as client:
         log = RowLog(out / "runs.jsonl")  # once there is a cluster to run on
         try:
-            result = run_campaign(campaign, client, indices=indices, on_row=log,
+            result = run_campaign(campaign, client, on_row=log, warm=False, specs=specs,
                                   progress=CampaignProgress(n, force=args.progress))
         finally:
             log.close()

@@ -2,10 +2,11 @@
 
 ROS-free and clock-free (time is passed in); the model pieces and the update arithmetic are
 in :mod:`lowerbase.driver.ekf_model`, run compiled by :mod:`lowerbase.driver.ekf_kernels`
-(the usual wheel cycle is one call). Built on filterpy's
-:class:`~filterpy.kalman.ExtendedKalmanFilter`: the filter is reachable as :attr:`PlanarEkf.kf`
-and its ``x``, ``P``, ``x_prior``, ``P_prior``, ``y``, ``S``, ``K`` stay inspectable (after
-a compiled cycle the last five are views the next cycle overwrites: copy them to keep them).
+(the usual wheel cycle is one call). The filter's arrays keep the names of filterpy's
+``ExtendedKalmanFilter`` (:class:`~lowerbase.driver.ekf_filter.FilterState`, without importing
+filterpy): the filter is reachable as :attr:`PlanarEkf.kf` and its ``x``, ``P``,
+``x_prior``, ``P_prior``, ``y``, ``S``, ``K`` stay inspectable (after a compiled cycle the
+last five are views the next cycle overwrites: copy them to keep them).
 
 State ``[x, y, yaw, v, w, b]``: position [m], heading [rad] (continuous, not wrapped), forward
 velocity [m/s], yaw rate [rad/s] and the z-gyro's bias [rad/s].

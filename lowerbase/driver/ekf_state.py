@@ -1,6 +1,7 @@
 """The state, time line and update arithmetic of the planar EKF (:mod:`lowerbase.driver.ekf`).
 
-:class:`EkfState` holds the filterpy filter, the stamp and the standstill timer, predicts and
+:class:`EkfState` holds the filter's arrays (:class:`~lowerbase.driver.ekf_filter.FilterState`:
+filterpy's names), the stamp and the standstill timer, predicts and
 holds, and steps the time line by intervals (:meth:`EkfState._begin` moves the rates to the next
 stamp, the measurements update them, :meth:`EkfState._finish` drives the pose over the interval
 with them). :class:`~lowerbase.driver.ekf.PlanarEkf` adds the wheel and gyro measurements.
@@ -12,8 +13,8 @@ import math
 from typing import Any, NamedTuple
 
 import numpy as np
-from filterpy.kalman import ExtendedKalmanFilter
 
+from lowerbase.driver.ekf_filter import FilterState
 from lowerbase.driver.ekf_kernels import CycleWorkspace, compile_kernels, drive, measure
 from lowerbase.driver.ekf_model import (
     DIM_X,
@@ -63,7 +64,7 @@ class EkfState:
     def __init__(self, noise: EkfNoise | None = None, stamp: float | None = None) -> None:
         compile_kernels()
         self.noise = noise if noise is not None else EkfNoise()
-        self.kf: Any = ExtendedKalmanFilter(dim_x=DIM_X, dim_z=2)
+        self.kf: Any = FilterState(DIM_X, 2)
         #: time [s] the state refers to (None until the first stamped call)
         self.stamp: float | None = stamp
         self.reset()

@@ -7,8 +7,9 @@ that they sit at the root with no namespace: ``robot_state`` (published at ``~pu
 angular.z; the seed names no velocity topic) and the sensor_msgs/Joy topic handed over by
 set_listen. The seed has no call that brings the robot to walking state: ``~walk``, ``~stand``
 and ``~sit`` (std_srvs/Trigger) send the LocomotionRequests that lead there along the state
-table (:func:`next_request`). Nor does it have one that ends a waypoint mission (an empty list
-is refused): ``~stop_waypoints`` (std_srvs/Trigger) does, an endless one too.
+table (:mod:`lowerbase.legged_driver.goals`). Nor does it have one that ends a waypoint
+mission (an empty list is refused): ``~stop_waypoints`` (std_srvs/Trigger) does, an endless one
+too.
 
 Threads (one lock around every core call): a reader per leg bus (four BusLinks, each reopened
 every second after an error), the main loop (tick: BodyVelocityCommand, locomotion goal,
@@ -25,7 +26,6 @@ import os
 import sys
 import threading
 import time
-from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,9 +34,9 @@ from typing import Any
 
 from lowerbase.clock import RealClock
 from lowerbase.errors import ConfigError, RosUnavailableError
-from lowerbase.legged.body import ALLOWED
 from lowerbase.legged.runner import leg_bus_configs  # the emulator's convention, one copy
 from lowerbase.legged_driver.core import LeggedDriverConfig, LeggedDriverCore
+from lowerbase.legged_driver.goals import GoalPursuit
 from lowerbase.legged_driver.waypoints import TIMEOUT, GpsDatum, Waypoint
 from lowerbase.protocol.legged import LocomotionState, legged_codec
 
@@ -54,34 +54,6 @@ SERVICES = {"set_waypoints": "planning/set_waypoints", "get_waypoints": "plannin
             "set_listen": "set_listen"}
 #: ~walk / ~stand / ~sit: the state each brings the robot to
 GOALS = {"walk": S.IN_CONTROL, "stand": S.STANDING_MODE, "sit": S.SITDOWN_MODE}
-
-
-# -- locomotion goals (pure) --------------------------------------------------------------------
-
-
-def next_request(state: LocomotionState, goal: LocomotionState) -> LocomotionState | None:
-    """The request that moves ``state`` one step toward ``goal`` along :data:`ALLOWED`, or None
-    when there is nothing to send (reached, or waiting for an automatic step: commutation,
-    sitting down). Never through MOTOR_DISABLED or COMM_DISABLED unless that is the goal, so a
-    standing robot is not dropped on its way. SITDOWN_MODE counts as reached once seated
-    (MOTOR_ENABLED) or when the robot is not up at all."""
-    if goal == S.SITDOWN_MODE and state not in (S.STANDING_MODE, S.IN_CONTROL):
-        return None
-    if state == goal or state in (S.MOTOR_COMMUTATION, S.SITDOWN_MODE):
-        return None
-    avoid = {S.MOTOR_DISABLED, S.COMM_DISABLED} - {goal}
-    edges = {s: set(ts) - avoid for s, ts in ALLOWED.items()}
-    first: dict[LocomotionState, LocomotionState] = {t: t for t in edges[state]}
-    queue = deque(edges[state])
-    while queue:
-        s = queue.popleft()
-        if s == goal:
-            return first[s]
-        for t in edges[s]:
-            if t not in first and t != state:
-                first[t] = first[s]
-                queue.append(t)
-    return None
 
 
 # -- settings (pure) ----------------------------------------------------------------------------
@@ -209,8 +181,7 @@ class LeggedNode:
         self.stop = threading.Event()
         self.core = core if core is not None else \
             LeggedDriverCore(self._send, RealClock(self.stop), config)
-        self.goal: LocomotionState | None = None
-        self._goal_sent: tuple[LocomotionState, float] | None = None
+        self.goals = GoalPursuit(settings.request_retry)
         self._joy_sub: Any = None
         self._joy_topic: str | None = None
         self._handles: list[Any] = []
@@ -306,32 +277,22 @@ class LeggedNode:
             if not self.core.link_up:
                 return self.ros.TriggerResponse(success=False, message=TIMEOUT)
             state = self.core.state
-            self.goal, self._goal_sent = goal, None
+            self.goals.set(goal)
         return self.ros.TriggerResponse(success=True, message=f"{state.name} -> {goal.name}")
 
     # -- the loop -------------------------------------------------------------------------------
 
+    @property
+    def goal(self) -> LocomotionState | None:
+        """The locomotion goal being pursued (None: none)."""
+        return self.goals.goal
+
     def pursue_goal(self) -> None:
         """Send the next LocomotionRequest toward the goal (on a state change or every
         ``request_retry``); drop the goal once reached or when a fault is latched."""
-        goal, core = self.goal, self.core
-        if goal is None or not core.link_up:
-            return
-        if core.fault:
-            log.warning("locomotion goal %s dropped: fault 0x%x", goal.name, core.fault)
-            self.goal = None
-            return
-        want = next_request(core.state, goal)
-        if want is None:
-            if core.state == goal or (goal == S.SITDOWN_MODE and core.state in (
-                    S.MOTOR_ENABLED, S.SITDOWN_MODE)):
-                self.goal = None
-            return
-        now = core.clock.now()
-        sent = self._goal_sent
-        if sent is None or sent[0] != want or now - sent[1] >= self.settings.request_retry:
-            core.request_state(want)
-            self._goal_sent = (want, now)
+        dropped = self.goals.pursue(self.core)
+        if dropped is not None:
+            log.warning("locomotion goal %s dropped: fault 0x%x", dropped.name, self.core.fault)
 
     def publish_state(self) -> None:
         """robot_state, now."""

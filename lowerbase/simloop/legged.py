@@ -4,10 +4,10 @@ to back, as :class:`~lowerbase.simloop.loop.SimLoop` is for the wheeled chassis.
 Every 1 ms (the lower computer's period, :data:`lowerbase.legged.lower.DT`) the lower
 computer steps and its frames go straight to :class:`~lowerbase.legged_driver.core.
 LeggedDriverCore` (``on_frame``) on the same leg bus; every ``1 / command_rate`` the driver
-ticks (BodyVelocityCommand) and a locomotion goal is pursued as the rospy node does it
-(``~walk`` / ``~stand`` / ``~sit``: :func:`lowerbase.legged_driver.node.next_request`, retried every
-``request_retry``). The driver's frames reach the lower computer at once. Nothing is lost or
-reordered; ``tap(t, direction, bus, frame_id, data)`` sees every frame.
+ticks (BodyVelocityCommand) and a locomotion goal (``~walk`` / ``~stand`` / ``~sit``) is
+pursued as the rospy node does it, by the same :class:`lowerbase.legged_driver.goals.
+GoalPursuit` (retried every ``request_retry``). The driver's frames reach the lower computer
+at once. Nothing is lost or reordered; ``tap(t, direction, bus, frame_id, data)`` sees every frame.
 """
 
 from __future__ import annotations
@@ -21,10 +21,9 @@ from lowerbase.clock import SimClock
 from lowerbase.legged.lower import LeggedLower
 from lowerbase.legged.profile import LeggedProfile
 from lowerbase.legged_driver.core import LeggedDriverConfig, LeggedDriverCore
-from lowerbase.legged_driver.node import next_request
+from lowerbase.legged_driver.goals import GoalPursuit
 from lowerbase.protocol.legged import LocomotionState
 
-S = LocomotionState
 #: (t [s], "lower"|"upper", bus, frame id, data)
 LeggedTap = Callable[[float, str, int, int, bytes], None]
 
@@ -49,10 +48,7 @@ class LeggedSimLoop:
         self.driver = LeggedDriverCore(self._from_driver, self.clock, config)
         self.dt = self.lower.dt
         self.tick_every = max(1, round(1.0 / (self.driver.config.command_rate * self.dt)))
-        self.request_retry = request_retry
-        self.goal: LocomotionState | None = None
-        self.goals_dropped = 0  #: goals dropped because a fault was latched
-        self._goal_sent: tuple[LocomotionState, float] | None = None
+        self.goals = GoalPursuit(request_retry)
         self.steps = 0
 
     @property
@@ -69,32 +65,23 @@ class LeggedSimLoop:
             self.tap(self.clock.now(), "upper", bus, frame_id, data)
         self.lower.receive(bus, frame_id, data)
 
+    @property
+    def goal(self) -> LocomotionState | None:
+        """The locomotion goal being pursued (None: none, or reached, or dropped)."""
+        return self.goals.goal
+
+    @property
+    def goals_dropped(self) -> int:
+        """Goals dropped because a fault was latched."""
+        return self.goals.dropped
+
     def set_goal(self, goal: LocomotionState) -> None:
         """``~walk`` (IN_CONTROL), ``~stand`` (STANDING_MODE) or ``~sit`` (SITDOWN_MODE)."""
-        self.goal, self._goal_sent = goal, None
+        self.goals.set(goal)
 
     def pursue_goal(self) -> None:
-        """The node's pursue_goal on the simulated clock: the next request along the state
-        table, again every ``request_retry`` until the state moves; dropped when reached or
-        when a fault is latched."""
-        goal, core = self.goal, self.driver
-        if goal is None or not core.link_up:
-            return
-        if core.fault:
-            self.goal = None
-            self.goals_dropped += 1
-            return
-        want = next_request(core.state, goal)
-        if want is None:
-            if core.state == goal or (goal == S.SITDOWN_MODE and core.state in (
-                    S.MOTOR_ENABLED, S.SITDOWN_MODE)):
-                self.goal = None
-            return
-        now = self.clock.now()
-        sent = self._goal_sent
-        if sent is None or sent[0] != want or now - sent[1] >= self.request_retry - 1e-9:
-            core.request_state(want)
-            self._goal_sent = (want, now)
+        """The node's pursue_goal on the simulated clock (:class:`GoalPursuit`)."""
+        self.goals.pursue(self.driver)
 
     def step(self) -> None:
         """One 1 ms period: the driver's tick when due, the lower computer, the clock."""

@@ -121,7 +121,8 @@ class WorldNode:
         self.odom: Pose | None = None
         self.scan_odom = ScanOdom()  #: each scan with /odom at its stamp, for the localizer
         self.stats: dict[str, int] = {"scans": 0, "scans_cast": 0, "frames": 0, "bad_odom": 0,
-                                      "bad_initialpose": 0, "amcl_poses": 0, "frames_dropped": 0}
+                                      "bad_initialpose": 0, "amcl_poses": 0}
+        self._watches: list[RateWatch] = []  #: the dropping loops' (the camera's)
         self._pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
         self._services: list[Any] = []
@@ -384,6 +385,7 @@ class WorldNode:
 
         pace = pace_for(self.rospy, self.stop)
         watch = RateWatch("camera", rate_hz)  # the dropping loop says what rate it keeps
+        self._watches.append(watch)
 
         def guarded() -> None:
             try:
@@ -399,13 +401,15 @@ class WorldNode:
                 if line is not None:
                     log.warning("%s", line)
 
-        def dropped(n: int) -> None:
-            self.stats["frames_dropped"] += n
-            watch.dropped(n)
-
         failed = threading.Event()
         paced_loop(pace, guarded, rate_hz, catch_up, lambda: running() and not failed.is_set(),
-                   dropped)
+                   watch.dropped)
+
+    @property
+    def frames_dropped(self) -> int:
+        """Camera frames dropped so far (their loop could not keep its rate): the stop line's
+        ``frames_dropped``, counted once, by the loop's :class:`RateWatch`."""
+        return sum(w.total_dropped for w in self._watches)
 
     def shutdown(self) -> None:
         self.stop.set()
@@ -431,5 +435,6 @@ def run(setup: WorldSetup, truth: Any, ros_args: Sequence[str], truth_where: str
             node.spin()
         finally:
             node.shutdown()
-            session.stopped({**node.stats, **node.scan_odom.counts})
+            session.stopped({**node.stats, "frames_dropped": node.frames_dropped,
+                             **node.scan_odom.counts})
     return 0

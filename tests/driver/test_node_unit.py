@@ -67,11 +67,11 @@ def _one_line_hint(result: subprocess.CompletedProcess[str], missing: str) -> No
 
 
 def test_launch_script_says_which_interpreter_to_pass_when_a_dependency_is_missing() -> None:
-    code = ("import runpy, sys; sys.modules['filterpy'] = None; sys.argv = [sys.argv[1]]; "
+    code = ("import runpy, sys; sys.modules['cantools'] = None; sys.argv = [sys.argv[1]]; "
             "runpy.run_path(sys.argv[0], run_name='__main__')")
     result = subprocess.run([sys.executable, "-c", code, str(SCRIPT)], capture_output=True,
                             text=True, timeout=60)
-    _one_line_hint(result, "filterpy")
+    _one_line_hint(result, "cantools")
 
 
 @pytest.mark.skipif(not Path("/usr/bin/python3").exists(), reason="no /usr/bin/python3")

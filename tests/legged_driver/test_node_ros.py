@@ -21,11 +21,11 @@ import pytest
 
 from lowerbase.errors import ConfigError
 from lowerbase.legged.body import ALLOWED
+from lowerbase.legged_driver.goals import next_request
 from lowerbase.legged_driver.node import (
     leg_bus_configs,
     load_legged_settings,
     lower_ids,
-    next_request,
 )
 from lowerbase.legged_driver.waypoints import EMPTY, SET_SUCCESS, STOPPED, TIMEOUT
 from lowerbase.protocol.legged import JOINT_NAMES, LocomotionState

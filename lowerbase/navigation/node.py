@@ -21,8 +21,8 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
 from lowerbase.errors import ConfigError, LowerbaseError, WorldError
@@ -403,14 +403,33 @@ class NavigationNode:
             service.shutdown()
 
 
+def with_params(setup: NavigationSetup, get_param: Callable[[str, Any], Any]
+                ) -> NavigationSetup:
+    """``setup`` with move_base's private ``~recovery_behaviors`` applied when it is set: a
+    list of :data:`lowerbase.navigation.recovery.BEHAVIORS` names in the order to run them
+    (move_base's ``{name, type}`` entries count by their ``name``). A bad value: one
+    NavigationError line."""
+    from lowerbase.navigation.goals import NavigationError, NavigatorConfig
+
+    value = get_param("~recovery_behaviors", None)
+    if value is None:
+        return setup
+    if not isinstance(value, (list, tuple)):
+        raise NavigationError(f"~recovery_behaviors must be a list of behaviour names, got "
+                              f"{value!r}")
+    names = tuple(v.get("name") if isinstance(v, dict) else v for v in value)
+    base = setup.navigator if setup.navigator is not None else NavigatorConfig()
+    return replace(setup, navigator=replace(base, recovery_behaviors=names))
+
+
 def run(setup: NavigationSetup, ros_args: Sequence[str], where: str) -> int:
     """Start rospy on the master in ROS_MASTER_URI, build the node and spin."""
     from lowerbase.ros1.node import ros_session
     from lowerbase.world.pacing import RosPace
 
-    import_ros()  # one line if ROS or the message modules are missing
+    rospy, _ = import_ros()  # one line if ROS or the message modules are missing
     with ros_session("navigation", NODE_NAME, ros_args) as session:
-        node = NavigationNode(setup)
+        node = NavigationNode(with_params(setup, rospy.get_param))
         try:
             node.advertise()
             clock = "ROS time (/use_sim_time)" if isinstance(node.pace, RosPace) \

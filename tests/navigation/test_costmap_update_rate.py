@@ -37,7 +37,10 @@ def test_an_update_marks_the_newest_scan_only_and_never_casts_the_others() -> No
     setup = node.NavigationSetup(grid=load_map("empty_room"))
     n, history = bare_node(setup)
     assert n._update_every == 4  # 20 Hz ticks, 5 Hz updates
-    scans = [LazyScan("base_link", 0.04 * k, lambda k=k: f"scan {k}") for k in range(5)]
+    def made(k: int) -> Any:
+        return lambda: f"scan {k}"  # stands for the cast scan
+
+    scans = [LazyScan("base_link", 0.04 * k, made(k)) for k in range(5)]
     for k, s in enumerate(scans):
         history.add(0.04 * k, (0.1 * k, 0.0, 0.0))
         n.sensors.add("scan", 0.04 * k, s)
@@ -53,3 +56,25 @@ def test_an_update_marks_the_newest_scan_only_and_never_casts_the_others() -> No
 def test_the_update_rate_is_checked() -> None:
     with pytest.raises(ConfigError, match="update_rate_hz"):
         node.NavigationSetup(grid=load_map("empty_room"), update_rate_hz=0.0)
+
+
+def test_the_node_takes_move_bases_recovery_behaviors_parameter() -> None:
+    from lowerbase.navigation.goals import NavigationError
+    from lowerbase.navigation.navigator import Navigator
+
+    setup = node.NavigationSetup(grid=load_map("empty_room"))
+    params: dict[str, Any] = {}
+    same = node.with_params(setup, lambda name, default: params.get(name, default))
+    assert same is setup  # not set: move_base's defaults
+    params["~recovery_behaviors"] = ["rotate", "clear_aggressive"]
+    got = node.with_params(setup, lambda name, default: params.get(name, default))
+    assert got.navigator.recovery_behaviors == ("rotate", "clear_aggressive")
+    nav = Navigator(got.grid, got.navigator)
+    assert nav.config.recovery_behaviors == ("rotate", "clear_aggressive")
+    params["~recovery_behaviors"] = [{"name": "back_off", "type": "x/BackOff"}, "rotate"]
+    got = node.with_params(setup, lambda name, default: params.get(name, default))
+    assert got.navigator.recovery_behaviors == ("back_off", "rotate")
+    for bad, why in (("rotate", "must be a list"), (["spin"], "unknown 'spin'"), ([], "non-empty")):
+        params["~recovery_behaviors"] = bad
+        with pytest.raises(NavigationError, match=why):
+            node.with_params(setup, lambda name, default: params.get(name, default))

@@ -16,7 +16,12 @@ with NaN where a number is needed is dropped and counted.
 
 A scan is put on the costmaps from the pose of its own time, as tf's message filter does: the
 first pose stamped at or after the scan's stamp (poses are kept for
-:data:`POSE_HISTORY`); a scan newer than every pose waits for the next one. A scan that arrives
+:data:`POSE_HISTORY`). Scans newer than every pose wait (:data:`SCANS_WAITING` of them, as
+tf's message filter queues them): a pose takes the newest waiting scan its stamp reaches, the
+older ones are counted as ``scan_superseded`` (the costmaps mark the newest view). So when the
+poses lag the scans by more than a scan period (a busy host: the localization waits for
+/odom), every pose still pairs with a scan; with one waiting slot each new scan replaced the
+one the next pose would have taken and the costmaps stopped updating. A scan that arrives
 late on a busy host is so marked where the robot was, not smeared along where it has turned
 since (issue 22 item 18). A scan older than every kept pose is dropped and counted
 (``scan_too_old``); unstamped messages (stamp 0) pair with the latest pose.
@@ -50,6 +55,8 @@ from lowerbase.world.lidar import LaserScan
 log = logging.getLogger(__name__)
 #: poses kept to pair a late scan with the pose of its time (20 Hz: 5 s)
 POSE_HISTORY = 100
+#: scans kept while newer than every pose (25 Hz: 2 s)
+SCANS_WAITING = 50
 
 Pose = tuple[float, float, float]
 Publish = Callable[[m.GTraceList], None]
@@ -111,7 +118,8 @@ class Navigator:
         self._latest: tuple[Pose, LaserScan] | None = None  #: the last scan and its pose
         #: (stamp, pose) of the last poses, oldest first
         self._poses: deque[tuple[float, Pose]] = deque(maxlen=POSE_HISTORY)
-        self._waiting: LaserScan | None = None  #: a scan newer than every pose so far
+        #: scans newer than every pose so far, in arrival order
+        self._waiting: deque[LaserScan] = deque()
 
     # -- inputs ---------------------------------------------------------------------------------
     def on_pose(self, msg: m.RobotPose2D) -> None:
@@ -124,11 +132,20 @@ class Navigator:
         stamp = float(msg.stamp)
         if self._poses and stamp < self._poses[-1][0]:
             self._poses.clear()  # time went back (a simulation started again)
+            self._waiting.clear()
         self._poses.append((stamp, pose))
-        waiting = self._waiting
-        if waiting is not None and stamp >= waiting.stamp:
-            self._waiting = None
-            self._take_scan(pose, waiting)
+        if self._waiting:
+            self._pair_waiting(stamp, pose)
+
+    def _pair_waiting(self, stamp: float, pose: Pose) -> None:
+        """The newest waiting scan ``pose`` (the first at or after its stamp) reaches."""
+        reached = [s for s in self._waiting if s.stamp <= stamp]
+        if not reached:
+            return
+        newest = max(reached, key=lambda s: s.stamp)
+        self._waiting = deque(s for s in self._waiting if s.stamp > stamp)
+        self.stats["scan_superseded"] += len(reached) - 1
+        self._take_scan(pose, newest)
 
     def on_scan(self, msg: m.GLaserScan) -> None:
         if self.pose is None:
@@ -151,8 +168,11 @@ class Navigator:
                             "host; %d so far)", self.name, poses[0][0] - scan.stamp, n)
             return
         pose = next((p for t, p in poses if t >= scan.stamp), None)  # the pose of its time
-        if pose is None:
-            self._waiting = scan  # for the pose of its time (a newer scan replaces it)
+        if pose is None:  # for the pose of its time
+            if len(self._waiting) >= SCANS_WAITING:
+                self._waiting.popleft()
+                self.stats["scan_superseded"] += 1
+            self._waiting.append(scan)
         else:
             self._take_scan(pose, scan)
 

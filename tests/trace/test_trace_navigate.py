@@ -202,3 +202,33 @@ def test_a_late_scan_is_paired_with_the_pose_of_its_time() -> None:
     # unstamped messages keep the old pairing: the latest pose
     mods.deliver(modules.LASER, _scan(0.0))
     assert nav._latest[1].stamp == 0.0 and nav._latest[0] == (2.0, 2.0, 0.0)
+
+
+def test_every_pose_pairs_with_a_scan_when_poses_lag_by_more_than_a_scan_period() -> None:
+    """CI under load: the localization's pose (map -> base_link at the last localized scan's
+    time) lagged the newest scan by more than a scan period; with one waiting slot each new
+    scan replaced the one the next pose would have taken, no scan was ever marked and the
+    robot stood BLOCKED at the route's start. Scans at 25 Hz, poses at 20 Hz arriving 120 ms
+    after their stamps: each pose takes the newest scan it reaches, older waiting ones are
+    superseded."""
+    mods = modules.TraceModules(SimClock(), load_map("empty_room"), lambda t, msg: None)
+    nav = mods.obstacle
+    taken: dict[float, float] = {}  # scan stamp -> stamp of the pose it was marked from
+    scan_t = [1.0 + 0.04 * k for k in range(101)]
+    pose_t = [0.9 + 0.05 * k for k in range(81)]
+    arrivals = sorted([(t, 0, t) for t in scan_t] + [(t + 0.12, 1, t) for t in pose_t])
+    for _, kind, t in arrivals:
+        if kind == 0:
+            mods.deliver(modules.LASER, _scan(t))
+        else:
+            mods.deliver(modules.POSE, m.RobotPose2D(stamp=t, x=2.0 + t, y=2.0))
+        if nav._latest is not None:
+            pose, scan = nav._latest
+            taken.setdefault(scan.stamp, pose[0] - 2.0)
+    assert len(taken) >= 75  # a scan for (nearly) every pose from the first scan's on
+    for scan_stamp, pose_stamp in taken.items():  # the first pose at or after the scan
+        assert scan_stamp - 1e-9 <= pose_stamp < scan_stamp + 0.05, (scan_stamp, pose_stamp)
+    ignored = sum(t < pose_t[0] + 0.12 for t in scan_t)  # before any pose: not kept
+    assert nav.stats["scan_superseded"] == \
+        len(scan_t) - ignored - len(taken) - len(nav._waiting)
+    assert nav.stats["scan_too_old"] == 0 and len(nav._waiting) <= 4

@@ -3,7 +3,9 @@
 * overhead: 200 library scenario runs (loop, wheel_slip, estop, watchdog, 50 each, a wheel's
   radius error varied) one after another in this process, then as a campaign on a LocalCluster
   of 2 worker processes; overhead = campaign time / (sum of single-run times / 2), with and
-  without starting the cluster. Target: at most 1.15. The same for 200 runs of a mix of the
+  without starting the cluster. Target: at most 1.15. Beside it, the same runs on 2 plain
+  processes of a multiprocessing pool (no Dask): what this host gives two runs at once, so
+  the overhead splits into the host's share and Dask's. The same for 200 runs of a mix of the
   library's kinds (:data:`MIX`: chassis, world, legged, tasks; 20 each of 10 scenarios).
 * scaling: `dask scheduler` and 1, 2, 4 `dask worker` processes on 127.0.0.1 started here;
   the same runs through the scheduler; runs/s per size, and whether the tables (wall times
@@ -91,6 +93,42 @@ def _cluster(workers: int, tmp: Path) -> Iterator[str]:
         stop_processes(reversed(procs))
 
 
+_BARRIER: Any = None
+
+
+def _warm_process(path: str, barrier: Any) -> None:
+    """A plain pool process's initializer: the first run of each scenario (as a warm worker)."""
+    global _BARRIER
+    from lowerbase.campaign.execute import run_one
+    from lowerbase.campaign.plan import load_campaign, plan_run
+
+    _BARRIER = barrier
+    c = load_campaign(Path(path))
+    for k in range(len(c.scenarios)):
+        run_one(plan_run(c, k * c.per_scenario))
+
+
+def _meet(_: int) -> None:
+    """Returns once both pool processes are here (both warmed: one such task each)."""
+    _BARRIER.wait(timeout=600)
+
+
+def two_plain_processes(path: Path, specs: list[Any]) -> float:
+    """[s] the runs on 2 warmed processes of a multiprocessing pool (no Dask): what this host
+    gives two runs at once, the baseline Dask's own overhead is measured against."""
+    import multiprocessing as mp
+
+    from lowerbase.campaign.execute import run_one
+
+    ctx = mp.get_context("forkserver")
+    barrier = ctx.Barrier(2)
+    with ctx.Pool(2, initializer=_warm_process, initargs=(str(path), barrier)) as pool:
+        pool.map(_meet, range(2), chunksize=1)
+        t0 = time.perf_counter()
+        pool.map(run_one, specs, chunksize=1)
+        return time.perf_counter() - t0
+
+
 def overhead(runs: int, tmp: Path, mix: bool = False) -> list[Row]:
     from lowerbase.campaign.engine import open_client, plan_runs, quiet_dask, run_campaign
     from lowerbase.campaign.execute import run_one
@@ -114,6 +152,7 @@ def overhead(runs: int, tmp: Path, mix: bool = False) -> list[Row]:
         result = run_campaign(c, client, warm=False, specs=specs)
         t2 = time.perf_counter()
     assert len(result.rows) == c.total
+    plain = two_plain_processes(c.source, [specs[i] for i in sorted(specs)])
     ideal = single / 2
     on_workers = sum(float(r["wall_s"]) for r in result.rows.values())
     note = f"{c.total} runs; sum of single runs {single:.1f} s, ideal on 2 = {ideal:.1f} s"
@@ -126,6 +165,10 @@ def overhead(runs: int, tmp: Path, mix: bool = False) -> list[Row]:
             "target <= 1.15"),
         Row("campaign", f"{tag}LocalCluster(2): overhead with cluster start", (t2 - t0) / ideal,
             "x", f"cluster start and warm-up {t1 - t0:.1f} s (the runs planned meanwhile)"),
+        Row("campaign", f"{tag}2 plain processes (no Dask): runs", plain / ideal, "x",
+            f"{plain:.1f} s: what this host gives two runs at once (multiprocessing pool)"),
+        Row("campaign", f"{tag}LocalCluster(2) against 2 plain processes", (t2 - t1) / plain,
+            "x", "Dask's own share of the overhead"),
         Row("campaign", f"{tag}LocalCluster(2): overhead vs the runs' times on the workers",
             (t2 - t1) / (on_workers / 2), "x",
             f"sum of wall_s on the workers {on_workers:.1f} s (a busy host slows the runs "

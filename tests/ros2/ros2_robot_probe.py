@@ -21,14 +21,15 @@ from __future__ import annotations
 import json
 import math
 import sys
-import time
-from collections.abc import Callable
+from functools import partial
 from itertools import pairwise
 from typing import Any
 
+import probe_common  # beside this script (sys.path[0])
 import rclpy
 from nav2_msgs.action import ComputePathToPose, NavigateToPose
 from nav_msgs.msg import OccupancyGrid, Odometry
+from probe_common import sec
 from rclpy.action import ActionClient
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
@@ -39,19 +40,7 @@ from tf2_msgs.msg import TFMessage
 from lowerbase.ros2.wire import clock_qos, qos_for
 
 TIMEOUT = 180.0
-
-
-def spin_until(node: Node, done: Callable[[], bool], what: str,
-               timeout: float = TIMEOUT) -> None:
-    deadline = time.monotonic() + timeout
-    while not done():
-        if time.monotonic() > deadline:
-            sys.exit(f"probe: {what} not seen within {timeout:.0f} s")
-        rclpy.spin_once(node, timeout_sec=0.1)
-
-
-def sec(stamp: Any) -> float:
-    return float(stamp.sec) + stamp.nanosec * 1e-9
+spin_until = partial(probe_common.spin_until, timeout=TIMEOUT)  # every wait's deadline
 
 
 def yaw(q: Any) -> float:
@@ -183,36 +172,8 @@ def move_base(node: Node, x: float, y: float, th: float) -> dict[str, Any]:
 
 
 def drive(node: Node) -> dict[str, Any]:
-    """A Twist on /base_cmd_vel from this process (20 Hz, as a teleop) until /odom moved
-    0.2 m; then zeros."""
-    from geometry_msgs.msg import Twist
-
-    got: list[Odometry] = []
-    node.create_subscription(Odometry, "/odom", got.append, qos_for("/odom", 50))
-    spin_until(node, lambda: bool(got), "/odom")
-    x0, y0 = got[-1].pose.pose.position.x, got[-1].pose.pose.position.y
-    pub = node.create_publisher(Twist, "/base_cmd_vel", qos_for("/base_cmd_vel"))
-    cmd = Twist()
-    cmd.linear.x = 0.3
-    deadline = time.monotonic() + TIMEOUT
-    next_cmd = 0.0
-
-    def moved() -> float:
-        p = got[-1].pose.pose.position
-        return math.hypot(p.x - x0, p.y - y0)
-
-    while moved() < 0.2:
-        if time.monotonic() > deadline:
-            sys.exit(f"probe: /odom moved {moved():.3f} m, not 0.2, within {TIMEOUT:.0f} s")
-        if time.monotonic() >= next_cmd:
-            pub.publish(cmd)
-            next_cmd = time.monotonic() + 0.05
-        rclpy.spin_once(node, timeout_sec=0.02)
-    speed = got[-1].twist.twist.linear.x
-    for _ in range(5):
-        pub.publish(Twist())
-        rclpy.spin_once(node, timeout_sec=0.02)
-    return {"moved": moved(), "speed": speed}
+    """A Twist on /base_cmd_vel from this process until /odom moved 0.2 m (probe_common)."""
+    return probe_common.drive(node, TIMEOUT)
 
 
 def _pose_goal(cls: Any, field: str, x: float, y: float) -> Any:

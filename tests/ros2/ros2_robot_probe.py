@@ -114,6 +114,21 @@ def tf(node: Node) -> dict[str, Any]:
             "map_pose": buf.map_pose()}
 
 
+def goal_end(node: Node, client: ActionClient, goal: Any, name: str,
+             feedback: list[Any] | None = None) -> Any:
+    """Send ``goal`` to the action server ``name``; exit in one line if it refuses it; its
+    end (status, result). Feedback is appended to ``feedback``."""
+    callback = None if feedback is None else (lambda m: feedback.append(m.feedback))
+    sent = client.send_goal_async(goal, feedback_callback=callback)
+    spin_until(node, sent.done, "the goal's acceptance")
+    handle = sent.result()
+    if not handle.accepted:
+        sys.exit(f"probe: {name} refused the goal")
+    result = handle.get_result_async()
+    spin_until(node, result.done, f"the {name} result")
+    return result.result()
+
+
 def navigate(node: Node, x: float, y: float, th: float) -> dict[str, Any]:
     buf = Tf(node)
     client = ActionClient(node, NavigateToPose, "/navigate_to_pose")
@@ -124,14 +139,7 @@ def navigate(node: Node, x: float, y: float, th: float) -> dict[str, Any]:
     goal.pose.pose.position.x, goal.pose.pose.position.y = x, y
     goal.pose.pose.orientation.z, goal.pose.pose.orientation.w = math.sin(th / 2), \
         math.cos(th / 2)
-    sent = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(m.feedback))
-    spin_until(node, sent.done, "the goal's acceptance")
-    handle = sent.result()
-    if not handle.accepted:
-        sys.exit("probe: navigate_to_pose refused the goal")
-    result = handle.get_result_async()
-    spin_until(node, result.done, "the navigate_to_pose result")
-    end = result.result()
+    end = goal_end(node, client, goal, "navigate_to_pose", feedback)
     spin_until(node, lambda: buf.has(("map", "odom"), ("odom", "base_link")), "TF")
     first, last = feedback[0], feedback[-1]
     return {"status": end.status, "error_code": end.result.error_code,
@@ -159,13 +167,10 @@ def move_base(node: Node, x: float, y: float, th: float) -> dict[str, Any]:
     goal.target_pose.pose.position.x, goal.target_pose.pose.position.y = x, y
     goal.target_pose.pose.orientation.z = math.sin(th / 2)
     goal.target_pose.pose.orientation.w = math.cos(th / 2)
-    sent = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(m.feedback))
-    spin_until(node, sent.done, "the goal's acceptance")
-    result = sent.result().get_result_async()
-    spin_until(node, result.done, "the move_base result")
+    end = goal_end(node, client, goal, "move_base", feedback)
     spin_until(node, lambda: buf.has(("map", "odom"), ("odom", "base_link")), "TF")
     last = feedback[-1].base_position
-    return {"status": result.result().status, "feedback": len(feedback),
+    return {"status": end.status, "feedback": len(feedback),
             "frame": last.header.frame_id,
             "last_pose": (last.pose.position.x, last.pose.position.y),
             "map_pose": buf.map_pose()}
@@ -237,13 +242,9 @@ def steps(node: Node, distance: float) -> dict[str, Any]:
     feedback: list[Any] = []
     goal = StepAction.Goal(mode=1, useAvoid=False, stepControl=[
         StepControl(executeMode=1, data=distance, speed=0.0, angle=0.0)])
-    sent = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(m.feedback))
-    spin_until(node, sent.done, "the goal's acceptance")
-    result = sent.result().get_result_async()
-    spin_until(node, result.done, "the step list's end")
+    end = goal_end(node, client, goal, "cmd_vel_control", feedback)
     n = len(odom)
     spin_until(node, lambda: len(odom) > n + 50, "/odom after the end")  # 1 s: standing
-    end = result.result()
     after = odom[-1].pose.pose.position
     return {"status": end.status, "result": end.result.result,
             "executeMode": end.result.executeMode, "percent": end.result.percent,
@@ -259,11 +260,7 @@ def plan(node: Node, x: float, y: float) -> dict[str, Any]:
     goal.goal.header.frame_id = "map"
     goal.goal.pose.position.x, goal.goal.pose.position.y = x, y
     goal.goal.pose.orientation.w = 1.0
-    sent = client.send_goal_async(goal)
-    spin_until(node, sent.done, "the goal's acceptance")
-    result = sent.result().get_result_async()
-    spin_until(node, result.done, "the compute_path_to_pose result")
-    end = result.result()
+    end = goal_end(node, client, goal, "compute_path_to_pose")
     poses = [(p.pose.position.x, p.pose.position.y) for p in end.result.path.poses]
     return {"status": end.status, "error_code": end.result.error_code, "n": len(poses),
             "frame": end.result.path.header.frame_id, "first": poses[0] if poses else None,

@@ -11,7 +11,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -153,3 +153,16 @@ def first_on_path(out: Path, generated: Callable[[str], bool]) -> Iterator[Path]
         for k in [k for k in sys.modules if generated(k)]:
             del sys.modules[k]
         sys.modules.update(saved)
+
+
+@contextlib.contextmanager
+def every_msggen_package(out: Path, hidden: Iterable[str]) -> Iterator[Path]:
+    """Every msggen package generated into ``out``, first on ``sys.path`` (:func:`first_on_path`,
+    the already imported modules of the ``hidden`` packages hidden meanwhile)."""
+    from lowerbase.driver import msggen
+
+    names = tuple(hidden)
+    for package in msggen.PACKAGES:
+        msggen.generate(out, package=package)
+    with first_on_path(out, lambda m: any(m == p or m.startswith(p + ".") for p in names)) as path:
+        yield path

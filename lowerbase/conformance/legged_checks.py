@@ -65,13 +65,18 @@ def _traffic(ctx: LeggedContext, seconds: float) -> dict[str, int]:
     return out
 
 
-def check_start(ctx: LeggedContext) -> Outcome:
+def _require_quiet_comm_disabled(ctx: LeggedContext) -> None:
+    """COMM_DISABLED reached, and after SETTLE no actuator command or reply for QUIET."""
     state = ctx.go_to(S.COMM_DISABLED)
     require(state == S.COMM_DISABLED, f"could not reach COMM_DISABLED (in {_name(state)})")
     ctx.wait(SETTLE)
     seen = _traffic(ctx, QUIET)
     require(not any(seen.values()), f"COMM_DISABLED, but {seen['commands']} actuator commands "
             f"and {seen['replies']} replies in {QUIET:g} s", **seen)
+
+
+def check_start(ctx: LeggedContext) -> Outcome:
+    _require_quiet_comm_disabled(ctx)
     return passed(f"COMM_DISABLED, no actuator traffic for {QUIET:g} s")
 
 
@@ -408,10 +413,5 @@ def check_exit_motor_mode(ctx: LeggedContext) -> Outcome:
 
 
 def check_stop(ctx: LeggedContext) -> Outcome:
-    state = ctx.go_to(S.COMM_DISABLED)
-    require(state == S.COMM_DISABLED, f"could not reach COMM_DISABLED (in {_name(state)})")
-    ctx.wait(SETTLE)
-    seen = _traffic(ctx, QUIET)
-    require(not any(seen.values()), f"COMM_DISABLED, but {seen['commands']} commands and "
-            f"{seen['replies']} replies in {QUIET:g} s", **seen)
+    _require_quiet_comm_disabled(ctx)
     return passed("COMM_DISABLED: the actuator traffic stopped")

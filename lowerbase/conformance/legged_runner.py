@@ -13,7 +13,6 @@ from lowerbase.conformance.core import (
     Report,
     passed,
     require,
-    skipped,
 )
 from lowerbase.conformance.legged_checks import (
     SETTLE,
@@ -38,7 +37,7 @@ from lowerbase.conformance.legged_checks import (
 from lowerbase.conformance.legged_context import LeggedContext, LeggedSettings, legged_check
 from lowerbase.conformance.legged_frames import legged_frame_checks
 from lowerbase.conformance.legged_link import LeggedLink
-from lowerbase.conformance.runner import run_check
+from lowerbase.conformance.runner import run_in_order
 from lowerbase.protocol.legged import BODY_BUS, LocomotionState, legged_codec
 
 S = LocomotionState
@@ -163,20 +162,10 @@ def run_legged_suite(
     settings = settings or LeggedSettings()
     start = time.monotonic()
     ctx = LeggedContext(link, settings)
-    results: list[CheckResult] = []
     try:
         if not any(c.id == "link.heartbeat" for c in checks):
             check_link(ctx)
-        for check in checks:
-            t = time.monotonic()
-            if ctx.linked or check.id == "link.heartbeat":
-                outcome = run_check(check, ctx)  # type: ignore[arg-type]  # a LeggedContext
-            else:
-                outcome = skipped("no lower computer on the bus (see link.heartbeat)")
-            result = CheckResult(check, outcome, time.monotonic() - t)
-            results.append(result)
-            if on_result is not None:
-                on_result(result)
+        results = run_in_order(checks, ctx, on_result)  # type: ignore[arg-type]  # a LeggedContext
     finally:
         if ctx.linked:
             ctx.go_to(S.COMM_DISABLED)

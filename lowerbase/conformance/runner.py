@@ -137,6 +137,24 @@ def run_check(check: Check, ctx: Context) -> Outcome:
         return Outcome(Status.ERROR, f"{type(exc).__name__}: {exc}")
 
 
+def run_in_order(checks: Sequence[Check], ctx: Context,
+                 on_result: Callable[[CheckResult], None] | None) -> list[CheckResult]:
+    """Each check in turn, timed (while no lower computer answers, link.heartbeat alone runs:
+    the others are skipped); each result to ``on_result`` as it comes."""
+    results: list[CheckResult] = []
+    for check in checks:
+        t = time.monotonic()
+        if ctx.linked or check.id == "link.heartbeat":
+            outcome = run_check(check, ctx)
+        else:
+            outcome = skipped("no lower computer on the bus (see link.heartbeat)")
+        result = CheckResult(check, outcome, time.monotonic() - t)
+        results.append(result)
+        if on_result is not None:
+            on_result(result)
+    return results
+
+
 def run_suite(
     client: ConformanceClient, checks: Sequence[Check], settings: Settings | None = None,
     on_result: Callable[[CheckResult], None] | None = None,
@@ -145,19 +163,9 @@ def run_suite(
     settings = settings or Settings()
     start = time.monotonic()
     ctx = Context(client, settings)
-    results: list[CheckResult] = []
     try:
         ctx.connect()
-        for check in checks:
-            t = time.monotonic()
-            if ctx.linked or check.id == "link.heartbeat":
-                outcome = run_check(check, ctx)
-            else:
-                outcome = skipped("no lower computer on the bus (see link.heartbeat)")
-            result = CheckResult(check, outcome, time.monotonic() - t)
-            results.append(result)
-            if on_result is not None:
-                on_result(result)
+        results = run_in_order(checks, ctx, on_result)
     finally:
         problems = ctx.finish()
     if problems:

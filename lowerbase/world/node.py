@@ -1,12 +1,14 @@
 """The world as a ROS1 node (``lowerbase world``): sensors and localization of the chassis.
 
 A thin rospy layer, as ``lowerbase.driver.node``: :class:`WorldSetup` (ROS-free, checked before
-rospy starts) holds the map, places, obstacles, sensors and the robot's start pose;
+rospy starts: :mod:`lowerbase.world.node_setup`) holds the map, places, obstacles, sensors and
+the robot's start pose;
 :class:`WorldNode` reads the emulator's ground truth (a :class:`~lowerbase.world.truth.TruthSource`,
 in a process of its own: :class:`~lowerbase.world.truth_stream.TruthReceiver`), casts the
 lidars and renders the camera at the truth's pose, runs the
 :class:`~lowerbase.world.localization.Localizer` on /scan and the driver's /odom, and serves the
-vendor's interface (docs/world.md, "ROS interface").
+vendor's interface (docs/world.md, "ROS interface"; the subscribers and services:
+:mod:`lowerbase.world.node_inputs`).
 
 Threads: the main loop (sensors, localization, TF) and rospy's callback threads (/odom,
 /initialpose, services) share one lock. Stamps are rospy's time (sim time from /clock under
@@ -21,54 +23,30 @@ import logging
 import math
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 from lowerbase.clock import Clock, RealClock
-from lowerbase.errors import LowerbaseError, WorldError
+from lowerbase.errors import LowerbaseError
 from lowerbase.ros1.wire import wanted
 from lowerbase.world.camera import DepthCamera
-from lowerbase.world.footprint import validate_pose
-from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lazy_scan import LazyScan
 from lowerbase.world.lidar import LaserScan, LidarRig
 from lowerbase.world.localization import Localizer
 from lowerbase.world.localization.lostwatch import LOCALIZED, LostWatch
 from lowerbase.world.localization.poses import compose
-from lowerbase.world.obstacles import Obstacles
+from lowerbase.world.node_inputs import WorldInputs
+from lowerbase.world.node_setup import Pose, WorldSetup
 from lowerbase.world.pacing import RateWatch, pace_for, paced_loop
 from lowerbase.world.raycast import Scene, Solid
 from lowerbase.world.scan_odom import ScanOdom
-from lowerbase.world.sensors import SensorsConfig
 from lowerbase.world.sim_clock import TruthTime
 from lowerbase.world.truth import PeopleFromTruth, WorldSurroundings
 
 log = logging.getLogger(__name__)
 
 NODE_NAME = "world"
-Pose = tuple[float, float, float]
 #: the truth is stale (emulator stopped) after this long without a sample [s]
 TRUTH_TIMEOUT = 1.0
-
-
-@dataclass
-class WorldSetup:
-    """Everything the node needs, checked without ROS (see ``lowerbase.cli.world``)."""
-
-    grid: OccupancyGrid
-    sensors: SensorsConfig
-    start: Pose  #: the emulator's origin on the map (where its robot starts)
-    obstacles: Obstacles = field(default_factory=Obstacles)
-    ground_truth: bool = False
-    camera: bool = True
-    map_frame: str = "map"
-    odom_frame: str = "odom"
-    base_frame: str = "base_link"
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        self.start = validate_pose(self.start, self.grid, self.obstacles, 0.0,
-                                   what="the robot's start pose")
 
 
 def import_ros() -> tuple[Any, Any]:
@@ -85,8 +63,9 @@ def import_ros() -> tuple[Any, Any]:
     return rospy, ros_msgs
 
 
-class WorldNode:
-    """Publishers, subscribers, services and the sensor loop around one WorldSetup."""
+class WorldNode(WorldInputs):
+    """Publishers, subscribers, services and the sensor loop around one WorldSetup (the
+    subscribers and services: :class:`~lowerbase.world.node_inputs.WorldInputs`)."""
 
     def __init__(self, setup: WorldSetup, truth: Any, *, clock: Clock | None = None,
                  wire: Any = None, lock: Any = None, ros: tuple[Any, Any] | None = None) -> None:
@@ -140,11 +119,6 @@ class WorldNode:
     # -- set-up --------------------------------------------------------------------------------
     def advertise(self) -> None:
         rospy, io, wire = self.rospy, self.io, self.wire
-        from geometry_msgs.msg import PoseWithCovarianceStamped
-        from nav_msgs.msg import Odometry
-        from nav_msgs.srv import GetMap, SetMap
-        from std_srvs.srv import SetBool  # type: ignore[import-untyped]
-
         pub = wire.publisher
         self._pubs = {"scan": pub("/scan", io.LaserScan, queue_size=5),
                       "amcl_pose": pub("/amcl_pose", io.PoseWithCovarianceStamped,
@@ -167,12 +141,7 @@ class WorldNode:
         self._static = wire.static_broadcaster()
         self._static.sendTransform(self.static_transforms(rospy.Time.now()))
         self._publish_map()
-        self._subs = [wire.subscriber("/odom", Odometry, self._on_odom, queue_size=10),
-                      wire.subscriber("/initialpose", PoseWithCovarianceStamped,
-                                      self._on_initialpose, queue_size=2)]
-        self._services = [wire.service("/start_localization", SetBool, self._start),
-                          wire.service("set_map", SetMap, self._set_map),
-                          wire.service("aic_map_server/get_map", GetMap, self._get_map)]
+        self._subs, self._services = self.listen()
 
     def static_transforms(self, stamp: Any) -> list[Any]:
         """base_link -> each lidar frame, -> camera link -> its optical frames (REP-103/105)."""
@@ -195,70 +164,6 @@ class WorldNode:
 
     def _publish_map(self) -> None:
         self._pubs["map"].publish(self.io.grid_msg(self.served_map, self.rospy.Time.now(),
-                                                   self.setup.map_frame))
-
-    # -- ROS -> world --------------------------------------------------------------------------
-    def _on_odom(self, msg: Any) -> None:
-        try:
-            pose = self.wire.convert(msg, self.io.ODOM_POSE, self.io.odom_pose)
-        except WorldError as exc:
-            self._count_bad("bad_odom", exc)
-            return
-        stamp = msg.header.stamp.to_sec()
-        with self.lock:
-            self.odom = pose
-            self.scan_odom.add_odom(stamp if stamp > 0 else self.rospy.get_time(), pose)
-
-    def _on_initialpose(self, msg: Any) -> None:
-        try:
-            if msg.header.frame_id.lstrip("/") not in ("", self.setup.map_frame):
-                raise WorldError(f"/initialpose must be in the {self.setup.map_frame!r} frame, "
-                                 f"got {msg.header.frame_id!r}")
-            pose = self.io.pose_of(msg.pose.pose, "/initialpose")
-            with self.lock:
-                self.localizer.initial_pose(pose, self.io.covariance_of(msg))
-        except LowerbaseError as exc:
-            self._count_bad("bad_initialpose", exc)
-            return
-        log.info("localization re-initialised at (%.3f, %.3f, %.3f)", *pose)
-
-    def _count_bad(self, key: str, exc: Exception) -> None:
-        self.stats[key] += 1
-        if self.stats[key] in (1, 10, 100) or self.stats[key] % 1000 == 0:
-            log.warning("%s (dropped; %d so far)", exc, self.stats[key])
-
-    def _start(self, req: Any) -> Any:
-        from std_srvs.srv import SetBoolResponse
-
-        with self.lock:
-            ok, message = self.localizer.start(bool(req.data))
-        return SetBoolResponse(success=ok, message=message)
-
-    def _set_map(self, req: Any) -> Any:
-        """nav_msgs/SetMap: the served map and the localizer's, all or nothing. Its response
-        has no message field: the reason of a failure goes to the log (and /rosout)."""
-        from nav_msgs.srv import SetMapResponse
-
-        try:
-            grid = self.io.grid_of(req.map)
-            pose = self.io.pose_of(req.initial_pose.pose.pose, "set_map initial_pose")
-            with self.lock:
-                self.localizer.set_map(grid, pose, self.io.covariance_of(req.initial_pose))
-                self.served_map = grid
-                self._publish_map()
-        except LowerbaseError as exc:
-            log.warning("set_map refused, nothing changed: %s", exc)
-            return SetMapResponse(success=False)
-        log.info("set_map: new map %d x %d cells, robot at (%.3f, %.3f, %.3f)", grid.width,
-                 grid.height, *pose)
-        return SetMapResponse(success=True)
-
-    def _get_map(self, req: Any) -> Any:
-        from nav_msgs.srv import GetMapResponse
-
-        with self.lock:
-            grid = self.served_map
-        return GetMapResponse(map=self.io.grid_msg(grid, self.rospy.Time.now(),
                                                    self.setup.map_frame))
 
     # -- world -> ROS --------------------------------------------------------------------------

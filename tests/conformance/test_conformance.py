@@ -33,6 +33,7 @@ from lowerbase.firmware_model.faults import parse_fault
 from lowerbase.firmware_model.mcu import RobotState
 from lowerbase.firmware_model.sim import SimRig
 from lowerbase.protocol.codec import default_codec
+from tests.conformance.cli_results import run_conformance
 from tests.conftest import LOADED_HOST, bus_cli_args
 
 CODEC = default_codec()
@@ -205,14 +206,7 @@ def test_defect_ignore_estop_and_param_no_nack() -> None:
 def _conformance(capsys: pytest.CaptureFixture[str], bus: list[str], *args: str
                  ) -> tuple[int, dict[str, str], str]:
     """Run ``lowerbase conformance`` in process: (exit code, id -> result, stdout)."""
-    code = main(["conformance", *bus, *LOADED_HOST, *args])
-    out = capsys.readouterr().out
-    results = {}
-    for line in out.splitlines():
-        parts = line.split(maxsplit=2)
-        if len(parts) >= 2 and parts[0] in ALL_IDS:
-            results[parts[0]] = parts[1]
-    return code, results, out
+    return run_conformance(capsys, ALL_IDS, *bus, *LOADED_HOST, *args)
 
 
 def _failed(results: dict[str, str]) -> set[str]:

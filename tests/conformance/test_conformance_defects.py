@@ -16,6 +16,7 @@ from lowerbase.cli import main
 from lowerbase.conformance import registry, select
 from lowerbase.protocol.codec import default_codec
 from lowerbase.transport import open_bus
+from tests.conformance.cli_results import run_conformance
 from tests.conformance.mutating_proxy import MutatingProxy, Mutation, swap_wheels
 from tests.conftest import LOADED_HOST, TEST_GROUP, Proc, bus_cli_args, free_udp_port
 
@@ -29,13 +30,7 @@ _channels = itertools.count()
 
 def _run_suite(capsys: pytest.CaptureFixture[str], bus: list[str], only: str = ONLY
                ) -> tuple[dict[str, str], str]:
-    main(["conformance", *bus, *LOADED_HOST, "--only", only])
-    out = capsys.readouterr().out
-    results = {}
-    for line in out.splitlines():
-        parts = line.split(maxsplit=2)
-        if len(parts) >= 2 and parts[0] in ALL_IDS:
-            results[parts[0]] = parts[1]
+    _, results, out = run_conformance(capsys, ALL_IDS, *bus, *LOADED_HOST, "--only", only)
     assert list(results) == [c.id for c in select(registry(default_codec()), [only])], out
     return results, out
 

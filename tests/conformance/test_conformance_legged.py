@@ -19,6 +19,7 @@ from lowerbase.conformance.legged_runner import legged_registry, run_legged_suit
 from lowerbase.errors import ConfigError
 from lowerbase.legged.lower import DEFECTS
 from lowerbase.protocol.legged import LocomotionState, legged_codec
+from tests.conformance.cli_results import run_conformance
 from tests.conftest import LOADED_HOST, bus_cli_args
 
 CODEC = legged_codec()
@@ -158,14 +159,7 @@ def test_a_silent_bus_fails_the_link_and_skips_the_rest() -> None:
 
 def _conformance(capsys: pytest.CaptureFixture[str], bus: list[str], *args: str
                  ) -> tuple[int, dict[str, str], str]:
-    code = main(["conformance", "--robot", "legged", *bus, *LOADED_HOST, *args])
-    out = capsys.readouterr().out
-    results = {}
-    for line in out.splitlines():
-        parts = line.split(maxsplit=2)
-        if len(parts) >= 2 and parts[0] in ALL_IDS:
-            results[parts[0]] = parts[1]
-    return code, results, out
+    return run_conformance(capsys, ALL_IDS, "--robot", "legged", *bus, *LOADED_HOST, *args)
 
 
 @pytest.mark.process

@@ -15,15 +15,11 @@ from types import ModuleType
 
 import pytest
 
-from tests.conftest import first_on_path
+from tests.conftest import every_msggen_package
 from tests.driver.conftest import ROS_MODULES, RosMaster, is_ci, require_ros
 
 LEGGED_PKG = "lowerbase_legged_msgs"
 _HIDDEN = ("woosh_msgs", LEGGED_PKG)
-
-
-def _generated(name: str) -> bool:
-    return any(name == p or name.startswith(p + ".") for p in _HIDDEN)
 
 
 @pytest.fixture(scope="module")
@@ -34,12 +30,7 @@ def legged_build(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     the tests check what this checkout generates.
     """
     require_ros((*ROS_MODULES, "sensor_msgs.msg"))
-    from lowerbase.driver import msggen
-
-    out = tmp_path_factory.mktemp("legged_ros")
-    for package in msggen.PACKAGES:
-        msggen.generate(out, package=package)
-    with first_on_path(out, _generated) as path:
+    with every_msggen_package(tmp_path_factory.mktemp("legged_ros"), _HIDDEN) as path:
         yield path
 
 

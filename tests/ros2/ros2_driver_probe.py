@@ -19,13 +19,15 @@ from __future__ import annotations
 import json
 import sys
 import time
-from collections.abc import Callable
+from functools import partial
 from itertools import pairwise
 from typing import Any
 
+import probe_common  # beside this script (sys.path[0])
 import rclpy
-from geometry_msgs.msg import TransformStamped, Twist
+from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry
+from probe_common import sec
 from rcl_interfaces.srv import GetParameters
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
@@ -39,19 +41,7 @@ from woosh_msgs.msg import Information, Parameter
 from lowerbase.ros2.wire import Ros2Wire, qos_for
 
 TIMEOUT = 120.0
-
-
-def spin_until(node: Node, done: Callable[[], bool], what: str,
-               timeout: float = TIMEOUT) -> None:
-    deadline = time.monotonic() + timeout
-    while not done():
-        if time.monotonic() > deadline:
-            sys.exit(f"probe: {what} not seen within {timeout:.0f} s")
-        rclpy.spin_once(node, timeout_sec=0.1)
-
-
-def sec(stamp: Any) -> float:
-    return float(stamp.sec) + stamp.nanosec * 1e-9
+spin_until = partial(probe_common.spin_until, timeout=TIMEOUT)  # every wait's deadline
 
 
 def odom(node: Node, n: int) -> dict[str, Any]:
@@ -112,28 +102,7 @@ def params(node: Node) -> dict[str, Any]:
 
 def drive(node: Node) -> dict[str, Any]:
     wait_ready(node)
-    got: list[Odometry] = []
-    node.create_subscription(Odometry, "/odom", got.append, qos_for("/odom", 50))
-    spin_until(node, lambda: bool(got), "/odom")
-    start = got[-1].pose.pose.position.x
-    pub = node.create_publisher(Twist, "/base_cmd_vel", qos_for("/base_cmd_vel"))
-    cmd = Twist()
-    cmd.linear.x = 0.3
-    deadline = time.monotonic() + TIMEOUT
-    next_cmd = 0.0
-    while got[-1].pose.pose.position.x - start < 0.2:
-        if time.monotonic() > deadline:
-            sys.exit(f"probe: /odom moved {got[-1].pose.pose.position.x - start:.3f} m, "
-                     f"not 0.2, within {TIMEOUT:.0f} s of commanding")
-        if time.monotonic() >= next_cmd:  # 20 Hz, as a teleop would
-            pub.publish(cmd)
-            next_cmd = time.monotonic() + 0.05
-        rclpy.spin_once(node, timeout_sec=0.02)
-    speed = got[-1].twist.twist.linear.x
-    for _ in range(5):
-        pub.publish(Twist())
-        rclpy.spin_once(node, timeout_sec=0.02)
-    return {"moved": got[-1].pose.pose.position.x - start, "speed": speed}
+    return probe_common.drive(node, TIMEOUT)
 
 
 def tf(node: Node) -> dict[str, Any]:

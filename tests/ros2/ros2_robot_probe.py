@@ -21,14 +21,15 @@ from __future__ import annotations
 import json
 import math
 import sys
-import time
-from collections.abc import Callable
+from functools import partial
 from itertools import pairwise
 from typing import Any
 
+import probe_common  # beside this script (sys.path[0])
 import rclpy
 from nav2_msgs.action import ComputePathToPose, NavigateToPose
 from nav_msgs.msg import OccupancyGrid, Odometry
+from probe_common import sec
 from rclpy.action import ActionClient
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
@@ -39,19 +40,7 @@ from tf2_msgs.msg import TFMessage
 from lowerbase.ros2.wire import clock_qos, qos_for
 
 TIMEOUT = 180.0
-
-
-def spin_until(node: Node, done: Callable[[], bool], what: str,
-               timeout: float = TIMEOUT) -> None:
-    deadline = time.monotonic() + timeout
-    while not done():
-        if time.monotonic() > deadline:
-            sys.exit(f"probe: {what} not seen within {timeout:.0f} s")
-        rclpy.spin_once(node, timeout_sec=0.1)
-
-
-def sec(stamp: Any) -> float:
-    return float(stamp.sec) + stamp.nanosec * 1e-9
+spin_until = partial(probe_common.spin_until, timeout=TIMEOUT)  # every wait's deadline
 
 
 def yaw(q: Any) -> float:
@@ -125,6 +114,21 @@ def tf(node: Node) -> dict[str, Any]:
             "map_pose": buf.map_pose()}
 
 
+def goal_end(node: Node, client: ActionClient, goal: Any, name: str,
+             feedback: list[Any] | None = None) -> Any:
+    """Send ``goal`` to the action server ``name``; exit in one line if it refuses it; its
+    end (status, result). Feedback is appended to ``feedback``."""
+    callback = None if feedback is None else (lambda m: feedback.append(m.feedback))
+    sent = client.send_goal_async(goal, feedback_callback=callback)
+    spin_until(node, sent.done, "the goal's acceptance")
+    handle = sent.result()
+    if not handle.accepted:
+        sys.exit(f"probe: {name} refused the goal")
+    result = handle.get_result_async()
+    spin_until(node, result.done, f"the {name} result")
+    return result.result()
+
+
 def navigate(node: Node, x: float, y: float, th: float) -> dict[str, Any]:
     buf = Tf(node)
     client = ActionClient(node, NavigateToPose, "/navigate_to_pose")
@@ -135,14 +139,7 @@ def navigate(node: Node, x: float, y: float, th: float) -> dict[str, Any]:
     goal.pose.pose.position.x, goal.pose.pose.position.y = x, y
     goal.pose.pose.orientation.z, goal.pose.pose.orientation.w = math.sin(th / 2), \
         math.cos(th / 2)
-    sent = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(m.feedback))
-    spin_until(node, sent.done, "the goal's acceptance")
-    handle = sent.result()
-    if not handle.accepted:
-        sys.exit("probe: navigate_to_pose refused the goal")
-    result = handle.get_result_async()
-    spin_until(node, result.done, "the navigate_to_pose result")
-    end = result.result()
+    end = goal_end(node, client, goal, "navigate_to_pose", feedback)
     spin_until(node, lambda: buf.has(("map", "odom"), ("odom", "base_link")), "TF")
     first, last = feedback[0], feedback[-1]
     return {"status": end.status, "error_code": end.result.error_code,
@@ -170,49 +167,18 @@ def move_base(node: Node, x: float, y: float, th: float) -> dict[str, Any]:
     goal.target_pose.pose.position.x, goal.target_pose.pose.position.y = x, y
     goal.target_pose.pose.orientation.z = math.sin(th / 2)
     goal.target_pose.pose.orientation.w = math.cos(th / 2)
-    sent = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(m.feedback))
-    spin_until(node, sent.done, "the goal's acceptance")
-    result = sent.result().get_result_async()
-    spin_until(node, result.done, "the move_base result")
+    end = goal_end(node, client, goal, "move_base", feedback)
     spin_until(node, lambda: buf.has(("map", "odom"), ("odom", "base_link")), "TF")
     last = feedback[-1].base_position
-    return {"status": result.result().status, "feedback": len(feedback),
+    return {"status": end.status, "feedback": len(feedback),
             "frame": last.header.frame_id,
             "last_pose": (last.pose.position.x, last.pose.position.y),
             "map_pose": buf.map_pose()}
 
 
 def drive(node: Node) -> dict[str, Any]:
-    """A Twist on /base_cmd_vel from this process (20 Hz, as a teleop) until /odom moved
-    0.2 m; then zeros."""
-    from geometry_msgs.msg import Twist
-
-    got: list[Odometry] = []
-    node.create_subscription(Odometry, "/odom", got.append, qos_for("/odom", 50))
-    spin_until(node, lambda: bool(got), "/odom")
-    x0, y0 = got[-1].pose.pose.position.x, got[-1].pose.pose.position.y
-    pub = node.create_publisher(Twist, "/base_cmd_vel", qos_for("/base_cmd_vel"))
-    cmd = Twist()
-    cmd.linear.x = 0.3
-    deadline = time.monotonic() + TIMEOUT
-    next_cmd = 0.0
-
-    def moved() -> float:
-        p = got[-1].pose.pose.position
-        return math.hypot(p.x - x0, p.y - y0)
-
-    while moved() < 0.2:
-        if time.monotonic() > deadline:
-            sys.exit(f"probe: /odom moved {moved():.3f} m, not 0.2, within {TIMEOUT:.0f} s")
-        if time.monotonic() >= next_cmd:
-            pub.publish(cmd)
-            next_cmd = time.monotonic() + 0.05
-        rclpy.spin_once(node, timeout_sec=0.02)
-    speed = got[-1].twist.twist.linear.x
-    for _ in range(5):
-        pub.publish(Twist())
-        rclpy.spin_once(node, timeout_sec=0.02)
-    return {"moved": moved(), "speed": speed}
+    """A Twist on /base_cmd_vel from this process until /odom moved 0.2 m (probe_common)."""
+    return probe_common.drive(node, TIMEOUT)
 
 
 def _pose_goal(cls: Any, field: str, x: float, y: float) -> Any:
@@ -276,13 +242,9 @@ def steps(node: Node, distance: float) -> dict[str, Any]:
     feedback: list[Any] = []
     goal = StepAction.Goal(mode=1, useAvoid=False, stepControl=[
         StepControl(executeMode=1, data=distance, speed=0.0, angle=0.0)])
-    sent = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(m.feedback))
-    spin_until(node, sent.done, "the goal's acceptance")
-    result = sent.result().get_result_async()
-    spin_until(node, result.done, "the step list's end")
+    end = goal_end(node, client, goal, "cmd_vel_control", feedback)
     n = len(odom)
     spin_until(node, lambda: len(odom) > n + 50, "/odom after the end")  # 1 s: standing
-    end = result.result()
     after = odom[-1].pose.pose.position
     return {"status": end.status, "result": end.result.result,
             "executeMode": end.result.executeMode, "percent": end.result.percent,
@@ -298,11 +260,7 @@ def plan(node: Node, x: float, y: float) -> dict[str, Any]:
     goal.goal.header.frame_id = "map"
     goal.goal.pose.position.x, goal.goal.pose.position.y = x, y
     goal.goal.pose.orientation.w = 1.0
-    sent = client.send_goal_async(goal)
-    spin_until(node, sent.done, "the goal's acceptance")
-    result = sent.result().get_result_async()
-    spin_until(node, result.done, "the compute_path_to_pose result")
-    end = result.result()
+    end = goal_end(node, client, goal, "compute_path_to_pose")
     poses = [(p.pose.position.x, p.pose.position.y) for p in end.result.path.poses]
     return {"status": end.status, "error_code": end.result.error_code, "n": len(poses),
             "frame": end.result.path.header.frame_id, "first": poses[0] if poses else None,

@@ -14,7 +14,7 @@ from types import ModuleType
 
 import pytest
 
-from tests.conftest import first_on_path
+from tests.conftest import every_msggen_package
 from tests.driver.conftest import ROS_MODULES, RosMaster, is_ci, require_ros
 
 PKG = "lowerbase_msgs"
@@ -22,21 +22,12 @@ _HIDDEN = ("woosh_msgs", "lowerbase_legged_msgs", PKG)
 DRIVER_PACKAGE = Path(__file__).resolve().parents[2] / "lowerbase" / "driver"
 
 
-def _generated(name: str) -> bool:
-    return any(name == p or name.startswith(p + ".") for p in _HIDDEN)
-
-
 @pytest.fixture(scope="module")
 def trace_build(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     """Every msggen package generated into a fresh directory, first on ``sys.path`` (the
     venv's build/ros hidden meanwhile: the tests check what this checkout generates)."""
     require_ros((*ROS_MODULES, "sensor_msgs.msg"))
-    from lowerbase.driver import msggen
-
-    out = tmp_path_factory.mktemp("traceros_build")
-    for package in msggen.PACKAGES:
-        msggen.generate(out, package=package)
-    with first_on_path(out, _generated) as path:
+    with every_msggen_package(tmp_path_factory.mktemp("traceros_build"), _HIDDEN) as path:
         yield path
 
 

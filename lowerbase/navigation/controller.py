@@ -11,8 +11,12 @@ when map = odom) and answers a twist for /base_cmd_vel and a status:
   robot (near obstacles) and to brake onto the goal (``sqrt(2 a d)``);
 - **final approach**, closed loop on the pose: within ``approach_distance`` of the goal the
   robot drives straight at the goal point (backwards if it lies behind), then rotates in place
-  to the goal's yaw; SUCCEEDED once position and yaw are within ``xy_tolerance`` and
-  ``yaw_tolerance`` (defaults 5 cm, 2 deg);
+  to the goal's yaw to within half the tolerances, then stops; SUCCEEDED once the robot
+  stands still (:data:`SETTLE_PERIODS` poses within :data:`STILL_DISTANCE` /
+  :data:`STILL_ANGLE`, as base_local_planner's goal check wants the robot in tolerance *and*
+  stopped) within ``xy_tolerance`` and ``yaw_tolerance`` (defaults 5 cm, 2 deg). A robot
+  that coasted past them (its pose or the command late on a busy host) turns back instead of
+  being reported at a goal it is not at;
 - **collision check**: the footprint is projected along the commanded arc over the braking
   distance plus a margin; if it meets a LETHAL cell the command brakes to zero and the status
   is BLOCKED (the caller replans or waits).
@@ -32,6 +36,13 @@ import numpy as np
 
 from lowerbase.errors import ConfigError
 from lowerbase.navigation.planner import LETHAL, NO_INFORMATION, FootprintCells, Pose
+
+#: the final stop: the pose stands still this many periods in a row before it is judged
+SETTLE_PERIODS = 3
+STILL_DISTANCE = 0.0003  #: [m] "still": within this of the pose the count started from
+STILL_ANGLE = math.radians(0.02)  #: [rad]
+#: [periods] a stop is judged after this at the latest (a pose that never settles)
+SETTLE_TIMEOUT = 40
 
 
 def wrap(a: float) -> float:
@@ -123,6 +134,10 @@ class PathController:
         self._index = 0
         self._phase = Status.IDLE
         self._at_position = False
+        #: the final stop: (the pose the still count started from, its count, periods stopped)
+        self._settle: tuple[Pose, int, int] | None = None
+        #: final stops that stood outside the tolerances and turned back (a late pose/command)
+        self.overshoots = 0
 
     def set_costmap(self, costs: np.ndarray, resolution: float, origin: Sequence[float]) -> None:
         if resolution != self.footprint.resolution:
@@ -141,6 +156,7 @@ class PathController:
         self._index = 0
         self._phase = Status.ROTATING if len(path) else Status.IDLE
         self._at_position = False
+        self._settle = None
 
     @property
     def goal(self) -> Pose | None:
@@ -207,6 +223,7 @@ class PathController:
         cfg = self.config
         if dist > cfg.xy_tolerance:
             self._at_position = False
+            self._settle = None
         if not self._at_position and dist <= 0.5 * cfg.xy_tolerance:
             self._at_position = True
         if not self._at_position:
@@ -229,10 +246,29 @@ class PathController:
             # rack face was BLOCKED creeping, free stopped: every other period)
             return self._checked(x, y, yaw, v, w, Status.APPROACHING, up_to=dist)
         err = wrap(gyaw - yaw)
-        if abs(err) <= 0.5 * cfg.yaw_tolerance:
+        if self._settle is None and abs(err) > 0.5 * cfg.yaw_tolerance:
+            return self._rotate(x, y, yaw, err, Status.APPROACHING)
+        return self._stop_and_judge((x, y, yaw), err, dist)
+
+    def _stop_and_judge(self, pose: Pose, err: float, dist: float) -> Command:
+        """Zero, until the pose stands still (or :data:`SETTLE_TIMEOUT`); then SUCCEEDED
+        within the tolerances, else the approach goes on from where the robot stands."""
+        cfg = self.config
+        start, still, periods = self._settle or (pose, -1, 0)
+        if abs(wrap(pose[2] - start[2])) <= STILL_ANGLE \
+                and math.hypot(pose[0] - start[0], pose[1] - start[1]) <= STILL_DISTANCE:
+            still += 1
+        else:
+            start, still = pose, 0
+        self._settle = (start, still, periods + 1)
+        if still < SETTLE_PERIODS and periods + 1 < SETTLE_TIMEOUT:
+            return self._out(0.0, 0.0, Status.APPROACHING)
+        self._settle = None
+        if abs(err) <= cfg.yaw_tolerance and dist <= cfg.xy_tolerance:
             self._phase = Status.SUCCEEDED
             return self._out(0.0, 0.0, Status.SUCCEEDED)
-        return self._rotate(x, y, yaw, err, Status.APPROACHING)
+        self.overshoots += 1  # coasted past the yaw tolerance (dist is within: see _approach)
+        return self._rotate(*pose, err, Status.APPROACHING)
 
     def _rotate(self, x: float, y: float, yaw: float, err: float, status: Status) -> Command:
         cfg = self.config

@@ -95,6 +95,10 @@ class Ros1Side:
         """What a face takes as ``ros`` (None: it imports rospy and its builders itself)."""
         return None
 
+    def param(self, name: str, default: Any = None) -> Any:
+        """A parameter of the ROS parameter server (a global name)."""
+        return self.rospy.get_param(name, default)
+
     def set_time(self, now: float) -> None:
         if self._time is None:
             self._time = RosTime(self.rospy)
@@ -115,6 +119,14 @@ class Ros1Side:
             return None
         rospy = self.rospy
         return lambda t: publisher.publish(Clock(clock=rospy.Time.from_sec(t)))
+
+
+def move_base_params(side: Any) -> Callable[[str, Any], Any]:
+    """The navigation's private parameters (``~name``) where the vendor's robot has them:
+    ``/move_base/name`` (the robot here is one node; move_base is one of its faces)."""
+    from lowerbase.navigation.node import NODE_NAME
+
+    return lambda name, default: side.param(f"/{NODE_NAME}/{name.removeprefix('~')}", default)
 
 
 class _Job:
@@ -203,10 +215,11 @@ class LockstepRobot:
         self.navigation: Any = None
         self.tasks: Any = None
         if "navigation" in opts.parts:
-            from lowerbase.navigation.node import NavigationNode, NavigationSetup
+            from lowerbase.navigation.node import NavigationNode, NavigationSetup, with_params
 
             camera = sensors.camera if opts.camera else None
-            self.navigation = NavigationNode(NavigationSetup(grid, camera),
+            self.navigation = NavigationNode(with_params(NavigationSetup(grid, camera),
+                                                         move_base_params(self.side)),
                                              wire=wire("move_base"), lock=self.lock,
                                              ros=ros("navigation"))
         if "tasks" in opts.parts:

@@ -62,6 +62,10 @@ class Ros2Side:
 
         return Ros2LocalWire(self.shim, board, name, self.real)
 
+    def param(self, name: str, default: Any = None) -> Any:
+        """ROS 2 parameters are not read yet (docs/ros2.md): the default."""
+        return self.shim.get_param(name, default)
+
     def face_ros(self, face: str) -> Any:
         from lowerbase.ros2.compat import AnyStampIo
         from lowerbase.ros2.wire import StampedIo

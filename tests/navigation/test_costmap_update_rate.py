@@ -78,3 +78,22 @@ def test_the_node_takes_move_bases_recovery_behaviors_parameter() -> None:
         params["~recovery_behaviors"] = bad
         with pytest.raises(NavigationError, match=why):
             node.with_params(setup, lambda name, default: params.get(name, default))
+
+
+def test_the_lockstep_robot_reads_recovery_behaviors_where_move_base_has_them() -> None:
+    """`lowerbase robot` is one node; its navigation reads /move_base/recovery_behaviors."""
+    from lowerbase.robot.lockstep import move_base_params
+
+    server: dict[str, Any] = {"/move_base/recovery_behaviors": ["back_off", "rotate"],
+                              "/lowerbase_robot/recovery_behaviors": ["clear_aggressive"]}
+
+    class Side:
+        def param(self, name: str, default: Any = None) -> Any:
+            return server.get(name, default)
+
+    setup = node.NavigationSetup(grid=load_map("empty_room"))
+    got = node.with_params(setup, move_base_params(Side()))
+    assert got.navigator is not None and got.navigator.recovery_behaviors == ("back_off",
+                                                                              "rotate")
+    server.clear()
+    assert node.with_params(setup, move_base_params(Side())) is setup

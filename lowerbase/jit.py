@@ -69,6 +69,7 @@ KERNEL_MODULES = (
     "lowerbase.world.localization.pf_kernel",
     "lowerbase.world.localization.likelihood_kernel",
     "lowerbase.navigation.kernels",
+    "lowerbase.navigation.pursuit_kernels",
 )
 
 

@@ -36,6 +36,7 @@ import numpy as np
 
 from lowerbase.errors import ConfigError
 from lowerbase.navigation.planner import LETHAL, NO_INFORMATION, FootprintCells, Pose
+from lowerbase.navigation.pursuit_kernels import arc_hits_lethal, first_beyond, nearest_ahead
 
 #: the final stop: the pose stands still this many periods in a row before it is judged
 SETTLE_PERIODS = 3
@@ -149,7 +150,7 @@ class PathController:
 
     def set_plan(self, poses: Sequence[Pose]) -> None:
         """A new plan (map frame); the robot starts by turning onto it if needed."""
-        path = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        path = np.ascontiguousarray(np.asarray(poses, dtype=np.float64).reshape(-1, 3))
         if not np.isfinite(path).all():
             raise ConfigError("a plan must hold finite (x, y, yaw) poses")
         self.path = path
@@ -290,27 +291,10 @@ class PathController:
         reach = min(reach, max(up_to, abs(v_next) * cfg.period))
         turn = w_next * w_next / (2.0 * lim.angular_decel) + abs(w_next) * cfg.period + 0.05
         n = max(3, math.ceil(reach / (0.5 * self.resolution)), math.ceil(turn / 0.02))
-        s = np.arange(1, n + 1, dtype=np.float64)  # np.linspace(0, 1, n + 1)[1:], bit for bit
-        s *= 1.0 / n
-        s[-1] = 1.0
-        direction = 1.0 if v_next >= 0 else -1.0
-        if abs(v_next) > 1e-6:
-            duration = reach / abs(v_next)
-            t = s * duration
-        else:
-            t = s * (turn / max(abs(w_next), 1e-6))
-            direction = 0.0
-        th = yaw + w_next * t
-        vv = direction * abs(v_next) if direction else 0.0
-        if abs(w_next) > 1e-6 and direction:
-            r = vv / w_next
-            px = x + r * (np.sin(th) - math.sin(yaw))
-            py = y - r * (np.cos(th) - math.cos(yaw))
-        else:
-            px = x + vv * t * math.cos(yaw)
-            py = y + vv * t * math.sin(yaw)
-        cost = self.footprint.max_cost(self.costs, self.origin, px, py, th)
-        if (cost >= LETHAL).any():
+        fp = self.footprint
+        if arc_hits_lethal(self.costs, self.origin[0], self.origin[1], self.resolution, x, y,
+                           yaw, v_next, w_next, reach, turn, n, fp.bins, fp._dr, fp._dc,
+                           LETHAL, NO_INFORMATION):
             v_stop, w_stop = self._ramp(0.0, 0.0)
             return self._out(v_stop, w_stop, Status.BLOCKED, "an obstacle ahead of the robot")
         if status is not self._phase and self._phase is Status.BLOCKED:
@@ -337,9 +321,7 @@ class PathController:
     def _advance(self, x: float, y: float) -> None:
         """Move the progress index to the nearest path point in a window ahead."""
         end = min(len(self.path), self._index + max(20, int(2.0 / self.resolution)))
-        seg = self.path[self._index:end, :2]
-        d = np.hypot(seg[:, 0] - x, seg[:, 1] - y)
-        self._index += int(np.argmin(d))
+        self._index = nearest_ahead(self.path, self._index, end, x, y)
 
     def _carrot(self, x: float, y: float, tight: bool = False) -> tuple[float, float]:
         cfg = self.config
@@ -347,20 +329,9 @@ class PathController:
                  cfg.lookahead)
         if tight:
             ld = 0.5 * cfg.min_lookahead
-        rest = self.path[self._index:, :2]
-        # the first point at least ld away: looked for in growing chunks from the progress
-        # index (the same distances as over the whole rest, which is mostly far beyond it)
-        start, chunk = 0, 64
-        while start < len(rest):
-            part = rest[start:start + chunk]
-            beyond = np.flatnonzero(np.hypot(part[:, 0] - x, part[:, 1] - y) >= ld)
-            if beyond.size:
-                k = start + int(beyond[0])
-                return float(rest[k, 0]), float(rest[k, 1])
-            start += chunk
-            chunk *= 4
-        k = len(rest) - 1
-        return float(rest[k, 0]), float(rest[k, 1])
+        # the first point at least ld away from the progress index (compiled)
+        k = first_beyond(self.path, self._index, x, y, ld)
+        return float(self.path[k, 0]), float(self.path[k, 1])
 
     def _cost_at(self, x: float, y: float) -> int:
         r = math.floor((y - self.origin[1]) / self.resolution)

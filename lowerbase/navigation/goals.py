@@ -157,7 +157,7 @@ def check_on_map(extent: Sequence[float], x: float, y: float, what: str,
                               f" m, y {num(y0)}..{num(y1)} m){within}: give a pose on the map")
 
 
-def path_blocked(rest: Sequence[Pose], costs: np.ndarray, resolution: float,
+def path_blocked(rest: Sequence[Pose] | np.ndarray, costs: np.ndarray, resolution: float,
                  origin: Sequence[float]) -> bool:
     """Whether any of the poses ``rest`` lies on an INSCRIBED or LETHAL cell of ``costs``."""
     if not len(rest):

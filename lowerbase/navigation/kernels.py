@@ -57,9 +57,13 @@ def clear_lines(data: np.ndarray, c0: int, r0: int, c1: np.ndarray, r1: np.ndarr
                 free: int) -> None:
     """Set ``free`` on every in-grid cell of the lines from (c0, r0) to each (c1, r1), end cells
     included: step k of n (the major axis' length) is the cell
-    ``(c0 + floor(k / max(n, 1) * dc + 0.5), r0 + floor(k / max(n, 1) * dr + 0.5))``."""
+    ``(c0 + floor(k / max(n, 1) * dc + 0.5), r0 + floor(k / max(n, 1) * dr + 0.5))``. A line
+    to the end cell of the one before it is that line again (neighbouring rays far out end in
+    one cell: about half a scan's): skipped, as every cell is set to the one value ``free``."""
     h, w = data.shape
     for i in range(c1.size):
+        if i > 0 and c1[i] == c1[i - 1] and r1[i] == r1[i - 1]:
+            continue
         dc = c1[i] - c0
         dr = r1[i] - r0
         n = max(abs(dc), abs(dr))

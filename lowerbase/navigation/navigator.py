@@ -440,7 +440,9 @@ class Navigator:
 
     def _path_ahead_blocked(self) -> bool:
         """Whether the rest of the plan crosses an INSCRIBED or LETHAL cell now."""
-        return path_blocked(self.path[self.controller._index:], self.combined.costs,
+        # the controller's array of the plan: its x and y are the plan's (reversed, only the
+        # headings differ), without converting the list of poses every update
+        return path_blocked(self.controller.path[self.controller._index:], self.combined.costs,
                             self.grid.resolution, self.combined.origin)
 
     def _update_remaining(self, p: Pose) -> None:

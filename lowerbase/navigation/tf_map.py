@@ -31,6 +31,12 @@ class MapToOdom:
             buffer = tf2_ros.Buffer(cache_time=self.rospy.Duration(10.0))
             self._listener = tf2_ros.TransformListener(buffer)
         self.buffer = buffer
+        # a tf2_ros.Buffer's lookup_transform is its can_transform (whose answer it drops;
+        # with no timeout it never waits) then lookup_transform_core: the core alone answers
+        # the same transform or raises the same exception, without the two Durations and the
+        # second search every call
+        self._lookup_in = getattr(buffer, "lookup_transform_core", buffer.lookup_transform)
+        self._latest_stamp = self.rospy.Time(0)
         errors = getattr(buffer, "TransformException", None)  # a buffer of its own kind
         if errors is None:
             import tf2_ros
@@ -42,14 +48,14 @@ class MapToOdom:
         if self.buffer is None:
             return None
         try:
-            t = self.buffer.lookup_transform(*self.frames, stamp)
+            t = self._lookup_in(*self.frames, stamp)
         except self._errors:  # none (yet), or not at that stamp
             return None
         return pose2d(t.transform)
 
     def latest(self) -> Pose | None:
         """The newest map -> odom; None: no localization (yet)."""
-        return self._lookup(self.rospy.Time(0))
+        return self._lookup(self._latest_stamp)
 
     def at(self, stamp: float) -> Pose | None:
         """Map -> odom at ``stamp`` [s] (interpolated by tf2); None when TF has none there:

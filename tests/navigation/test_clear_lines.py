@@ -34,6 +34,23 @@ def test_clear_lines_frees_exactly_the_cells_of_line_cells() -> None:
                 np.testing.assert_array_equal(got, want)
 
 
+def test_runs_of_one_end_cell_clear_what_each_line_does() -> None:
+    """Neighbouring rays ending in one cell (a scan's beams far out): the repeats are skipped,
+    the cells freed are still those of every line."""
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        data = rng.choice(np.array([0, 100, 254, 255], np.uint8), size=(60, 60))
+        runs = rng.integers(1, 5, 40)
+        ec = np.repeat(rng.integers(0, 60, 40), runs)
+        er = np.repeat(rng.integers(0, 60, 40), runs)
+        assert ((ec[1:] == ec[:-1]) & (er[1:] == er[:-1])).any()
+        want = data.copy()
+        clear_numpy(want, 30, 31, ec, er)
+        got = data.copy()
+        clear_lines(got, 30, 31, ec, er, 0)
+        np.testing.assert_array_equal(got, want)
+
+
 def test_ray_end_cells_are_clip_rays_cells() -> None:
     """The compiled end cells: clip_rays (max length, the window's box), world_to_map and the
     clamp onto the grid, as ObstacleLayer.update computed them in numpy; ends near, on and far

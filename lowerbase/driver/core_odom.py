@@ -101,6 +101,8 @@ class OdometryInput:
         the one nearest to the receive times."""
         assert self._last_wheel is not None
         step = (counter - self._last_wheel[1]) % 16
+        if step + 16 > since + 2.0 or step + 16 > 16 * 256:
+            return step  # the Counter's step is the only candidate (the usual case)
         odo, last, counts = self.odometry, self._last_counts, self._wheels_done
         if odo is None or last is None or counts is None:
             return step

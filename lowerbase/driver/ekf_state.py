@@ -142,8 +142,8 @@ class EkfState:
     @property
     def pose(self) -> tuple[float, float, float]:
         """(x [m], y [m], yaw [rad] in (-pi, pi])."""
-        s = self.kf.x
-        return float(s[X, 0]), float(s[Y, 0]), math.remainder(float(s[YAW, 0]), math.tau)
+        x, y, yaw = self.kf.x[X:YAW + 1, 0].tolist()  # X, Y, YAW: 0, 1, 2
+        return x, y, math.remainder(yaw, math.tau)
 
     @property
     def yaw_unwrapped(self) -> float:
@@ -175,6 +175,13 @@ class EkfState:
     def twist_covariance(self) -> np.ndarray:
         """Covariance of (v, w) [(m/s)^2, m*rad/s^2, (rad/s)^2]."""
         return self.P[V : W + 1, V : W + 1]
+
+    def covariances(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`pose_covariance` and :meth:`twist_covariance`, each its own copy, from one
+        read of the state covariance (driver_base's /odom at 50 Hz)."""
+        P = self.kf.P
+        return (np.array(P[X : YAW + 1, X : YAW + 1], dtype=float),
+                np.array(P[V : W + 1, V : W + 1], dtype=float))
 
     # -- predict -----------------------------------------------------------------------------
 

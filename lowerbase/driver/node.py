@@ -262,9 +262,11 @@ class DriverNode:
         now, at, last = self.ros_now(), self.core.ekf.stamp, self._last_odom_stamp
         age = self.core.clock.now() - at if at is not None else math.nan
         stamp = now - self.rospy.Duration.from_sec(age) if 0.0 < age <= MAX_STAMP_AGE else now
-        if last is not None and last - MAX_STAMP_AGE < stamp.to_sec() < last:
+        sec = stamp.to_sec()
+        if last is not None and last - MAX_STAMP_AGE < sec < last:
             stamp = self.rospy.Time.from_sec(last)  # never back (after an EKF reset, "now")
-        self._last_odom_stamp = stamp.to_sec()
+            sec = stamp.to_sec()
+        self._last_odom_stamp = sec
         return stamp
 
     def _publish_odometry(self) -> None:
@@ -283,7 +285,7 @@ class DriverNode:
             # built only if read: in lockstep the faces here take the pose (ODOM_POSE), and
             # the message is made only when a node outside takes /odom (publish_lazy)
             twist, unobserved = ekf.twist, core.config.odometry_noise.unobserved_variance
-            pose_cov, twist_cov = ekf.pose_covariance().copy(), ekf.twist_covariance().copy()
+            pose_cov, twist_cov = ekf.covariances()
             self.wire.publish_lazy(
                 pub, io.odom_header(stamp, s.odom_frame),
                 lambda: io.odometry_msg(stamp, s.odom_frame, s.base_frame, pose, twist,

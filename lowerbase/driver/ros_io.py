@@ -13,7 +13,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from geometry_msgs.msg import Quaternion, TransformStamped, Twist
+from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Twist, Vector3
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Header, String, UInt64
@@ -115,7 +115,12 @@ def transform_from_odometry(odom: Odometry) -> TransformStamped:
 
 def yaw_of(q: Any, what: str) -> float:
     """The heading of a quaternion message; WorldError unless it is a finite rotation."""
-    values = (q.x, q.y, q.z, q.w)
+    return _yaw(q.x, q.y, q.z, q.w, what)
+
+
+def _yaw(x: float, y: float, z: float, w: float, what: str) -> float:
+    """:func:`yaw_of` of the quaternion (x, y, z, w), without a message."""
+    values = (x, y, z, w)
     if not all(math.isfinite(v) for v in values):
         raise WorldError(f"{what}: the orientation has a non-finite component {values}")
     norm = math.sqrt(sum(v * v for v in values))
@@ -144,8 +149,11 @@ ODOM_POSE = "odom_pose"
 
 def odom_pose_of(pose: tuple[float, float, float]) -> tuple[float, float, float]:
     """What :func:`odom_pose` reads from :func:`odometry_msg` of ``pose``, without the
-    message: the same floats (the heading through the message's quaternion)."""
-    return float(pose[0]), float(pose[1]), yaw_of(quaternion_from_yaw(pose[2]), "/odom")
+    message: the same floats (the heading through the message's quaternion, the same
+    arithmetic as :func:`quaternion_from_yaw` then :func:`yaw_of`, without building it)."""
+    half = 0.5 * pose[2]
+    return float(pose[0]), float(pose[1]), _yaw(0.0, 0.0, math.sin(half), math.cos(half),
+                                                "/odom")
 
 
 def odom_header(stamp: Any, frame_id: str) -> Header:
@@ -155,14 +163,13 @@ def odom_header(stamp: Any, frame_id: str) -> Header:
 def odom_transform(stamp: Any, frame_id: str, child_frame_id: str,
                    pose: tuple[float, float, float]) -> TransformStamped:
     """:func:`transform_from_odometry` of :func:`odometry_msg` with this ``pose``, without the
-    message (the same values)."""
-    t = TransformStamped()
-    t.header.stamp = stamp
-    t.header.frame_id = frame_id
-    t.child_frame_id = child_frame_id
-    t.transform.translation.x, t.transform.translation.y = float(pose[0]), float(pose[1])
-    t.transform.rotation = quaternion_from_yaw(pose[2])
-    return t
+    message (the same values; every field given, so no default part is built and replaced:
+    /odom's TF goes out at 50 Hz)."""
+    half = 0.5 * pose[2]
+    return TransformStamped(
+        Header(0, stamp, frame_id), child_frame_id,
+        Transform(Vector3(float(pose[0]), float(pose[1]), 0.0),
+                  Quaternion(0.0, 0.0, math.sin(half), math.cos(half))))
 
 
 def imu_msg(

@@ -5,7 +5,7 @@ core with their send time, the driver ticks, and its frames reach the MCU. What 
 would publish (/odom_raw, /odom, /battery, ...) is read off ``loop.driver``; the ground truth
 off ``loop.mcu.truth``. Scenarios, the demo and the odometry benchmark run on this.
 
-``run`` and ``drive`` without an ``on_step`` (and :meth:`SimLoop.advance`) run up to
+``run`` and ``drive`` without an ``on_step`` (and :meth:`SimLoop.advance`) run 1 to
 ``MAX_BATCH`` periods at once: the driver's ticks first, each at its period's time (what they
 send, MotionCommands, depends on the twist and the command grid alone, not on the frames they
 would have seen), their sends handed to one ``Mcu.advance(k, incoming)`` (a repeated command
@@ -236,7 +236,7 @@ class SimLoop(SteppedLoop):
         ``Mcu.advance`` (see the module docstring)."""
         while periods > 0:
             k = self._batchable(periods)
-            if k <= 1:
+            if k < 1:
                 self.step()
                 periods -= 1
             else:
@@ -256,7 +256,7 @@ class SimLoop(SteppedLoop):
         done = 0
         while done < periods:
             k = self._batchable(periods - done)
-            if k <= 1:
+            if k < 1:
                 if done % every == 0:
                     self.driver.set_twist(linear, angular, smoothed)
                 self.step()
@@ -267,19 +267,21 @@ class SimLoop(SteppedLoop):
 
     def _batchable(self, periods: int) -> int:
         """How many periods from now may run as one batch: up to and including the first
-        whose driver tick may do anything; 1 when anything but the tick could make the driver
-        send (or the MCU take something else than a MotionCommand)."""
+        whose driver tick may do anything; 0 when anything but the tick could make the driver
+        send (or the MCU take something else than a MotionCommand): :meth:`step` then. A
+        single period is a batch too (the lockstep robot's jobs cut many runs to one period:
+        the compiled run's call costs less than a step's)."""
         driver, mcu = self.driver, self.mcu
-        if (periods < 2 or driver.state is not LinkState.READY
+        if (driver.state is not LinkState.READY
                 or (driver.listeners and not self.passive_listeners)
                 or self.tap is not None or mcu.faults or mcu._delayed
                 or mcu.state is not RobotState.ACTIVE or driver.heard_until is not None
                 or driver._reboot_suspect is not None or self.batch_stats["mistimed"]
                 or type(self).step is not SimLoop.step):
-            return 1
+            return 0
         for frame_id, _ in self._to_mcu:
             if frame_id != self._motion_id:
-                return 1
+                return 0
         return driver.quiet_ticks(self.clock.now(), mcu.dt, min(periods, MAX_BATCH))
 
     def _batch(self, k: int,

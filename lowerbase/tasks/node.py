@@ -20,8 +20,9 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import cache
 from typing import Any
 
 from lowerbase.errors import LowerbaseError, WorldError
@@ -68,6 +69,14 @@ def import_ros() -> Any:
     except ImportError as exc:
         raise RosUnavailableError(f"ROS is not installed ({exc}): {ROS_HINT}") from None
     return rospy
+
+
+@cache
+def _odom_conversion() -> tuple[str, Callable[[Any], tuple[float, float, float]]]:
+    """/odom's conversion key and function (imported once: /odom comes at 50 Hz)."""
+    from lowerbase.world.ros_msgs import ODOM_POSE, odom_pose
+
+    return ODOM_POSE, odom_pose
 
 
 def request_of(msg: Any, frame: str = "map") -> TaskRequest:
@@ -168,10 +177,8 @@ class TasksNode:
             self.inputs.bms_status = int(msg.BMSStatus)
 
     def _on_odom(self, msg: Any) -> None:
-        from lowerbase.world.ros_msgs import ODOM_POSE, odom_pose
-
         try:
-            pose = self.wire.convert(msg, ODOM_POSE, odom_pose)
+            pose = self.wire.convert(msg, *_odom_conversion())
         except WorldError as exc:
             self._count_bad("bad_odom", str(exc))
             return

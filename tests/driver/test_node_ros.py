@@ -9,6 +9,7 @@ deadlines. The pure parts (settings, conversions, throttle, CLI errors) are test
 from __future__ import annotations
 
 import contextlib
+import io
 import json
 import math
 import os
@@ -693,12 +694,16 @@ def test_odom_read_without_its_message_is_what_the_message_gives(woosh_msgs: Any
 
     rng = random.Random(7)
     poses = [(rng.uniform(-50, 50), rng.uniform(-50, 50), rng.uniform(-math.pi, math.pi))
-             for _ in range(2000)] + [(0.0, 0.0, math.pi), (1.0, -1.0, -math.pi), (0, 0, 0)]
+             for _ in range(2000)] + [(0.0, 0.0, math.pi), (1.0, -1.0, -math.pi), (0, 0, 0),
+                                      (0.0, -0.0, -0.0), (2.0, 3.0, 1e-300), (0.0, 0.0, 4.0)]
+    import genpy
+
+    stamp = genpy.Time(3, 5)
     for pose in poses:
-        msg = ros_io.odometry_msg(0, "odom", "base_link", pose, (0.0, 0.0), [0.0] * 9,
+        msg = ros_io.odometry_msg(stamp, "odom", "base_link", pose, (0.0, 0.0), [0.0] * 9,
                                   [0.0] * 4, 1e6)
-        assert ros_io.odom_pose_of(pose) == ros_io.odom_pose(msg)
-        a, b = ros_io.odom_transform(0, "odom", "base_link", pose), \
+        assert repr(ros_io.odom_pose_of(pose)) == repr(ros_io.odom_pose(msg))  # -0.0 too
+        a, b = ros_io.odom_transform(stamp, "odom", "base_link", pose), \
             ros_io.transform_from_odometry(msg)
         assert (a.header.frame_id, a.child_frame_id) == (b.header.frame_id, b.child_frame_id)
         ta, tb = a.transform, b.transform
@@ -706,3 +711,7 @@ def test_odom_read_without_its_message_is_what_the_message_gives(woosh_msgs: Any
             (tb.translation.x, tb.translation.y, tb.translation.z)
         assert (ta.rotation.x, ta.rotation.y, ta.rotation.z, ta.rotation.w) == \
             (tb.rotation.x, tb.rotation.y, tb.rotation.z, tb.rotation.w)
+        wire_a, wire_b = io.BytesIO(), io.BytesIO()
+        a.serialize(wire_a)
+        b.serialize(wire_b)
+        assert wire_a.getvalue() == wire_b.getvalue()  # /tf's bytes, seq and z included

@@ -128,6 +128,34 @@ def test_batched_periods_match_single_steps_bit_for_bit(profile_kw: dict[str, bo
     assert batched.batch_stats["mistimed"] == 0
 
 
+def test_single_periods_run_as_batches_bit_for_bit() -> None:
+    """The lockstep robot's jobs cut many runs to one period: ``advance(1)`` is then a batch of
+    one (one compiled run instead of a step), with the frames, commands and state of
+    ``step()``, bit for bit, across twist changes, a stale twist and standing."""
+    stepped, single = SimLoop(), SimLoop()
+    rec_s, rec_b = _recording(stepped), _recording(single)
+    for loop in (stepped, single):
+        loop.run(1.0, on_step=lambda lp: None)
+    assert single.driver.state == LinkState.READY
+    states: tuple[list[dict[str, Any]], list[dict[str, Any]]] = ([], [])
+    for i in range(900):  # 4.5 s: a twist each 50 ms for 3 s, then none (stale, a stop)
+        for loop, out in ((stepped, states[0]), (single, states[1])):
+            if i % 10 == 0 and i < 600:
+                loop.driver.set_twist(0.6 if i < 400 else 0.0, 0.3 if i % 70 < 40 else -0.4,
+                                      i % 200 < 100)
+            if loop is stepped:
+                loop.step()
+            else:
+                loop.advance(1)
+            if i % 50 == 49:
+                out.append(_state(loop))
+    assert rec_b == rec_s  # every frame each way, at its time
+    assert states[1] == states[0]
+    assert stepped.batch_stats["periods"] == 0
+    assert single.batch_stats["batches"] == single.batch_stats["periods"] > 700
+    assert single.batch_stats["mistimed"] == 0
+
+
 def test_no_batching_while_something_else_may_send() -> None:
     """A listener (it may send, or read the truth) or a tap keeps the loop stepping."""
     loop = SimLoop()

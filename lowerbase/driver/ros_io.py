@@ -164,12 +164,14 @@ def odom_transform(stamp: Any, frame_id: str, child_frame_id: str,
                    pose: tuple[float, float, float]) -> TransformStamped:
     """:func:`transform_from_odometry` of :func:`odometry_msg` with this ``pose``, without the
     message (the same values; every field given, so no default part is built and replaced:
-    /odom's TF goes out at 50 Hz)."""
+    /odom's TF goes out at 50 Hz). Keywords only: ROS 2's messages take no positional fields
+    and its Header has no ``seq``."""
     half = 0.5 * pose[2]
     return TransformStamped(
-        Header(0, stamp, frame_id), child_frame_id,
-        Transform(Vector3(float(pose[0]), float(pose[1]), 0.0),
-                  Quaternion(0.0, 0.0, math.sin(half), math.cos(half))))
+        header=Header(stamp=stamp, frame_id=frame_id), child_frame_id=child_frame_id,
+        transform=Transform(translation=Vector3(x=float(pose[0]), y=float(pose[1]), z=0.0),
+                            rotation=Quaternion(x=0.0, y=0.0, z=math.sin(half),
+                                                w=math.cos(half))))
 
 
 def imu_msg(

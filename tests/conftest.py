@@ -79,8 +79,11 @@ class Proc:
 
     def _read(self) -> None:
         assert self.popen.stdout is not None
-        for line in self.popen.stdout:
-            self._queue.put(line)
+        try:
+            for line in self.popen.stdout:
+                self._queue.put(line)
+        except ValueError:  # stop()/wait()'s communicate() closed stdout under this thread
+            pass
         self._queue.put(None)
 
     def wait_for(self, text: str, timeout: float = 20.0) -> str:

@@ -293,7 +293,7 @@ class PathController:
         n = max(3, math.ceil(reach / (0.5 * self.resolution)), math.ceil(turn / 0.02))
         fp = self.footprint
         if arc_hits_lethal(self.costs, self.origin[0], self.origin[1], self.resolution, x, y,
-                           yaw, v_next, w_next, reach, turn, n, fp.bins, fp._dr, fp._dc,
+                           yaw, v_next, w_next, reach, turn, n, fp.bins, fp.dr_table, fp.dc_table,
                            LETHAL, NO_INFORMATION):
             v_stop, w_stop = self._ramp(0.0, 0.0)
             return self._out(v_stop, w_stop, Status.BLOCKED, "an obstacle ahead of the robot")

@@ -121,12 +121,13 @@ class FootprintCells:
             cells = np.unique(np.concatenate((np.column_stack((rr, cc)),
                                               np.column_stack((pr, pc)))), axis=0) - n
             self.offsets.append((cells[:, 0], cells[:, 1]))
-        # every bin's cells in one (bins, L) array, short bins padded with their first cell
-        # (a repeated cell changes neither the max nor "any cell off the map")
+        # every bin's cells in one (bins, L) array each (row and column offsets), short bins
+        # padded with their first cell (a repeated cell changes neither the max nor "any cell
+        # off the map"): what the compiled footprint checks take
         size = max(dr.size for dr, _ in self.offsets)
-        self._dr = np.stack([np.pad(dr, (0, size - dr.size), mode="edge")
+        self.dr_table = np.stack([np.pad(dr, (0, size - dr.size), mode="edge")
                              for dr, _ in self.offsets])
-        self._dc = np.stack([np.pad(dc, (0, size - dc.size), mode="edge")
+        self.dc_table = np.stack([np.pad(dc, (0, size - dc.size), mode="edge")
                              for _, dc in self.offsets])
 
     def max_cost(self, costs: np.ndarray, origin: Sequence[float], x: np.ndarray | float,
@@ -138,7 +139,8 @@ class FootprintCells:
             # 1D float poses (the controller's arc, the path ahead): one compiled call
             out = np.empty(x.size, dtype=np.int64)
             footprint_max_at(costs, float(origin[0]), float(origin[1]), self.resolution, x, y,
-                             yaw, self.bins, self._dr, self._dc, LETHAL, NO_INFORMATION, out)
+                             yaw, self.bins, self.dr_table, self.dc_table, LETHAL,
+                             NO_INFORMATION, out)
             return out
         x, y, yaw = np.broadcast_arrays(np.atleast_1d(np.asarray(x, dtype=np.float64)),
                                         np.atleast_1d(np.asarray(y, dtype=np.float64)),
@@ -150,8 +152,8 @@ class FootprintCells:
         h, w = costs.shape
         if costs.dtype == np.uint8:  # all poses at once, compiled (kernels.py)
             best = np.empty(k.size, dtype=np.int64)
-            footprint_max(costs, rows.ravel(), cols.ravel(), k.ravel(), self._dr, self._dc,
-                          LETHAL, NO_INFORMATION, best)
+            footprint_max(costs, rows.ravel(), cols.ravel(), k.ravel(), self.dr_table,
+                          self.dc_table, LETHAL, NO_INFORMATION, best)
             return best.reshape(x.shape)
         out = np.empty(x.shape, dtype=np.int64)
         for b in np.unique(k):

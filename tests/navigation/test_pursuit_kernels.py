@@ -86,7 +86,8 @@ def test_the_verdict_is_the_footprint_gathers() -> None:
         px, py, th = numpy_arc(x, y, yaw, v, w, reach, turn, n)
         want = bool((reference_max_cost(fc, costs, origin, px, py, th) >= LETHAL).any())
         got = arc_hits_lethal(costs, origin[0], origin[1], fc.resolution, x, y, yaw, v, w,
-                              reach, turn, n, fc.bins, fc._dr, fc._dc, LETHAL, NO_INFORMATION)
+                              reach, turn, n, fc.bins, fc.dr_table, fc.dc_table, LETHAL,
+                              NO_INFORMATION)
         assert got == want, (x, y, yaw, v, w, reach, turn, n)
         seen.add(want)
     assert seen == {True, False}

@@ -1,10 +1,31 @@
 """One exception hierarchy for everything lowerbase raises on purpose.
 
 Programming errors stay ordinary Python exceptions; everything a user or the wire can cause is a
-:class:`LowerbaseError`, so callers catch one root and the CLI prints one clear line.
+:class:`LowerbaseError`, so callers catch one root and the CLI prints one clear line. Bad input
+that arrives over and over (a topic, a bus) is dropped, counted and logged a few times:
+:func:`count_drop`.
 """
 
 from __future__ import annotations
+
+import logging
+from collections.abc import MutableMapping
+
+
+def worth_logging(n: int) -> bool:
+    """Whether the ``n``-th drop of one kind is logged: the 1st, 10th, 100th and every 1000th
+    (a flood of bad input stays a few lines; the count says how many)."""
+    return n in (1, 10, 100) or n % 1000 == 0
+
+
+def count_drop(stats: MutableMapping[str, int], key: str, logger: logging.Logger,
+               what: object) -> int:
+    """One dropped input counted in ``stats[key]`` and ``what`` (the error) logged when
+    :func:`worth_logging`; the count."""
+    n = stats[key] = stats.get(key, 0) + 1
+    if worth_logging(n):
+        logger.warning("%s (dropped; %d so far)", what, n)
+    return n
 
 
 class LowerbaseError(Exception):

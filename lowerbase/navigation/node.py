@@ -25,7 +25,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
-from lowerbase.errors import ConfigError, LowerbaseError, WorldError
+from lowerbase.errors import ConfigError, LowerbaseError, WorldError, count_drop
 from lowerbase.navigation.controller import Limits
 from lowerbase.navigation.costmap import camera_cloud
 from lowerbase.navigation.loop import control_loop
@@ -197,9 +197,7 @@ class NavigationNode:
 
     # -- ROS -> navigation ---------------------------------------------------------------------
     def _count_bad(self, key: str, exc: Exception) -> None:
-        self.stats[key] += 1
-        if self.stats[key] in (1, 10, 100) or self.stats[key] % 1000 == 0:
-            log.warning("%s (dropped; %d so far)", exc, self.stats[key])
+        count_drop(self.stats, key, log, exc)
 
     def _on_odom(self, msg: Any) -> None:
         try:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
 
-from lowerbase.errors import LowerbaseError, WorldError
+from lowerbase.errors import LowerbaseError, WorldError, count_drop
 from lowerbase.tasks.inputs import (
     PART_DOWN_PARAM,
     PART_NOTE_MAX,
@@ -156,9 +156,7 @@ class TasksNode:
 
     # -- ROS -> machine ------------------------------------------------------------------------
     def _count_bad(self, key: str, what: str) -> None:
-        self.stats[key] += 1
-        if self.stats[key] in (1, 10, 100) or self.stats[key] % 1000 == 0:
-            log.warning("%s (dropped; %d so far)", what, self.stats[key])
+        count_drop(self.stats, key, log, what)
 
     def _on_link(self, msg: Any) -> None:
         with self.lock:

@@ -38,7 +38,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from lowerbase.clock import Clock
-from lowerbase.errors import ConfigError
+from lowerbase.errors import ConfigError, worth_logging
 from lowerbase.navigation.controller import (
     Command,
     ControllerConfig,
@@ -163,7 +163,7 @@ class Navigator:
         if scan.stamp < poses[0][0] and len(poses) == poses.maxlen:  # older than all kept
             self.stats["scan_too_old"] += 1
             n = self.stats["scan_too_old"]
-            if n in (1, 10, 100) or n % 1000 == 0:
+            if worth_logging(n):
                 log.warning("%s: dropped a scan %.2f s older than every pose kept (a busy "
                             "host; %d so far)", self.name, poses[0][0] - scan.stamp, n)
             return

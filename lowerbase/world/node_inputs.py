@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING, Any
 
-from lowerbase.errors import LowerbaseError, WorldError
+from lowerbase.errors import LowerbaseError, WorldError, count_drop
 
 if TYPE_CHECKING:  # pragma: no cover
     from lowerbase.world.grid import OccupancyGrid
@@ -78,9 +78,7 @@ class WorldInputs:
         log.info("localization re-initialised at (%.3f, %.3f, %.3f)", *pose)
 
     def _count_bad(self, key: str, exc: Exception) -> None:
-        self.stats[key] += 1
-        if self.stats[key] in (1, 10, 100) or self.stats[key] % 1000 == 0:
-            log.warning("%s (dropped; %d so far)", exc, self.stats[key])
+        count_drop(self.stats, key, log, exc)
 
     def _start(self, req: Any) -> Any:
         from std_srvs.srv import SetBoolResponse

@@ -26,6 +26,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
+from lowerbase.errors import worth_logging
 from lowerbase.world.localization.poses import compose
 
 log = logging.getLogger(__name__)
@@ -135,5 +136,5 @@ class StampedSensors:
 
     def _drop(self, key: str, sensor: str, stamp: float, why: str) -> None:
         n = self.stats[key] = self.stats[key] + 1
-        if n in (1, 10, 100) or n % 1000 == 0:
+        if worth_logging(n):
             log.warning("%s at %.3f dropped: %s (%s: %d so far)", sensor, stamp, why, key, n)

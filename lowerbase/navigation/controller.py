@@ -284,13 +284,8 @@ class PathController:
         """The command if the footprint stays off lethal cells along its arc over the braking
         distance (+ margin, at most ``up_to`` m: the goal, as nav2's regulated pure pursuit
         checks up to the carrot); else braking and BLOCKED."""
-        lim, cfg = self.limits, self.config
         v_next, w_next = self._ramp(v, w)
-        reach = v_next * v_next / (2.0 * lim.linear_decel) + cfg.check_margin \
-            + abs(v_next) * cfg.period
-        reach = min(reach, max(up_to, abs(v_next) * cfg.period))
-        turn = w_next * w_next / (2.0 * lim.angular_decel) + abs(w_next) * cfg.period + 0.05
-        n = max(3, math.ceil(reach / (0.5 * self.resolution)), math.ceil(turn / 0.02))
+        reach, turn, n = self._arc_extent(v_next, w_next, up_to)
         fp = self.footprint
         if arc_hits_lethal(self.costs, self.origin[0], self.origin[1], self.resolution, x, y,
                            yaw, v_next, w_next, reach, turn, n, fp.bins, fp.dr_table, fp.dc_table,
@@ -300,6 +295,17 @@ class PathController:
         if status is not self._phase and self._phase is Status.BLOCKED:
             self._phase = status
         return self._out(v_next, w_next, status)
+
+    def _arc_extent(self, v: float, w: float, up_to: float) -> tuple[float, float, int]:
+        """How far the collision check looks for the command (v, w): (reach [m]: the braking
+        distance + margin + a period, at most ``up_to``; turn [rad]: the same for the
+        rotation; n: the poses checked along it)."""
+        lim, cfg = self.limits, self.config
+        reach = v * v / (2.0 * lim.linear_decel) + cfg.check_margin + abs(v) * cfg.period
+        reach = min(reach, max(up_to, abs(v) * cfg.period))
+        turn = w * w / (2.0 * lim.angular_decel) + abs(w) * cfg.period + 0.05
+        n = max(3, math.ceil(reach / (0.5 * self.resolution)), math.ceil(turn / 0.02))
+        return reach, turn, n
 
     def _ramp(self, v: float, w: float) -> tuple[float, float]:
         """The command one period closer to (v, w) within the acceleration limits."""

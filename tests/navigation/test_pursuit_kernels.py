@@ -132,13 +132,8 @@ class NumpyController(PathController):
 
     def _checked(self, x: float, y: float, yaw: float, v: float, w: float,
                  status: Status, up_to: float = math.inf) -> Command:
-        lim, cfg = self.limits, self.config
         v_next, w_next = self._ramp(v, w)
-        reach = v_next * v_next / (2.0 * lim.linear_decel) + cfg.check_margin \
-            + abs(v_next) * cfg.period
-        reach = min(reach, max(up_to, abs(v_next) * cfg.period))
-        turn = w_next * w_next / (2.0 * lim.angular_decel) + abs(w_next) * cfg.period + 0.05
-        n = max(3, math.ceil(reach / (0.5 * self.resolution)), math.ceil(turn / 0.02))
+        reach, turn, n = self._arc_extent(v_next, w_next, up_to)
         px, py, th = numpy_arc(x, y, yaw, v_next, w_next, reach, turn, n)
         if (self.footprint.max_cost(self.costs, self.origin, px, py, th) >= LETHAL).any():
             v_stop, w_stop = self._ramp(0.0, 0.0)

@@ -63,7 +63,8 @@ class Ros2Side:
         return Ros2LocalWire(self.shim, board, name, self.real)
 
     def param(self, name: str, default: Any = None) -> Any:
-        """ROS 2 parameters are not read yet (docs/ros2.md): the default."""
+        """The shim's parameter (it holds ``/use_sim_time`` only: ROS 2 parameters are not read
+        yet, docs/ros2.md), else ``default``."""
         return self.shim.get_param(name, default)
 
     def face_ros(self, face: str) -> Any:

@@ -33,6 +33,10 @@ PACKAGES=(
     ros-sensor-msgs
     # Modbus RTU/TCP command-line client used by the BMS tests
     mbpoll
+    # ROS 2's interface packages are built with the wheels' rosidl generators (make ros2)
+    cmake
+    ninja-build
+    g++
 )
 
 log() { echo "install-ros: $*" >&2; }

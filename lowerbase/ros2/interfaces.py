@@ -34,7 +34,7 @@ from pathlib import Path
 from lowerbase.errors import LowerbaseError
 
 #: bump when the way packages are built changes (it is part of the cache key)
-BUILDER_VERSION = "1"
+BUILDER_VERSION = "2"
 
 HERE = Path(__file__).resolve().parent
 LOWERBASE = HERE.parent
@@ -59,6 +59,12 @@ PACKAGES = (
 )
 
 KINDS = ("msg", "srv", "action")
+#: what rclpy needs, in rosidl_core_generators' order: the C code, its two typesupports (Fast
+#: DDS's and introspection) and the Python bindings. rosidl_default_generators would also build
+#: the C++ code and its three typesupports, about half of the build, which rclpy never loads.
+GENERATORS = ("rosidl_cmake", "rosidl_typesupport_c", "rosidl_typesupport_fastrtps_c",
+              "rosidl_typesupport_introspection_c", "rosidl_generator_c",
+              "rosidl_generator_py", "rosidl_generator_type_description")
 #: the wheels' CMake exports name the Python of the machine that built them
 WHEEL_BUILD_PYTHON = "/opt/python/cp311-cp311"
 #: rosidl's .msg parser wants snake_case field names and UPPER_CASE constants; ROS 1 messages
@@ -169,12 +175,15 @@ def prepare_source(pkg: InterfacePackage, dest: Path) -> None:
 </package>
 """, encoding="utf-8")
     finds = "\n".join(f"find_package({d} REQUIRED)" for d in deps)
+    generators = "\n".join(f"find_package({g} REQUIRED)" for g in GENERATORS)
     files = " ".join(f'"{i}"' for i in idls)
     (dest / "CMakeLists.txt").write_text(f"""cmake_minimum_required(VERSION 3.20)
 project({pkg.name})
 find_package(ament_cmake REQUIRED)
-find_package(rosidl_default_generators REQUIRED)
+{generators}
 {finds}
+# the dependencies' configs register the C++ generators again: rclpy never loads them
+list(FILTER AMENT_EXTENSIONS_rosidl_generate_idl_interfaces EXCLUDE REGEX "_cpp:")
 rosidl_generate_interfaces(${{PROJECT_NAME}} {files} DEPENDENCIES {" ".join(deps)})
 ament_export_dependencies(rosidl_default_runtime)
 ament_package()

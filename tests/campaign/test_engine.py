@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -109,3 +110,23 @@ def test_ctrl_c_keeps_the_runs_that_finished(tmp_path: Path) -> None:
     table = read_csv(out / "results.csv")
     assert 3 <= len(table) < 200
     assert json.loads((out / "summary.json").read_text())["interrupted"] is True
+
+
+def _worker_settings(dask_worker: Any) -> dict[str, Any]:
+    """What a worker runs beside the campaign's runs (client.run passes ``dask_worker``)."""
+    import dask
+
+    return {"profile": "profile" in dask_worker.periodic_callbacks,
+            "tick": dask.config.get("distributed.admin.tick.interval"),
+            "memory": dask.config.get("distributed.worker.memory.monitor-interval")}
+
+
+@pytest.mark.process
+def test_local_cluster_workers_run_without_the_profiler_and_with_slow_monitors() -> None:
+    from lowerbase.campaign.engine import LOCAL_CLUSTER_CONFIG, open_client, quiet_dask
+
+    with quiet_dask(), open_client(workers=1) as client:
+        got = list(client.run(_worker_settings).values())
+    assert got == [{"profile": False,
+                    "tick": LOCAL_CLUSTER_CONFIG["distributed.admin.tick.interval"],
+                    "memory": LOCAL_CLUSTER_CONFIG["distributed.worker.memory.monitor-interval"]}]

@@ -181,6 +181,12 @@ def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = ()
             counts = ", ".join(f"{k} {v}" for k, v in sorted(stats.items()) if v)
             print(f"lowerbase robot: stopped at {robot.now:.2f} s of simulated time; "
                   f"{counts or 'nothing counted'}", file=sys.stderr, flush=True)
+        # rclpy 9.1's Executor.shutdown destroys its guard condition without waiting for the
+        # callbacks still in its threads, which then fail on it ("The following exception was
+        # never retrieved: ... destruction was requested"): they end first
+        pool = getattr(executor, "_executor", None)
+        if pool is not None:
+            pool.shutdown(wait=True)
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)

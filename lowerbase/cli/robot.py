@@ -237,16 +237,16 @@ def _run_lockstep(args: argparse.Namespace, sup: Any, speed: float, parts: tuple
 
 
 def _run_ros2(args: argparse.Namespace) -> int:
-    """--ros2: the lockstep robot with its interface on ROS 2 (no ROS master)."""
-    from lowerbase.robot.lockstep import LockstepOptions
+    """--ros2: the lockstep robot (wheeled or legged) with its interface on ROS 2 (no ROS
+    master)."""
+    from lowerbase.robot.lockstep import LockstepOptions, LockstepRobot
     from lowerbase.robot.plan import UPPER
     from lowerbase.world.maps import load_map
 
     if not args.sim_time:
         raise ConfigError("--ros2 runs the lockstep robot only so far: add --sim-time "
                           "(docs/ros2.md)")
-    for given, flag in ((args.robot == "legged", "--robot legged"),
-                        (args.mcap or args.foxglove, "--mcap/--foxglove"),
+    for given, flag in ((args.mcap or args.foxglove, "--mcap/--foxglove"),
                         (args.paused, "--paused"), (args.respawn, "--respawn")):
         if given:
             raise ConfigError(f"{flag} is not on ROS 2 yet (docs/ros2.md)")
@@ -260,8 +260,13 @@ def _run_ros2(args: argparse.Namespace) -> int:
     opts = LockstepOptions(map=args.map, parts=tuple(p for p in UPPER if p not in args.without),
                            soc=args.soc, ground_truth=args.ground_truth, seed=args.seed,
                            truth=args.truth)
+    make: Any = LockstepRobot
+    if args.robot == "legged":  # its lower computer and legged driver (parts, map unused)
+        from lowerbase.robot.lockstep_legged import LeggedLockstep
+
+        make = LeggedLockstep
     return run_ros2(opts, None if speed == MAX_SPEED else speed, (),
-                    duration=args.duration)
+                    duration=args.duration, make=make)
 
 
 def run(args: argparse.Namespace) -> int:

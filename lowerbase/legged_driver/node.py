@@ -168,13 +168,15 @@ class LeggedNode:
 
     def __init__(self, settings: LeggedSettings, config: LeggedDriverConfig,
                  links: Sequence[Any], *, core: LeggedDriverCore | None = None,
-                 wire: Any = None, lock: Any = None) -> None:
+                 wire: Any = None, lock: Any = None, ros: Any = None) -> None:
         """``core``: a LeggedDriverCore that already talks to its lower computer (the lockstep
         robot's; ``links`` are then unused); ``wire``: how the face reaches ROS
-        (:mod:`lowerbase.ros1.wire`; None: rospy as is); ``lock``: shared with the loop."""
+        (:mod:`lowerbase.ros1.wire`; None: rospy as is); ``lock``: shared with the loop;
+        ``ros``: :func:`import_ros`'s namespace (None: ROS 1's; ROS 2's is
+        :func:`lowerbase.ros2.compat.legged_ros`)."""
         from lowerbase.ros1.wire import RosWire
 
-        self.ros = import_ros()
+        self.ros = ros if ros is not None else import_ros()
         self.wire = wire if wire is not None else RosWire(self.ros.rospy)
         self.settings, self.links = settings, links
         self.lock = lock if lock is not None else threading.RLock()

@@ -8,7 +8,9 @@ the legged driver core exchange every frame at once, every 1 ms of simulated tim
 set_map, set_listen, ``~walk``/``~stand``/``~sit``) ticks at its command rate and publishes
 robot_state at its ``publish_rate`` of simulated time, as the node does on the wall clock.
 ROS time is the simulated time, /clock every 10 ms of it. The interface to
-:mod:`lowerbase.robot.simcontrol` is :class:`~lowerbase.robot.lockstep.LockstepRobot`'s.
+:mod:`lowerbase.robot.simcontrol` is :class:`~lowerbase.robot.lockstep.LockstepRobot`'s, and so
+is how it reaches ROS (``side``: :class:`~lowerbase.robot.lockstep.Ros1Side`, or ROS 2's
+:class:`~lowerbase.robot.lockstep_ros2.Ros2Side`).
 """
 
 from __future__ import annotations
@@ -18,33 +20,39 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from lowerbase.robot.lockstep import CLOCK_RATE, LockstepOptions, RosTime
+from lowerbase.errors import ConfigError
+from lowerbase.robot.lockstep import CLOCK_RATE, LockstepOptions, Ros1Side
 
 
 class LeggedLockstep:
     """The legged robot and its driver's face on one simulated clock (see the module)."""
 
-    def __init__(self, opts: LockstepOptions, rospy: Any) -> None:
+    def __init__(self, opts: LockstepOptions, rospy: Any, side: Any = None) -> None:
         from lowerbase.legged_driver.node import NODE_NAME, LeggedNode, load_legged_settings
-        from lowerbase.ros1.wire import LocalWire, Switchboard
         from lowerbase.simloop.legged import LeggedSimLoop
 
         self.opts = opts
         self.rospy = rospy
+        self.side = side if side is not None else Ros1Side(rospy)
         self.lock = threading.RLock()
         settings, config = load_legged_settings({})
+        if config.map_dir is not None:  # set_map's PCD files (as `lowerbase driver` makes it)
+            try:
+                config.map_dir.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise ConfigError(f"~map_dir {config.map_dir}: {exc.strerror}") from None
         kwargs: dict[str, Any] = {} if opts.soc is None else {"soc": opts.soc}
         self.loop = LeggedSimLoop(config=config, **kwargs)
         self.dt = self.loop.dt
-        self.board = Switchboard(rospy)
+        self.board = self.side.board()
         self.node = LeggedNode(settings, config, [], core=self.loop.driver,
-                               wire=LocalWire(rospy, self.board, NODE_NAME), lock=self.lock)
+                               wire=self.side.wire(self.board, NODE_NAME), lock=self.lock,
+                               ros=self.side.face_ros("legged"))
         self.steps = 0
         self._tick_every = self.loop.tick_every
         self._publish_every = max(1, round(1.0 / (settings.publish_rate * self.dt)))
         self._clock_every = max(1, round(1.0 / (CLOCK_RATE * self.dt)))
         self._clock_pub: Any = None
-        self._ros_time = RosTime(rospy)
         self.parts = ("legged lower computer", "legged driver")
 
     @property
@@ -52,23 +60,17 @@ class LeggedLockstep:
         return float(self.loop.now)
 
     def advertise(self) -> None:
-        from rosgraph_msgs.msg import Clock
-
         self._set_ros_time()
-        self._clock_pub = self.rospy.Publisher("/clock", Clock, queue_size=10)
+        self._clock_pub = self.side.clock_publisher()
         with self.lock:
             self.node.advertise()
 
     def _set_ros_time(self) -> None:
-        self._ros_time.set(float(self.loop.now))
+        self.side.set_time(float(self.loop.now))
 
     def run_periods(self, periods: int, until: Callable[[], bool] | None = None) -> bool:
         """``periods`` 1 ms periods: /clock every 10 ms, the driver's tick and goal at its
         command rate, robot_state at its publish rate, then the lower computer's step."""
-        from rosgraph_msgs.msg import Clock
-
-        from lowerbase.ros1.wire import connected
-
         loop, node = self.loop, self.node
         for _ in range(periods):
             with self.lock:
@@ -76,8 +78,9 @@ class LeggedLockstep:
                 if step % self._clock_every == 0:
                     self.board.drain()
                     self._set_ros_time()
-                    if connected(self._clock_pub):  # nobody on ROS listens: nothing built
-                        self._clock_pub.publish(Clock(clock=self.rospy.Time.from_sec(loop.now)))
+                    send = self.side.clock_sender(self._clock_pub)
+                    if send is not None:  # None: nobody on ROS listens, nothing is built
+                        send(float(loop.now))
                 if step % self._tick_every == 0:
                     node.pursue_goal()
                     node.core.tick()

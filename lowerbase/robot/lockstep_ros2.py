@@ -1,5 +1,6 @@
 """``lowerbase robot --ros2 --sim-time``: the lockstep robot (:class:`~lowerbase.robot.lockstep.
-LockstepRobot`, unchanged) with its interface on ROS 2.
+LockstepRobot`, unchanged) with its interface on ROS 2; with ``--robot legged``, the legged one
+(:class:`~lowerbase.robot.lockstep_legged.LeggedLockstep`, unchanged).
 
 Every part runs in this process on one simulated clock, as on ROS 1; the faces are the ROS 1
 ones, on :class:`Ros2Side`: one rclpy node ``/lowerbase_robot`` carries every face's
@@ -10,7 +11,9 @@ in for rospy (ROS time is the simulated time), the message builders get
 names of the ROS 2 types are added once (:func:`lowerbase.ros2.compat.ros1_names`).
 /clock (rosgraph_msgs/Clock) is published every 10 ms of simulated time; the node's
 ``use_sim_time`` is true. nav2's ``navigate_to_pose`` and ``compute_path_to_pose`` are served
-beside the vendor's move_base (:mod:`lowerbase.navigation.nav2`).
+beside the vendor's move_base (:mod:`lowerbase.navigation.nav2`). The legged robot's face
+(:class:`~lowerbase.legged_driver.node.LeggedNode`) gets its ROS 2 types from
+:func:`lowerbase.ros2.compat.legged_ros`.
 
 An rclpy executor (several threads: an action goal's execute callback follows its goal until
 it ends) serves the subscriptions, services and actions; the lockstep loop runs in the main
@@ -32,8 +35,7 @@ from lowerbase.robot.lockstep import NODE, LockstepOptions, LockstepRobot
 
 log = logging.getLogger(__name__)
 
-#: MCU periods (5 ms) run between two looks at the pace and the stop flag
-CHUNK = 10
+CHUNK = 0.05  #: [s] of simulated time run between two looks at the pace and the stop flag
 EXECUTOR_THREADS = 8  #: the action goals followed at once, plus services and subscriptions
 
 
@@ -73,6 +75,10 @@ class Ros2Side:
 
         if face == "tasks":
             return self.shim
+        if face == "legged":
+            from lowerbase.ros2.compat import legged_ros
+
+            return legged_ros(self.shim)
         if face == "driver":
             from lowerbase.driver import ros_io
 
@@ -106,8 +112,11 @@ class Ros2Side:
 
 
 def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = (),
-        duration: float | None = None) -> int:
-    """Build the robot on ROS 2, run it until a signal or ``duration`` [s of wall time]."""
+        duration: float | None = None,
+        make: Callable[[LockstepOptions, Any, Ros2Side], Any] = LockstepRobot) -> int:
+    """Build the robot on ROS 2, run it until a signal or ``duration`` [s of wall time].
+    ``make(opts, rospy, side)``: the robot (:class:`LockstepRobot`, or
+    :class:`~lowerbase.robot.lockstep_legged.LeggedLockstep`)."""
     from lowerbase.driver.ros2_node import import_rclpy, start_node
     from lowerbase.robot.pace import Pacer
 
@@ -120,7 +129,7 @@ def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = ()
     side = Ros2Side(node)
     stop = threading.Event()
     executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=context)
-    robot: LockstepRobot | None = None
+    robot: Any = None
     nav2: Any = None
 
     def serve() -> None:
@@ -134,25 +143,29 @@ def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = ()
     previous = {s: signal.signal(s, lambda *_: stop.set())
                 for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        robot = LockstepRobot(opts, side.shim, side)
+        robot = make(opts, side.shim, side)
         robot.advertise()
-        if robot.navigation is not None:
+        navigation = getattr(robot, "navigation", None)  # the legged robot has none
+        if navigation is not None:
             from lowerbase.navigation.nav2 import Nav2Servers
 
-            nav2 = Nav2Servers(robot.navigation)
+            nav2 = Nav2Servers(navigation)
             nav2.start()
         executor.add_node(node)
         spinner.start()
+        parts = getattr(robot, "parts", None)  # the legged robot's; the wheeled one's map
+        what = ", ".join(parts) if parts else f"map {opts.map}"
         print(f"lowerbase robot: {node.get_fully_qualified_name()} on ROS 2 (domain "
-              f"{context.get_domain_id()}), map {opts.map}, simulated time at "
+              f"{context.get_domain_id()}), {what}, simulated time at "
               f"{'max' if speed is None else f'{speed:g} x'}; Ctrl-C stops", flush=True)
         pacer = Pacer(speed)
+        chunk = max(1, round(CHUNK / robot.dt))  # the MCU's periods (5 ms; legged 1 ms)
         started = time.monotonic()
         while not stop.is_set():
             if duration is not None and time.monotonic() - started >= duration:
                 break
             pacer.wait(robot.now)
-            robot.run_periods(CHUNK)
+            robot.run_periods(chunk)
     finally:
         stop.set()
         side.shim.signal_shutdown("robot stopped")
@@ -168,6 +181,12 @@ def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = ()
             counts = ", ".join(f"{k} {v}" for k, v in sorted(stats.items()) if v)
             print(f"lowerbase robot: stopped at {robot.now:.2f} s of simulated time; "
                   f"{counts or 'nothing counted'}", file=sys.stderr, flush=True)
+        # rclpy 9.1's Executor.shutdown destroys its guard condition without waiting for the
+        # callbacks still in its threads, which then fail on it ("The following exception was
+        # never retrieved: ... destruction was requested"): they end first
+        pool = getattr(executor, "_executor", None)
+        if pool is not None:
+            pool.shutdown(wait=True)
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)

@@ -8,17 +8,18 @@ with ``msg.header.stamp.to_sec()``. ROS 2 has the same messages under other name
 (``SetBool.Response``, ``woosh_msgs.action.MoveBase.Feedback``) and a ``builtin_interfaces/
 Time`` without ``to_sec``. :func:`ros1_names` adds those names to the ROS 2 modules (aliases of
 the ROS 2 classes, nothing else), once per process, so the faces run unchanged. Only the ROS 2
-processes of lowerbase call it (``lowerbase robot --ros2``).
+processes of lowerbase call it (``lowerbase robot --ros2``). :func:`legged_ros` is the legged
+driver's face's :func:`~lowerbase.legged_driver.node.import_ros` on ROS 2.
 """
 
 from __future__ import annotations
 
 import importlib
-from types import ModuleType
+from types import ModuleType, SimpleNamespace
 from typing import Any
 
 #: srv modules whose services the faces answer: ``XResponse``/``XRequest`` are added
-SRV_MODULES = ("std_srvs.srv", "nav_msgs.srv", "woosh_msgs.srv")
+SRV_MODULES = ("std_srvs.srv", "nav_msgs.srv", "woosh_msgs.srv", "lowerbase_legged_msgs.srv")
 #: the action packages whose ``<Name>Action``, ``Goal``, ``Result``, ``Feedback`` go to .msg
 ACTION_PACKAGES = ("woosh_msgs",)
 
@@ -56,6 +57,20 @@ def ros1_names() -> None:
                 for part in ("Goal", "Result", "Feedback"):
                     setattr(msg, f"{attr}{part}", getattr(action, part))
     _done = True
+
+
+def legged_ros(rospy: Any) -> SimpleNamespace:
+    """What :class:`~lowerbase.legged_driver.node.LeggedNode` takes as ``ros`` on ROS 2: the
+    names of :func:`~lowerbase.legged_driver.node.import_ros`, with ``rospy`` the stand-in
+    (:class:`~lowerbase.ros2.wire.RclpyShim`) and the ROS 2 types under their ROS 1 names."""
+    from geometry_msgs.msg import Twist
+    from lowerbase_legged_msgs import msg, srv
+    from sensor_msgs.msg import Joy
+    from std_srvs.srv import Trigger  # type: ignore[import-untyped]
+
+    ros1_names()
+    return SimpleNamespace(rospy=rospy, Twist=Twist, Joy=Joy, Trigger=Trigger,
+                           TriggerResponse=Trigger.Response, msg=msg, srv=srv)
 
 
 class AnyStampIo:

@@ -74,8 +74,9 @@ def add_subparser(subparsers: Any) -> None:
                    help="with --sim-time: the wheeled AMR (default) or seed 003's legged robot "
                    "(its lower computer and legged driver in lockstep; docs/legged.md)")
     p.add_argument("--ros2", action="store_true",
-                   help="with --sim-time: the robot's interface on ROS 2 (rclpy, Fast DDS; "
-                   "nav2's navigate_to_pose beside move_base); run from .venv-ros2 after "
+                   help="the lockstep robot (as --sim-time) with its interface on ROS 2 "
+                   "(rclpy, Fast DDS; nav2's navigate_to_pose beside move_base); run from "
+                   ".venv-ros2 after "
                    "`make ros2`, docs/ros2.md")
     p.add_argument("--seed", type=int, default=0, metavar="S",
                    help="with --sim-time: the seed of the localization's random numbers "
@@ -236,6 +237,12 @@ def _run_lockstep(args: argparse.Namespace, sup: Any, speed: float, parts: tuple
     return 0
 
 
+#: what ``robot --ros2`` without --sim-time says: real time on ROS 2 is the driver's alone
+ROS2_SIM_TIME = ("lowerbase robot: on ROS 2 the robot runs on simulated time, as with "
+                 "--sim-time (/clock; give your nodes use_sim_time:=true); for real firmware "
+                 "on ROS 2 run lowerbase driver --ros2 on its bus (docs/ros2.md)")
+
+
 def _run_ros2(args: argparse.Namespace) -> int:
     """--ros2: the lockstep robot (wheeled or legged) with its interface on ROS 2 (no ROS
     master)."""
@@ -243,9 +250,6 @@ def _run_ros2(args: argparse.Namespace) -> int:
     from lowerbase.robot.plan import UPPER
     from lowerbase.world.maps import load_map
 
-    if not args.sim_time:
-        raise ConfigError("--ros2 runs the lockstep robot only so far: add --sim-time "
-                          "(docs/ros2.md)")
     for given, flag in ((args.mcap or args.foxglove, "--mcap/--foxglove"),
                         (args.paused, "--paused"), (args.respawn, "--respawn")):
         if given:
@@ -254,6 +258,8 @@ def _run_ros2(args: argparse.Namespace) -> int:
 
     import_rclpy()  # one clear line when rclpy or the messages are missing
     load_map(args.map)
+    if not args.sim_time:  # the virtual robot on ROS 2 is the lockstep one, said in one line
+        print(ROS2_SIM_TIME, file=sys.stderr, flush=True)
     from lowerbase.robot.lockstep_ros2 import run as run_ros2
 
     speed = args.speed or DEFAULT_SPEED

@@ -17,30 +17,30 @@ from lowerbase.robot.lockstep_legged import LeggedLockstep
 from lowerbase.ros1.wire import Switchboard
 
 
-def test_ros2_legged_needs_sim_time(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["robot", "--ros2", "--robot", "legged"]) != 0
-    assert "--ros2 runs the lockstep robot only so far: add --sim-time" in \
-        capsys.readouterr().err
-
-
+@pytest.mark.parametrize("sim_time", [["--sim-time"], []])
 @pytest.mark.parametrize(("robot", "make"), [("legged", LeggedLockstep),
                                              ("wheeled", LockstepRobot)])
-def test_ros2_runs_the_robot_asked_for(monkeypatch: pytest.MonkeyPatch, robot: str,
-                                       make: Any) -> None:
-    """``--robot legged --ros2 --sim-time`` is no longer refused: lockstep_ros2.run builds
-    the legged robot (the wheeled one by default), with the options of ROS 1's."""
+def test_ros2_runs_the_robot_asked_for(monkeypatch: pytest.MonkeyPatch,
+                                       capsys: pytest.CaptureFixture[str], robot: str,
+                                       make: Any, sim_time: list[str]) -> None:
+    """``--robot legged --ros2`` is no longer refused: lockstep_ros2.run builds the legged
+    robot (the wheeled one by default), with the options of ROS 1's. Without --sim-time it is
+    the same lockstep robot, and one line says so."""
     import lowerbase.driver.ros2_node as ros2_node
     import lowerbase.robot.lockstep_ros2 as lockstep_ros2
+    from lowerbase.cli.robot import ROS2_SIM_TIME
 
     calls: list[tuple[Any, ...]] = []
     monkeypatch.setattr(ros2_node, "import_rclpy", lambda: None)
     monkeypatch.setattr(lockstep_ros2, "run", lambda opts, speed, ros_args, duration, make:
                         calls.append((opts, speed, duration, make)) or 0)
-    assert main(["robot", "--robot", robot, "--ros2", "--sim-time", "--speed", "max",
+    assert main(["robot", "--robot", robot, "--ros2", *sim_time, "--speed", "max",
                  "--duration", "3", "--soc", "55"]) == 0
     [(opts, speed, duration, made)] = calls
     assert made is make and speed is None and duration == 3.0
     assert opts.soc == 55.0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ([] if sim_time else [ROS2_SIM_TIME])
 
 
 class Wire:

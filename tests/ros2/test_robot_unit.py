@@ -61,7 +61,9 @@ def test_the_cache_keeps_cache_time_and_yaw_takes_the_short_way() -> None:
     assert abs(abs(yaw) - math.pi) < 1e-9
 
 
-def test_ros2_needs_sim_time(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["robot", "--ros2", "--map", "empty_room"]) != 0
-    assert "--ros2 runs the lockstep robot only so far: add --sim-time" in \
-        capsys.readouterr().err
+@pytest.mark.parametrize("sim_time", [["--sim-time"], []])
+def test_ros2_without_rclpy_is_one_line(capsys: pytest.CaptureFixture[str],
+                                        sim_time: list[str]) -> None:
+    assert main(["robot", "--ros2", *sim_time, "--map", "empty_room"]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "ROS 2 is not importable" in err[0] and "make ros2" in err[0]

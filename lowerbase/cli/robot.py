@@ -78,6 +78,10 @@ def add_subparser(subparsers: Any) -> None:
                    "(rclpy, Fast DDS; nav2's navigate_to_pose beside move_base); run from "
                    ".venv-ros2 after "
                    "`make ros2`, docs/ros2.md")
+    p.add_argument("ros_args", nargs="*", metavar="_NAME:=VALUE",
+                   help="with --ros2: a ROS 2 parameter of /lowerbase_robot, e.g. "
+                   "_move_base/recovery_behaviors:=[clear_costmap,rotate_recovery] (on ROS 1 "
+                   "the parameter server's /move_base/recovery_behaviors)")
     p.add_argument("--seed", type=int, default=0, metavar="S",
                    help="with --sim-time: the seed of the localization's random numbers "
                    "(default 0)")
@@ -254,8 +258,10 @@ def _run_ros2(args: argparse.Namespace) -> int:
                         (args.paused, "--paused"), (args.respawn, "--respawn")):
         if given:
             raise ConfigError(f"{flag} is not on ROS 2 yet (docs/ros2.md)")
+    from lowerbase.cli.driver import split_ros_args
     from lowerbase.driver.ros2_node import import_rclpy
 
+    ros_args = split_ros_args(args.ros_args)
     import_rclpy()  # one clear line when rclpy or the messages are missing
     load_map(args.map)
     if not args.sim_time:  # the virtual robot on ROS 2 is the lockstep one, said in one line
@@ -271,7 +277,7 @@ def _run_ros2(args: argparse.Namespace) -> int:
         from lowerbase.robot.lockstep_legged import LeggedLockstep
 
         make = LeggedLockstep
-    return run_ros2(opts, None if speed == MAX_SPEED else speed, (),
+    return run_ros2(opts, None if speed == MAX_SPEED else speed, ros_args,
                     duration=args.duration, make=make)
 
 
@@ -291,6 +297,10 @@ def run(args: argparse.Namespace) -> int:
 
     if getattr(args, "ros2", False):
         return _run_ros2(args)
+    if args.ros_args:
+        raise ConfigError(f"{args.ros_args[0]}: NAME:=VALUE arguments go with --ros2; on ROS 1 "
+                          "the robot reads the parameter server (rosparam set "
+                          "/move_base/recovery_behaviors ...)")
     if not args.sim_time:
         for given, flag in ((args.speed is not None, "--speed K"), (args.paused, "--paused"),
                             (args.seed != 0, "--seed S"),

@@ -65,9 +65,22 @@ class Ros2Side:
         return Ros2LocalWire(self.shim, board, name, self.real)
 
     def param(self, name: str, default: Any = None) -> Any:
-        """The shim's parameter (it holds ``/use_sim_time`` only: ROS 2 parameters are not read
-        yet, docs/ros2.md), else ``default``."""
-        return self.shim.get_param(name, default)
+        """A global ROS 1 name as a ROS 2 parameter of this node (``/move_base/recovery_
+        behaviors`` is ``move_base.recovery_behaviors``), declared here so that ``ros2 param``
+        lists it: its value from the command line (``_move_base/recovery_behaviors:=[...]``),
+        else ``default``. ``/use_sim_time`` is the shim's."""
+        if name == "/use_sim_time":
+            return self.shim.get_param(name, default)
+        from rcl_interfaces.msg import ParameterDescriptor
+
+        key = name.strip("/").replace("/", ".")
+        if not self.node.has_parameter(key):
+            self.node.declare_parameter(key, None, ParameterDescriptor(dynamic_typing=True))
+        value = self.node.get_parameter(key).value
+        if value is None:
+            return default
+        return list(value) if isinstance(value, (list, tuple)) or hasattr(value, "tolist") \
+            else value
 
     def face_ros(self, face: str) -> Any:
         from lowerbase.ros2.compat import AnyStampIo
@@ -125,7 +138,8 @@ def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = ()
     from rclpy.parameter import Parameter
 
     context, node = start_node(NODE, ros_args, parameter_overrides=[
-        Parameter("use_sim_time", Parameter.Type.BOOL, True)])
+        Parameter("use_sim_time", Parameter.Type.BOOL, True)],
+        automatically_declare_parameters_from_overrides=True)
     side = Ros2Side(node)
     stop = threading.Event()
     executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=context)

@@ -12,6 +12,7 @@ JSON line.
 ``services X Y``     /move_base/make_plan to (X, Y) from the robot; clear_costmaps
 ``plan X Y``         compute_path_to_pose to (X, Y) from the robot; the robot's map pose
 ``task ID DIR``      exec_task: transport to R1 (direction DIR); robot_status to its end
+``param NAME``       the robot node's ROS 2 parameter NAME (its GetParameters service)
 
 Every wait has a deadline (``TIMEOUT``) and fails in one line when it passes.
 """
@@ -318,7 +319,26 @@ def services(node: Node, x: float, y: float) -> dict[str, Any]:
             "cleared": isinstance(cleared.result(), Empty.Response)}
 
 
+def parameter(node: Node, name: str) -> dict[str, Any]:
+    """``ros2 param get /lowerbase_robot NAME``: the robot node's parameter service."""
+    from rcl_interfaces.srv import GetParameters
+
+    client = node.create_client(GetParameters, "/lowerbase_robot/get_parameters")
+    spin_until(node, lambda: client.service_is_ready(), "/lowerbase_robot/get_parameters")
+    future = client.call_async(GetParameters.Request(names=[name]))
+    spin_until(node, future.done, "the parameter's answer")
+    [value] = future.result().values
+    return {"type": value.type, "strings": list(value.string_array_value)}
+
+
 def main() -> None:
+    if sys.argv[1] == "param":
+        rclpy.init()
+        node = rclpy.create_node("lowerbase_probe_param")
+        print(json.dumps(parameter(node, sys.argv[2])), flush=True)
+        node.destroy_node()
+        rclpy.shutdown()
+        return
     mode, args = sys.argv[1], [float(a) for a in sys.argv[2:]]
     rclpy.init()
     node = rclpy.create_node(f"lowerbase_probe_{mode}")

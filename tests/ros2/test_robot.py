@@ -10,6 +10,7 @@ come before the ones that drive it.
 from __future__ import annotations
 
 import math
+import subprocess
 from collections.abc import Iterator
 
 import pytest
@@ -23,13 +24,15 @@ GOAL = (7.0, 5.0, 0.0)
 XY_TOLERANCE = 0.05  #: the navigator's goal tolerance [m]
 BACK = (4.0, 3.0, 0.0)  #: where /move_base drives it after GOAL
 R1 = (8.0, 2.0, 0.0)  #: empty_room's storage place R1
+#: move_base's ~recovery_behaviors as a ROS 2 parameter of /lowerbase_robot (ROS 1: rosparam)
+RECOVERY = "_move_base/recovery_behaviors:=[rotate,clear_aggressive]"
 
 
 @pytest.fixture(scope="module")
 def robot() -> Iterator[Ros2]:
     ros2 = ros2_or_skip()
     proc = Ros2Proc([str(ros2.python), "-m", "lowerbase", "robot", "--ros2", "--sim-time",
-                     "--map", "empty_room", "--speed", "max"], ros2.env)
+                     "--map", "empty_room", "--speed", "max", RECOVERY], ros2.env)
     try:
         line = proc.wait_for("on ROS 2", timeout=START_TIMEOUT)
         assert "/lowerbase_robot" in line and "empty_room" in line, line
@@ -49,6 +52,23 @@ def test_odom_scan_and_clock(robot: Ros2) -> None:
     assert got["odom_rate"] == pytest.approx(50.0, rel=0.05)  # per second of /clock's time
     assert got["scan_frame"] == "base_link" and got["scan_beams"] == 720
     assert got["clock_last"] > got["clock_first"] and got["clock_backwards"] == 0
+
+
+def test_recovery_behaviors_are_a_ros2_parameter(robot: Ros2) -> None:
+    got = robot.run_json("ros2_robot_probe.py", "param", "move_base.recovery_behaviors",
+                         timeout=300)
+    assert got == {"type": 9, "strings": ["rotate", "clear_aggressive"]}  # STRING_ARRAY
+
+
+def test_a_bad_recovery_behavior_is_one_line(robot: Ros2) -> None:
+    own = ros2_or_skip()  # a domain of its own, beside the module's robot
+    done = subprocess.run([str(own.python), "-m", "lowerbase", "robot", "--ros2",
+                           "--sim-time", "--map", "empty_room",
+                           "_move_base/recovery_behaviors:=[rotate,no_such_behavior]"],
+                          env=own.env, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode != 0
+    assert "Traceback" not in done.stderr, done.stderr
+    assert "no_such_behavior" in done.stderr.strip().splitlines()[-1], done.stderr
 
 
 def test_late_subscriber_gets_map_and_tf_static(robot: Ros2) -> None:
@@ -114,14 +134,19 @@ def test_vendor_move_base(robot: Ros2) -> None:
     assert math.hypot(x - BACK[0], y - BACK[1]) <= XY_TOLERANCE + 0.02, got
 
 
-def test_the_command_line(robot: Ros2) -> None:
-    """Without --sim-time, --ros2 says what it needs in one line."""
-    import subprocess
+def test_without_sim_time_it_is_the_same_robot_said_in_one_line(robot: Ros2) -> None:
+    """Without --sim-time, --ros2 runs the lockstep robot too, after one line saying so (in a
+    domain of its own, beside the module's robot)."""
+    from lowerbase.cli.robot import ROS2_SIM_TIME
 
-    proc = subprocess.run([str(robot.python), "-m", "lowerbase", "robot", "--ros2"],
-                          env=robot.env, cwd=ROOT, capture_output=True, text=True, timeout=120)
-    assert proc.returncode != 0
-    assert "--ros2 runs the lockstep robot only so far: add --sim-time" in proc.stderr
+    own = ros2_or_skip()
+    proc = subprocess.run([str(own.python), "-m", "lowerbase", "robot", "--ros2", "--map",
+                           "empty_room", "--duration", "2"],
+                          env=own.env, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.splitlines()[0] == ROS2_SIM_TIME
+    assert "simulated time at 1 x" in proc.stdout and "lowerbase robot: stopped at" in \
+        proc.stderr
 
 
 def test_goal_ends_map_to_ros2_states(robot: Ros2) -> None:

@@ -158,7 +158,8 @@ def _signals_to(stop: Callable[[str], None]) -> Iterator[None]:
 def start_node(name: str, ros_args: Sequence[str], **node_options: Any) -> tuple[Any, Any]:
     """(context, node): rclpy initialised in a context of its own on loopback (Fast DDS
     profile), with the ROS 1-style ``ros_args`` translated, without rclpy's signal handlers
-    (the caller's own stop the process); stdout line-buffered for the stop line."""
+    (the caller's own stop the process); stdout line-buffered for the stop line; lowerbase's
+    log records on the node's logger (console and /rosout, :mod:`lowerbase.ros2.logs`)."""
     rclpy = import_rclpy()
     loopback_only(os.environ)
     from rclpy.signals import SignalHandlerOptions
@@ -168,7 +169,11 @@ def start_node(name: str, ros_args: Sequence[str], **node_options: Any) -> tuple
     context = rclpy.Context()
     rclpy.init(args=["lowerbase", "--ros-args", *ros2_arguments(ros_args)], context=context,
                signal_handler_options=SignalHandlerOptions.NO)
-    return context, rclpy.create_node(name, context=context, **node_options)
+    node = rclpy.create_node(name, context=context, **node_options)
+    from lowerbase.ros2.logs import to_rosout
+
+    to_rosout(node)  # for the process' life: lowerbase's records on its console and /rosout
+    return context, node
 
 
 def run(

@@ -6,6 +6,7 @@
 ``params``        the node's ROS 2 parameters topics.odom, command_rate, publish_tf
 ``drive``         once ~link_state is ready: /base_cmd_vel forward until /odom moved 0.2 m
 ``tf``            one odom -> base_link on /tf
+``rosout``        NaN twists on /base_cmd_vel until driver_base's warning is on /rosout
 ``imu``           one /imu/data_raw (sensor-data QoS)
 ``static_pub``    publishes two static transforms through Ros2Wire, then waits to be killed
 ``static_sub``    a late subscriber's /tf_static
@@ -25,7 +26,7 @@ from typing import Any
 
 import probe_common  # beside this script (sys.path[0])
 import rclpy
-from geometry_msgs.msg import TransformStamped
+from geometry_msgs.msg import TransformStamped, Twist
 from nav_msgs.msg import Odometry
 from probe_common import sec
 from rcl_interfaces.srv import GetParameters
@@ -105,6 +106,29 @@ def drive(node: Node) -> dict[str, Any]:
     return probe_common.drive(node, TIMEOUT)
 
 
+def rosout(node: Node) -> dict[str, Any]:
+    """Twists with NaN on /base_cmd_vel until driver_base's warning about them is on /rosout
+    (transient local, as rcl publishes it: a line logged before the match still comes)."""
+    from rcl_interfaces.msg import Log
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+
+    logs: list[Log] = []
+    node.create_subscription(Log, "/rosout", logs.append, QoSProfile(
+        depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    wait_ready(node)
+    pub = node.create_publisher(Twist, "/base_cmd_vel", qos_for("/base_cmd_vel"))
+    bad = Twist()
+    bad.linear.x = float("nan")
+
+    def warned() -> bool:
+        pub.publish(bad)
+        return any("NaN or infinity" in m.msg for m in logs)
+
+    spin_until(node, warned, "driver_base's warning on /rosout")
+    m = next(m for m in logs if "NaN or infinity" in m.msg)
+    return {"level": int(m.level), "name": m.name, "msg": m.msg}
+
+
 def tf(node: Node) -> dict[str, Any]:
     got: list[TFMessage] = []
     node.create_subscription(TFMessage, "/tf", got.append, qos_for("/tf", 100))
@@ -174,7 +198,7 @@ def main() -> None:
         result = service(node, args[0])
     else:
         result = {"latched": latched, "params": params, "drive": drive, "tf": tf, "imu": imu,
-                  "static_sub": static_sub}[mode](node)
+                  "static_sub": static_sub, "rosout": rosout}[mode](node)
     print(json.dumps(result), flush=True)
     node.destroy_node()
     rclpy.shutdown()

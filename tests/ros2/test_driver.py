@@ -123,6 +123,14 @@ def test_parameters_are_ros2_parameters(driver: Ros2) -> None:
     assert got == {"topics.odom": "/odom", "command_rate": 50.0, "publish_tf": True}
 
 
+def test_log_lines_go_to_rosout(driver: Ros2) -> None:
+    """lowerbase's log records are the node's: driver_base's warning about twists with NaN
+    reaches an rclpy subscriber of /rosout (rcl_interfaces/msg/Log), at WARN."""
+    got = driver.run_json("ros2_driver_probe.py", "rosout", timeout=300)
+    assert got["level"] == 30 and got["name"] == "driver_base", got  # Log.WARN
+    assert "ignored 1 twist(s) with NaN or infinity" in got["msg"], got
+
+
 def test_tf_and_imu(driver: Ros2) -> None:
     assert driver.run_json("ros2_driver_probe.py", "tf", timeout=200) == \
         {"frame_id": "odom", "child_frame_id": "base_link"}

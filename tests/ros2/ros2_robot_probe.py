@@ -13,6 +13,7 @@ JSON line.
 ``plan X Y``         compute_path_to_pose to (X, Y) from the robot; the robot's map pose
 ``task ID DIR``      exec_task: transport to R1 (direction DIR); robot_status to its end
 ``param NAME``       the robot node's ROS 2 parameter NAME (its GetParameters service)
+``navigation_mode``  a /navigation_mode goal the navigator takes, then one it refuses
 
 Every wait has a deadline (``TIMEOUT``) and fails in one line when it passes.
 """
@@ -175,6 +176,20 @@ def move_base(node: Node, x: float, y: float, th: float) -> dict[str, Any]:
             "frame": last.header.frame_id,
             "last_pose": (last.pose.position.x, last.pose.position.y),
             "map_pose": buf.map_pose()}
+
+
+def navigation_mode(node: Node) -> dict[str, Any]:
+    """/navigation_mode (woosh_msgs/action/NavigationMode): precise avoidance at 0.4 m/s, then
+    an unknown mode (9): each goal's end (status, result)."""
+    from woosh_msgs.action import NavigationMode
+
+    client = ActionClient(node, NavigationMode, "/navigation_mode")
+    spin_until(node, lambda: client.server_is_ready(), "the navigation_mode server")
+    good = goal_end(node, client, NavigationMode.Goal(navigation_mode=1, max_speed=0.4),
+                    "navigation_mode")
+    bad = goal_end(node, client, NavigationMode.Goal(navigation_mode=9, max_speed=0.4),
+                   "navigation_mode")
+    return {"good": [good.status, good.result.result], "bad": [bad.status, bad.result.result]}
 
 
 def drive(node: Node) -> dict[str, Any]:
@@ -357,7 +372,7 @@ def main() -> None:
         result = task(node, int(args[0]), int(args[1]))
     else:
         result = {"topics": topics, "latched": latched, "tf": tf, "drive": drive,
-                  "preempt": preempt}[mode](node)
+                  "preempt": preempt, "navigation_mode": navigation_mode}[mode](node)
     print(json.dumps(result), flush=True)
     node.destroy_node()
     rclpy.shutdown()

@@ -71,6 +71,13 @@ def test_a_bad_recovery_behavior_is_one_line(robot: Ros2) -> None:
     assert "no_such_behavior" in done.stderr.strip().splitlines()[-1], done.stderr
 
 
+def test_navigation_mode(robot: Ros2) -> None:
+    """The vendor's /navigation_mode on ROS 2: a known mode SUCCEEDED with result 1, an unknown
+    one ABORTED with result 0 (as actionlib's set_aborted on ROS 1)."""
+    got = robot.run_json("ros2_robot_probe.py", "navigation_mode", timeout=300)
+    assert got == {"good": [4, 1], "bad": [6, 0]}, got  # SUCCEEDED, ABORTED
+
+
 def test_late_subscriber_gets_map_and_tf_static(robot: Ros2) -> None:
     got = robot.run_json("ros2_robot_probe.py", "latched", timeout=300)
     assert (got["map_frame"], got["width"], got["height"], got["resolution"]) == \

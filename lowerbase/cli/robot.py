@@ -82,6 +82,10 @@ def add_subparser(subparsers: Any) -> None:
                    help="with --ros2: a ROS 2 parameter of /lowerbase_robot, e.g. "
                    "_move_base/recovery_behaviors:=[clear_costmap,rotate_recovery] (on ROS 1 "
                    "the parameter server's /move_base/recovery_behaviors)")
+    p.add_argument("--camera", action="store_true",
+                   help="with --sim-time: the depth camera too (/camera_1/..., ~50 ms of CPU a "
+                   "frame at 15 Hz of simulated time; the real-time robot's world always has "
+                   "it)")
     p.add_argument("--seed", type=int, default=0, metavar="S",
                    help="with --sim-time: the seed of the localization's random numbers "
                    "(default 0)")
@@ -216,7 +220,8 @@ def _run_lockstep(args: argparse.Namespace, sup: Any, speed: float, parts: tuple
         sup.start([recorder_spec(RobotOptions(map=args.map, foxglove=args.foxglove,
                                               mcap=args.mcap))], on_ready=_on_ready)
     opts = LockstepOptions(map=args.map, parts=parts, soc=args.soc,
-                           ground_truth=args.ground_truth, seed=args.seed, truth=args.truth)
+                           ground_truth=args.ground_truth, seed=args.seed, truth=args.truth,
+                           camera=args.camera)
 
     lost: set[str] = set()
 
@@ -271,7 +276,7 @@ def _run_ros2(args: argparse.Namespace) -> int:
     speed = args.speed or DEFAULT_SPEED
     opts = LockstepOptions(map=args.map, parts=tuple(p for p in UPPER if p not in args.without),
                            soc=args.soc, ground_truth=args.ground_truth, seed=args.seed,
-                           truth=args.truth)
+                           truth=args.truth, camera=args.camera)
     make: Any = LockstepRobot
     if args.robot == "legged":  # its lower computer and legged driver (parts, map unused)
         from lowerbase.robot.lockstep_legged import LeggedLockstep
@@ -307,6 +312,9 @@ def run(args: argparse.Namespace) -> int:
                             (args.robot == "legged", "--robot legged")):
             if given:
                 raise ConfigError(f"{flag} goes with --sim-time (real time runs at 1 x)")
+        if args.camera:
+            raise ConfigError("--camera goes with --sim-time: the real-time robot's world "
+                              "renders the camera always")
     elif args.respawn:
         raise ConfigError("--respawn restarts the parts of the real-time robot; with "
                           "--sim-time the robot is one process: drop one of them")

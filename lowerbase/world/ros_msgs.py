@@ -116,13 +116,16 @@ _XYZ = [PointField(name="x", offset=0, datatype=PointField.FLOAT32, count=1),
 def camera_info(config: CameraConfig, frame_id: str, stamp: Any) -> CameraInfo:
     """The pinhole the camera renders with (:class:`~lowerbase.world.camera.DepthCamera`): K from
     fx, fy, cx, cy, no distortion (plumb_bob, D = 0), R = I, P = [K | 0] (a monocular camera,
-    as realsense2_camera publishes each stream's own)."""
+    as realsense2_camera publishes each stream's own). ROS 1's field names are D, K, R, P;
+    ROS 2's d, k, r, p."""
     fx, fy, cx, cy = config.fx, config.fy, config.cx, config.cy
+    matrices = {"D": [0.0] * 5, "K": [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+                "R": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                "P": [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]}
+    if hasattr(CameraInfo, "d"):  # ROS 2 spells them d, k, r, p
+        matrices = {k.lower(): v for k, v in matrices.items()}
     return CameraInfo(header=header(stamp, frame_id), height=config.height, width=config.width,
-                      distortion_model="plumb_bob", D=[0.0] * 5,
-                      K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
-                      R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-                      P=[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0])
+                      distortion_model="plumb_bob", **matrices)
 
 
 def cloud_xyz32(points: np.ndarray, frame_id: str, stamp: Any) -> PointCloud2:

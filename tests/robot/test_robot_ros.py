@@ -210,6 +210,18 @@ def test_speed_without_sim_time_is_one_line(tmp_path: Path) -> None:
     assert len(lines) == 1 and "--speed K goes with --sim-time" in lines[0], out.stderr
 
 
+@pytest.mark.parametrize(("args", "says"), [
+    (["--camera"], "--camera goes with --sim-time"),
+    (["_move_base/recovery_behaviors:=[rotate]"], "NAME:=VALUE arguments go with --ros2")])
+def test_lockstep_and_ros2_options_without_them_are_one_line(args: list[str],
+                                                              says: str) -> None:
+    out = subprocess.run([sys.executable, "-m", "lowerbase", "robot", *args],
+                         capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert out.returncode != 0
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and says in lines[0], out.stderr
+
+
 @pytest.mark.ros
 @pytest.mark.process
 def test_a_second_robot_on_a_master_that_has_one_is_refused_and_sighup_stops_the_first(

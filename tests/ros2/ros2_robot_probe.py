@@ -14,6 +14,7 @@ JSON line.
 ``task ID DIR``      exec_task: transport to R1 (direction DIR); robot_status to its end
 ``param NAME``       the robot node's ROS 2 parameter NAME (its GetParameters service)
 ``navigation_mode``  a /navigation_mode goal the navigator takes, then one it refuses
+``camera``           one depth camera_info and one depth image (robot --camera)
 
 Every wait has a deadline (``TIMEOUT``) and fails in one line when it passes.
 """
@@ -190,6 +191,25 @@ def navigation_mode(node: Node) -> dict[str, Any]:
     bad = goal_end(node, client, NavigationMode.Goal(navigation_mode=9, max_speed=0.4),
                    "navigation_mode")
     return {"good": [good.status, good.result.result], "bad": [bad.status, bad.result.result]}
+
+
+def camera(node: Node) -> dict[str, Any]:
+    """One /camera_1/depth/camera_info and one /camera_1/depth/image_raw (sensor-data QoS,
+    which takes reliable publishers too)."""
+    from sensor_msgs.msg import CameraInfo, Image
+
+    infos: list[CameraInfo] = []
+    images: list[Image] = []
+    node.create_subscription(CameraInfo, "/camera_1/depth/camera_info", infos.append,
+                             qos_profile_sensor_data)
+    node.create_subscription(Image, "/camera_1/depth/image_raw", images.append,
+                             qos_profile_sensor_data)
+    spin_until(node, lambda: bool(infos) and bool(images), "the depth camera's topics")
+    info, image = infos[0], images[0]
+    return {"info": [info.width, info.height, info.distortion_model, list(info.d),
+                     list(info.k), list(info.p)],
+            "image": [image.width, image.height, image.encoding, len(image.data)],
+            "frame": info.header.frame_id}
 
 
 def drive(node: Node) -> dict[str, Any]:
@@ -372,7 +392,8 @@ def main() -> None:
         result = task(node, int(args[0]), int(args[1]))
     else:
         result = {"topics": topics, "latched": latched, "tf": tf, "drive": drive,
-                  "preempt": preempt, "navigation_mode": navigation_mode}[mode](node)
+                  "preempt": preempt, "navigation_mode": navigation_mode,
+                  "camera": camera}[mode](node)
     print(json.dumps(result), flush=True)
     node.destroy_node()
     rclpy.shutdown()

@@ -60,6 +60,26 @@ def test_recovery_behaviors_are_a_ros2_parameter(robot: Ros2) -> None:
     assert got == {"type": 9, "strings": ["rotate", "clear_aggressive"]}  # STRING_ARRAY
 
 
+def test_the_depth_camera_with_ros2_names(robot: Ros2) -> None:
+    """``--camera`` (a robot of its own, in a domain of its own): the depth camera's info with
+    ROS 2's d, k, p (ROS 1's D, K, P) and its 16-bit image."""
+    own = ros2_or_skip()
+    proc = Ros2Proc([str(own.python), "-m", "lowerbase", "robot", "--ros2", "--sim-time",
+                     "--map", "empty_room", "--speed", "max", "--camera"], own.env)
+    try:
+        proc.wait_for("on ROS 2", timeout=START_TIMEOUT)
+        got = own.run_json("ros2_robot_probe.py", "camera", timeout=300)
+    finally:
+        code, err = proc.stop(timeout=60)
+    assert code == 0 and "Traceback" not in err, err
+    fx, cx, fy, cy = 385.0, 319.5, 385.0, 239.5  # CameraConfig's defaults
+    assert got["info"] == [640, 480, "plumb_bob", [0.0] * 5,
+                           [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+                           [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]]
+    assert got["image"] == [640, 480, "16UC1", 640 * 480 * 2]
+    assert got["frame"] == "camera_1_depth_optical_frame"
+
+
 def test_a_bad_recovery_behavior_is_one_line(robot: Ros2) -> None:
     own = ros2_or_skip()  # a domain of its own, beside the module's robot
     done = subprocess.run([str(own.python), "-m", "lowerbase", "robot", "--ros2",

@@ -9,6 +9,7 @@ come before the ones that drive it.
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 from collections.abc import Iterator
@@ -204,3 +205,17 @@ def test_exec_task_and_robot_status(robot: Ros2) -> None:
     assert got["task_state"] == 7 and got["dest"] == "R1", got  # COMPLETED
     x, y, _ = got["map_pose"]
     assert math.hypot(x - R1[0], y - R1[1]) < 0.1, got
+
+
+def test_the_example_client_drives_goals_and_a_task(robot: Ros2) -> None:
+    """examples/ros2_client.py, a team's own rclpy node (docs/ros2.md): a NavigateToPose goal,
+    then a transport task to R1, on the robot's simulated time."""
+    done = subprocess.run([str(robot.python), str(ROOT / "examples" / "ros2_client.py"),
+                           "--goal", "6.0", "4.0", "0.0", "--mark", "R1", "--timeout", "600"],
+                          env=robot.env, cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stdout + done.stderr
+    lines = done.stdout.splitlines()
+    [nav] = [json.loads(line[9:]) for line in lines if line.startswith("navigate ")]
+    assert nav["status"] == 4 and nav["error_code"] == 0 and nav["feedbacks"] > 0, nav
+    statuses = [json.loads(line[13:]) for line in lines if line.startswith("robot_status ")]
+    assert statuses[-1]["task_state"] == 7 and statuses[-1]["dest"] == "R1", statuses[-1]

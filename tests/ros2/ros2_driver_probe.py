@@ -8,6 +8,7 @@
 ``tf``            one odom -> base_link on /tf
 ``rosout``        NaN twists on /base_cmd_vel until driver_base's warning is on /rosout
 ``imu``           one /imu/data_raw (sensor-data QoS)
+``rates``         /imu/data_raw's and /battery's rates by their stamps; the last battery
 ``static_pub``    publishes two static transforms through Ros2Wire, then waits to be killed
 ``static_sub``    a late subscriber's /tf_static
 ``clock_pub T``   publishes /clock from T s on at the wall clock's pace until killed
@@ -146,6 +147,26 @@ def imu(node: Node) -> dict[str, Any]:
             "accel_z": got[-1].linear_acceleration.z}
 
 
+def rates(node: Node) -> dict[str, Any]:
+    """/imu/data_raw (sensor-data QoS) and /battery: their rates by their stamps (101 and 6
+    messages), and the last battery."""
+    from woosh_msgs.msg import Battery
+
+    imu: list[Imu] = []
+    battery: list[Battery] = []
+    node.create_subscription(Imu, "/imu/data_raw", imu.append, qos_profile_sensor_data)
+    node.create_subscription(Battery, "/battery", battery.append, qos_for("/battery", 10))
+    spin_until(node, lambda: len(imu) > 100 and len(battery) > 5, "/imu/data_raw and /battery")
+
+    def rate(msgs: list[Any], n: int) -> float:
+        stamps = [sec(m.header.stamp) for m in msgs[: n + 1]]
+        return n / (stamps[-1] - stamps[0])
+
+    last = battery[-1]
+    return {"imu": rate(imu, 100), "battery": rate(battery, 5),
+            "percentage": last.batteryPercentage, "voltage": last.batteryVoltage}
+
+
 def static_pub(node: Node) -> None:
     broadcaster = Ros2Wire(node).static_broadcaster()
     for child, x in (("laser", 0.2), ("camera", 0.3)):
@@ -198,7 +219,7 @@ def main() -> None:
         result = service(node, args[0])
     else:
         result = {"latched": latched, "params": params, "drive": drive, "tf": tf, "imu": imu,
-                  "static_sub": static_sub, "rosout": rosout}[mode](node)
+                  "static_sub": static_sub, "rosout": rosout, "rates": rates}[mode](node)
     print(json.dumps(result), flush=True)
     node.destroy_node()
     rclpy.shutdown()

@@ -139,6 +139,15 @@ def test_tf_and_imu(driver: Ros2) -> None:
     assert imu["accel_z"] == pytest.approx(9.8, abs=0.5)
 
 
+def test_imu_and_battery_at_their_rates(driver: Ros2) -> None:
+    """/imu/data_raw at 100 Hz and /battery at 1 Hz (docs/driver.md's table), by their
+    stamps; the battery as the emulator's pack reports it."""
+    got = driver.run_json("ros2_driver_probe.py", "rates", timeout=300)
+    assert got["imu"] == pytest.approx(100.0, rel=0.05), got
+    assert got["battery"] == pytest.approx(1.0, rel=0.15), got
+    assert 0 < got["percentage"] <= 100 and 40.0 < got["voltage"] < 60.0, got
+
+
 def test_late_subscriber_gets_tf_static(ros2: Ros2) -> None:
     pub = Ros2Proc([str(ros2.python), str(HERE / "ros2_driver_probe.py"), "static_pub"],
                    ros2.env)

@@ -133,12 +133,23 @@ class BmsFrameAccumulator:
 
     def __init__(self) -> None:
         self.frames: dict[str, dict[str, Any]] = {}
+        self._fresh: set[str] = set()  #: the Bms* frames come since the last whole burst
 
     def update(self, name: str, signals: Mapping[str, Any]) -> bool:
         """Store one decoded frame; True if it was a Bms* frame."""
         if name not in BMS_FRAMES:
             return False
         self.frames[name] = dict(signals)
+        self._fresh.add(name)
+        return True
+
+    def take_burst(self) -> bool:
+        """True once each Bms* frame has come again since the last True: a whole burst (the
+        five frames of one 1 Hz cycle), so that /battery goes out once a cycle and never from
+        a cycle half received. A frame lost from a cycle makes it wait for the next."""
+        if len(self._fresh) < len(BMS_FRAMES):
+            return False
+        self._fresh.clear()
         return True
 
     @property
@@ -159,3 +170,4 @@ class BmsFrameAccumulator:
 
     def clear(self) -> None:
         self.frames.clear()
+        self._fresh.clear()

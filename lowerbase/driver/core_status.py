@@ -82,7 +82,9 @@ class StatusInput:
             k: int(v[k]) for k in ("Urgency", "Abnormal", "Normal", "Color")}
 
     def _bms(self, name: str, v: dict[str, Any], now: float) -> None:
-        if self.bms.update(name, v):
+        # /battery and /driver_base/bms once a whole 1 Hz burst of five frames is in: the
+        # node's tick falling between two frames of one burst gave two, the first torn
+        if self.bms.update(name, v) and self.bms.take_burst():
             self._notify("battery")
 
     def _on_BmsPack(self, v: dict[str, Any], now: float) -> None:

@@ -136,3 +136,19 @@ def test_mcu_adapter() -> None:
         codec.encode(name, adapter.frame(name, snap))
     with pytest.raises(KeyError):
         adapter.frame("Heartbeat", snap)
+
+
+def test_a_burst_is_taken_once_whole_and_waits_for_a_lost_frame() -> None:
+    acc = BmsFrameAccumulator()
+    decoded = _over_the_wire(_register_snapshot(70, 5), {})
+    taken = []
+    for name in BMS_FRAMES * 2:  # two whole cycles
+        acc.update(name, decoded[name])
+        taken.append(acc.take_burst())
+    assert taken == [False] * 4 + [True] + [False] * 4 + [True]
+    for name in BMS_FRAMES[:-1]:  # a cycle whose BmsLife is lost: nothing yet
+        acc.update(name, decoded[name])
+        assert not acc.take_burst()
+    for name in BMS_FRAMES:  # the next cycle: once, at its end
+        acc.update(name, decoded[name])
+        assert acc.take_burst() == (name == BMS_FRAMES[-1])

@@ -355,6 +355,16 @@ class LeggedNode:
             link.close()
 
 
+
+def make_map_dir(config: LeggedDriverConfig) -> None:
+    """Make set_map's directory (``~map_dir``) if it is set; a ConfigError line if it cannot
+    be made."""
+    if config.map_dir is not None:
+        try:
+            config.map_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ConfigError(f"~map_dir {config.map_dir}: {exc.strerror}") from None
+
 def run(bus_config: dict[str, Any], ros_args: Sequence[str], *, name: str = NODE_NAME,
         params: dict[str, Any] | None = None) -> int:
     """Open the four leg buses, start rospy and spin until shutdown."""
@@ -377,11 +387,7 @@ def run(bus_config: dict[str, Any], ros_args: Sequence[str], *, name: str = NODE
                 links.append(BusLink({**cfg, "can_filters": filters}))
             settings, config = load_legged_settings(
                 {**session.rospy.get_param("~", {}), **(params or {})})
-            if config.map_dir is not None:
-                try:
-                    config.map_dir.mkdir(parents=True, exist_ok=True)
-                except OSError as exc:
-                    raise ConfigError(f"~map_dir {config.map_dir}: {exc.strerror}") from None
+            make_map_dir(config)
             node = LeggedNode(settings, config, links)
             node.advertise()
             node.start_readers()

@@ -20,7 +20,6 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from lowerbase.errors import ConfigError
 from lowerbase.robot.lockstep import CLOCK_RATE, LockstepOptions, Ros1Side
 
 
@@ -28,7 +27,12 @@ class LeggedLockstep:
     """The legged robot and its driver's face on one simulated clock (see the module)."""
 
     def __init__(self, opts: LockstepOptions, rospy: Any, side: Any = None) -> None:
-        from lowerbase.legged_driver.node import NODE_NAME, LeggedNode, load_legged_settings
+        from lowerbase.legged_driver.node import (
+            NODE_NAME,
+            LeggedNode,
+            load_legged_settings,
+            make_map_dir,
+        )
         from lowerbase.simloop.legged import LeggedSimLoop
 
         self.opts = opts
@@ -36,11 +40,7 @@ class LeggedLockstep:
         self.side = side if side is not None else Ros1Side(rospy)
         self.lock = threading.RLock()
         settings, config = load_legged_settings({})
-        if config.map_dir is not None:  # set_map's PCD files (as `lowerbase driver` makes it)
-            try:
-                config.map_dir.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise ConfigError(f"~map_dir {config.map_dir}: {exc.strerror}") from None
+        make_map_dir(config)  # set_map's PCD files, as `lowerbase driver --robot legged`
         kwargs: dict[str, Any] = {} if opts.soc is None else {"soc": opts.soc}
         self.loop = LeggedSimLoop(config=config, **kwargs)
         self.dt = self.loop.dt

@@ -66,6 +66,27 @@ def udp_bound_beyond_loopback(pid: int) -> list[str]:
     return bad
 
 
+@contextlib.contextmanager
+def robot_on_ros2(ros2: Ros2, args: list[str], *named: str,
+                  env: dict[str, str] | None = None) -> Iterator[None]:
+    """``lowerbase robot --ros2 ARGS`` of the ROS 2 venv for the block: its start line names
+    /lowerbase_robot and each of ``named``, nothing of it is bound beyond loopback, and at the
+    end Ctrl-C stops it with its stop line and no traceback."""
+    proc = Ros2Proc([str(ros2.python), "-m", "lowerbase", "robot", "--ros2", *args],
+                    ros2.env if env is None else env)
+    try:
+        line = proc.wait_for("on ROS 2", timeout=START_TIMEOUT)
+        assert "/lowerbase_robot" in line and all(n in line for n in named), line
+        assert udp_bound_beyond_loopback(proc.popen.pid) == []
+        yield
+        code, err = proc.stop(timeout=60)
+        assert code == 0, err
+        assert "lowerbase robot: stopped at" in err, err
+        assert "Traceback" not in err, err
+    finally:
+        proc.stop(timeout=60)
+
+
 @pytest.fixture(scope="module")
 def driver() -> Iterator[Ros2]:
     """An emulator and ``lowerbase driver --ros2`` on a udp_multicast port of their own."""

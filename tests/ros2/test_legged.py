@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from tests.ros2.conftest import Ros2, ros2_or_skip
-from tests.ros2.test_driver import START_TIMEOUT, Ros2Proc, udp_bound_beyond_loopback
+from tests.ros2.test_driver import robot_on_ros2
 
 IN_CONTROL, STANDING_MODE = 7, 6  #: RobotState's state values
 JOY, VEL_CMD = 0, 1  #: RobotState's joy_listen_type values
@@ -26,19 +26,9 @@ def robot(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Ros2, Path
     ros2 = ros2_or_skip()
     home = tmp_path_factory.mktemp("ros_home")  # set_map's PCD files go to $ROS_HOME/maps
     env = {**ros2.env, "ROS_HOME": str(home)}
-    proc = Ros2Proc([str(ros2.python), "-m", "lowerbase", "robot", "--robot", "legged",
-                     "--ros2", "--sim-time", "--speed", "1"], env)
-    try:
-        line = proc.wait_for("on ROS 2", timeout=START_TIMEOUT)
-        assert "/lowerbase_robot" in line and "legged driver" in line, line
-        assert udp_bound_beyond_loopback(proc.popen.pid) == []
+    with robot_on_ros2(ros2, ["--robot", "legged", "--sim-time", "--speed", "1"],
+                       "legged driver", env=env):
         yield ros2, home
-        code, err = proc.stop(timeout=60)
-        assert code == 0, err
-        assert "lowerbase robot: stopped at" in err, err
-        assert "Traceback" not in err, err
-    finally:
-        proc.stop(timeout=60)
 
 
 def test_the_ros1_interface_on_ros2(robot: tuple[Ros2, Path]) -> None:

@@ -18,7 +18,7 @@ import pytest
 
 from tests.conftest import ROOT
 from tests.ros2.conftest import Ros2, ros2_or_skip
-from tests.ros2.test_driver import START_TIMEOUT, Ros2Proc, udp_bound_beyond_loopback
+from tests.ros2.test_driver import robot_on_ros2
 
 START = (5.0, 4.0, 0.0)  #: empty_room's "start" pose (lowerbase/world/maps/empty_room.*)
 GOAL = (7.0, 5.0, 0.0)
@@ -32,19 +32,9 @@ RECOVERY = "_move_base/recovery_behaviors:=[rotate,clear_aggressive]"
 @pytest.fixture(scope="module")
 def robot() -> Iterator[Ros2]:
     ros2 = ros2_or_skip()
-    proc = Ros2Proc([str(ros2.python), "-m", "lowerbase", "robot", "--ros2", "--sim-time",
-                     "--map", "empty_room", "--speed", "max", RECOVERY], ros2.env)
-    try:
-        line = proc.wait_for("on ROS 2", timeout=START_TIMEOUT)
-        assert "/lowerbase_robot" in line and "empty_room" in line, line
-        assert udp_bound_beyond_loopback(proc.popen.pid) == []
+    with robot_on_ros2(ros2, ["--sim-time", "--map", "empty_room", "--speed", "max", RECOVERY],
+                       "empty_room"):
         yield ros2
-        code, err = proc.stop(timeout=60)
-        assert code == 0, err
-        assert "lowerbase robot: stopped at" in err, err
-        assert "Traceback" not in err, err
-    finally:
-        proc.stop(timeout=60)
 
 
 def test_odom_scan_and_clock(robot: Ros2) -> None:
@@ -65,14 +55,9 @@ def test_the_depth_camera_with_ros2_names(robot: Ros2) -> None:
     """``--camera`` (a robot of its own, in a domain of its own): the depth camera's info with
     ROS 2's d, k, p (ROS 1's D, K, P) and its 16-bit image."""
     own = ros2_or_skip()
-    proc = Ros2Proc([str(own.python), "-m", "lowerbase", "robot", "--ros2", "--sim-time",
-                     "--map", "empty_room", "--speed", "max", "--camera"], own.env)
-    try:
-        proc.wait_for("on ROS 2", timeout=START_TIMEOUT)
+    with robot_on_ros2(own, ["--sim-time", "--map", "empty_room", "--speed", "max",
+                             "--camera"]):
         got = own.run_json("ros2_robot_probe.py", "camera", timeout=300)
-    finally:
-        code, err = proc.stop(timeout=60)
-    assert code == 0 and "Traceback" not in err, err
     fx, cx, fy, cy = 385.0, 319.5, 385.0, 239.5  # CameraConfig's defaults
     assert got["info"] == [640, 480, "plumb_bob", [0.0] * 5,
                            [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],

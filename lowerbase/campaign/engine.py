@@ -35,6 +35,11 @@ LOCAL_CLUSTER_CONFIG: dict[str, Any] = {
     "distributed.admin.system-monitor.interval": "2s",
     "distributed.worker.memory.monitor-interval": "1s",
 }
+#: where the system has a forkserver (Linux, macOS), a LocalCluster's workers are forked from
+#: one that imported these first: the warm-up's imports and kernel loads are done once for all
+#: workers instead of once in each (docs/campaigns.md), and a worker is up in a fraction of the
+#: time a fresh interpreter takes
+FORKSERVER_PRELOAD = ("distributed", "lowerbase.campaign.prewarm")
 _NOISY = ("distributed", "tornado", "bokeh")
 
 
@@ -116,10 +121,13 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *,
         from lowerbase.campaign.warmup import WarmPlugin
 
         # the nannies take the settings along to the workers they start (and restart)
-        with dask.config.set(LOCAL_CLUSTER_CONFIG):
+        with dask.config.set(LOCAL_CLUSTER_CONFIG), dask.config.set(_start_method()):
             started.append(LocalCluster(
                 n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                 dashboard_address=None, silence_logs=logging.CRITICAL,
+                # the scheduler's HTTP routes (health, metrics; no dashboard) on a free
+                # loopback port: on Dask's 8787 a second campaign beside the first warned
+                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                 plugins={WarmPlugin()} if warm else set()))
 
     with _children_ignore_sigint():  # (SIGINT waits meanwhile: Ctrl-C after the start)
@@ -150,6 +158,25 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *,
             yield client
     finally:
         cluster.close()
+
+
+def _start_method() -> dict[str, str]:
+    """Dask's setting for how a LocalCluster's nannies start their workers: forked from a
+    forkserver that preloaded :data:`FORKSERVER_PRELOAD` (it is started once per process and
+    kept; if it already runs without them, the workers still warm by their plugin), else Dask's
+    default (spawn)."""
+    import multiprocessing
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():  # pragma: no cover
+        return {}
+    config = {"distributed.worker.multiprocessing-method": "forkserver"}
+    import dask
+    from distributed.utils import get_mp_context
+
+    with dask.config.set(config):
+        # Dask sets its own preload list on its first call; ours replaces it (it imports those)
+        get_mp_context().set_forkserver_preload(list(FORKSERVER_PRELOAD))
+    return config
 
 
 def warm_workers(client: Any) -> None:

@@ -130,3 +130,36 @@ def test_local_cluster_workers_run_without_the_profiler_and_with_slow_monitors()
     assert got == [{"profile": False,
                     "tick": LOCAL_CLUSTER_CONFIG["distributed.admin.tick.interval"],
                     "memory": LOCAL_CLUSTER_CONFIG["distributed.worker.memory.monitor-interval"]}]
+
+
+def _worker_start() -> dict[str, Any]:
+    kernel = sys.modules.get("lowerbase.firmware_model.lean_kernel")
+    return {"preloaded": "lowerbase.campaign.prewarm" in sys.modules,
+            "kernel loaded": bool(kernel is not None and kernel.period.signatures),
+            "parent": os.getppid()}
+
+
+@pytest.mark.process
+def test_local_cluster_workers_are_forked_warm_from_one_forkserver() -> None:
+    """Without the warm-up plugin, a worker has the kernels loaded as it starts: it was forked
+    from the forkserver that warmed once (not spawned, nor a child of this process)."""
+    from lowerbase.campaign.engine import open_client, quiet_dask
+
+    with quiet_dask(), open_client(workers=2, warm=False) as client:
+        got = list(client.run(_worker_start).values())
+    assert [(g["preloaded"], g["kernel loaded"]) for g in got] == [(True, True)] * 2
+    assert got[0]["parent"] == got[1]["parent"] != os.getpid()
+
+
+@pytest.mark.process
+def test_two_local_clusters_at_once_start_without_a_port_warning() -> None:
+    import warnings
+
+    from lowerbase.campaign.engine import open_client, quiet_dask
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        with quiet_dask(), open_client(workers=1) as a, open_client(workers=1) as b:
+            ports = [c.scheduler_info()["services"]["dashboard"] for c in (a, b)]
+    assert [str(w.message) for w in seen if "in use" in str(w.message)] == []
+    assert len(set(ports)) == 2 and 8787 not in ports

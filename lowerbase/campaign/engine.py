@@ -91,6 +91,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *,
     ``warm``: a LocalCluster's workers are warmed as they start (their plugin, before they
     take runs), a scheduler's by :func:`warm_workers`. ``meanwhile`` runs in this thread while
     the LocalCluster starts and warms in another (the campaign is planned then)."""
+    method = _start_forkserver() if scheduler is None else {}
     try:
         from distributed import Client, LocalCluster
     except ImportError as e:  # pragma: no cover - a dependency
@@ -121,7 +122,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *,
         from lowerbase.campaign.warmup import WarmPlugin
 
         # the nannies take the settings along to the workers they start (and restart)
-        with dask.config.set(LOCAL_CLUSTER_CONFIG), dask.config.set(_start_method()):
+        with dask.config.set(LOCAL_CLUSTER_CONFIG), dask.config.set(method):
             started.append(LocalCluster(
                 n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                 dashboard_address=None, silence_logs=logging.CRITICAL,
@@ -160,23 +161,23 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *,
         cluster.close()
 
 
-def _start_method() -> dict[str, str]:
-    """Dask's setting for how a LocalCluster's nannies start their workers: forked from a
-    forkserver that preloaded :data:`FORKSERVER_PRELOAD` (it is started once per process and
-    kept; if it already runs without them, the workers still warm by their plugin), else Dask's
-    default (spawn)."""
+def _start_forkserver() -> dict[str, str]:
+    """Start the forkserver a LocalCluster's workers are forked from, preloading
+    :data:`FORKSERVER_PRELOAD`, and return Dask's setting that makes the nannies use it (else,
+    where there is none, ``{}``: Dask's default, spawn). Started first, before this process
+    imports Dask, so that its warm-up runs beside this process' own start. It is started once
+    per process and kept (already running, it keeps what it preloaded: the workers then warm
+    by their plugin); it ignores SIGINT, as do the workers it forks."""
     import multiprocessing
+    import multiprocessing.forkserver
 
     if "forkserver" not in multiprocessing.get_all_start_methods():  # pragma: no cover
         return {}
-    config = {"distributed.worker.multiprocessing-method": "forkserver"}
-    import dask
-    from distributed.utils import get_mp_context
-
-    with dask.config.set(config):
-        # Dask sets its own preload list on its first call; ours replaces it (it imports those)
-        get_mp_context().set_forkserver_preload(list(FORKSERVER_PRELOAD))
-    return config
+    # (Dask sets a preload list of its own on its first use: the server is running by then)
+    multiprocessing.get_context("forkserver").set_forkserver_preload(list(FORKSERVER_PRELOAD))
+    with _children_ignore_sigint():
+        multiprocessing.forkserver.ensure_running()
+    return {"distributed.worker.multiprocessing-method": "forkserver"}
 
 
 def warm_workers(client: Any) -> None:

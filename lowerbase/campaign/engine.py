@@ -91,7 +91,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *,
     ``warm``: a LocalCluster's workers are warmed as they start (their plugin, before they
     take runs), a scheduler's by :func:`warm_workers`. ``meanwhile`` runs in this thread while
     the LocalCluster starts and warms in another (the campaign is planned then)."""
-    method = _start_forkserver() if scheduler is None else {}
+    method = start_forkserver() if scheduler is None else {}
     try:
         from distributed import Client, LocalCluster
     except ImportError as e:  # pragma: no cover - a dependency
@@ -161,11 +161,11 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *,
         cluster.close()
 
 
-def _start_forkserver() -> dict[str, str]:
+def start_forkserver() -> dict[str, str]:
     """Start the forkserver a LocalCluster's workers are forked from, preloading
     :data:`FORKSERVER_PRELOAD`, and return Dask's setting that makes the nannies use it (else,
-    where there is none, ``{}``: Dask's default, spawn). Started first, before this process
-    imports Dask, so that its warm-up runs beside this process' own start. It is started once
+    where there is none, ``{}``: Dask's default, spawn). :func:`open_client` calls it; call it
+    first, before this process imports Dask, and the warm-up runs beside that. It is started once
     per process and kept (already running, it keeps what it preloaded: the workers then warm
     by their plugin); it ignores SIGINT, as do the workers it forks."""
     import multiprocessing

@@ -79,7 +79,7 @@ def _range(text: str | None, total: int) -> list[int] | None:
 
 
 def run_command(args: argparse.Namespace) -> int:
-    from lowerbase.campaign.engine import open_client, plan_runs, quiet_dask, run_campaign
+    from lowerbase.campaign import engine
     from lowerbase.campaign.plan import load_campaign
     from lowerbase.campaign.progress import CampaignProgress
     from lowerbase.campaign.report import write_report
@@ -87,6 +87,8 @@ def run_command(args: argparse.Namespace) -> int:
 
     campaign = load_campaign(args.campaign)
     indices = _range(args.runs, campaign.total)
+    if args.scheduler is None:  # its workers' warm-up begins now, beside Dask's import here
+        engine.start_forkserver()
     n = campaign.total if indices is None else len(indices)
     out = Path(args.out) if args.out else \
         Path("reports") / f"campaign-{campaign.name}-{time.strftime('%Y%m%d-%H%M%S')}"
@@ -95,12 +97,12 @@ def run_command(args: argparse.Namespace) -> int:
           f"on {where}", file=sys.stderr)
     t0 = time.monotonic()
     specs: dict[int, Any] = {}  # planned while the cluster starts and its workers warm
-    with quiet_dask(args.debug), open_client(
+    with engine.quiet_dask(args.debug), engine.open_client(
             args.scheduler, args.workers, warm=True,
-            meanwhile=lambda: specs.update(plan_runs(campaign, indices))) as client:
+            meanwhile=lambda: specs.update(engine.plan_runs(campaign, indices))) as client:
         log = RowLog(out / "runs.jsonl")  # once there is a cluster to run on
         try:
-            result = run_campaign(campaign, client, on_row=log, warm=False, specs=specs,
+            result = engine.run_campaign(campaign, client, on_row=log, warm=False, specs=specs,
                                   progress=CampaignProgress(n, force=args.progress))
         finally:
             log.close()

@@ -98,6 +98,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *,
         raise CampaignError(f"campaigns need Dask: pip install 'dask[distributed]' ({e})"
                             ) from None
     if scheduler is not None:
+        _check_scheduler(scheduler)
         try:
             client = Client(scheduler, timeout=10)
         except OSError as e:
@@ -159,6 +160,36 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *,
             yield client
     finally:
         cluster.close()
+
+
+def _check_scheduler(address: str) -> None:
+    """One line at once for an address Dask cannot take, or a TCP port nobody listens on
+    (Dask's Client would retry it for its whole timeout)."""
+    import socket
+
+    from distributed.comm.addressing import get_address_host_port, parse_address
+
+    hint = "give the scheduler's address, e.g. tcp://127.0.0.1:8786"
+    try:
+        scheme, _ = parse_address(address, strict=True)
+        host, port = get_address_host_port(address)
+        if scheme in ("tcp", "tls") and not 0 < port < 65536:
+            raise ValueError(f"port {port} is out of range")
+    except (ValueError, TypeError) as e:
+        raise CampaignError(f"--scheduler {address}: {e}; {hint}") from None
+    if scheme != "tcp":
+        return
+    try:
+        socket.create_connection((host, port), timeout=2).close()
+    except ConnectionRefusedError:
+        raise CampaignError(f"--scheduler {address}: nothing listens there (connection "
+                            "refused); start one with `dask scheduler` and workers with "
+                            f"`dask worker {address}`") from None
+    except socket.gaierror as e:
+        raise CampaignError(f"--scheduler {address}: unknown host {host!r} ({e.strerror}); "
+                            f"{hint}") from None
+    except OSError:
+        pass  # unreachable or slow to answer: the Client's own timeout says so
 
 
 def start_forkserver() -> dict[str, str]:

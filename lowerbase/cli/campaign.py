@@ -10,6 +10,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from lowerbase.cli.args import positive_int
+
 
 def add_subparser(subparsers: Any) -> None:
     p = subparsers.add_parser(
@@ -32,7 +34,7 @@ def add_subparser(subparsers: Any) -> None:
     where.add_argument("--scheduler", metavar="tcp://HOST:8786",
                        help="an existing Dask scheduler (workers started with `dask worker` "
                        "where lowerbase is installed)")
-    where.add_argument("--workers", type=int, metavar="N",
+    where.add_argument("--workers", type=positive_int, metavar="N",
                        help="LocalCluster worker processes (default: one per core)")
     run.add_argument("--runs", metavar="A-B",
                      help="only runs A..B (inclusive), e.g. 0-9, to try a campaign out")
@@ -73,6 +75,8 @@ def _range(text: str | None, total: int) -> list[int] | None:
         lo, hi = int(a), int(b or a)
     except ValueError:
         raise CampaignError(f"--runs {text}: give A-B, e.g. 0-9") from None
+    if lo > hi:
+        raise CampaignError(f"--runs {text}: A-B with A <= B, e.g. {hi}-{lo}")
     if not 0 <= lo <= hi < total:
         raise CampaignError(f"--runs {text}: this campaign has runs 0..{total - 1}")
     return list(range(lo, hi + 1))
@@ -97,15 +101,24 @@ def run_command(args: argparse.Namespace) -> int:
           f"on {where}", file=sys.stderr)
     t0 = time.monotonic()
     specs: dict[int, Any] = {}  # planned while the cluster starts and its workers warm
-    with engine.quiet_dask(args.debug), engine.open_client(
-            args.scheduler, args.workers, warm=True,
-            meanwhile=lambda: specs.update(engine.plan_runs(campaign, indices))) as client:
-        log = RowLog(out / "runs.jsonl")  # once there is a cluster to run on
-        try:
-            result = engine.run_campaign(campaign, client, on_row=log, warm=False, specs=specs,
-                                  progress=CampaignProgress(n, force=args.progress))
-        finally:
-            log.close()
+    result: engine.Outcome | None = None
+    try:
+        with engine.quiet_dask(args.debug), engine.open_client(
+                args.scheduler, args.workers, warm=True,
+                meanwhile=lambda: specs.update(engine.plan_runs(campaign, indices))) as client:
+            log = RowLog(out / "runs.jsonl")  # once there is a cluster to run on
+            try:
+                result = engine.run_campaign(campaign, client, on_row=log, warm=False,
+                                             specs=specs,
+                                             progress=CampaignProgress(n, force=args.progress))
+            finally:
+                log.close()
+    except KeyboardInterrupt:  # in the cluster's start, or its stop after the runs
+        if result is None:
+            print(f"campaign {campaign.name}: interrupted before a run started; nothing "
+                  "written", file=sys.stderr)
+            return 130
+        result.interrupted = True
     rows = list(result.rows.values())
     write_csv(out / "results.csv", campaign, rows)
     summary = write_report(campaign, rows, out, campaign_arg=args.campaign,

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from lowerbase.cli.args import positive_seconds
+from lowerbase.cli.args import positive_seconds, seed
 from lowerbase.errors import ConfigError, LowerbaseError
 from lowerbase.text import clip
 
@@ -86,7 +86,7 @@ def add_subparser(subparsers: Any) -> None:
                    help="with --sim-time: the depth camera too (/camera_1/..., ~50 ms of CPU a "
                    "frame at 15 Hz of simulated time; the real-time robot's world always has "
                    "it)")
-    p.add_argument("--seed", type=int, default=0, metavar="S",
+    p.add_argument("--seed", type=seed, default=0, metavar="S",
                    help="with --sim-time: the seed of the localization's random numbers "
                    "(default 0)")
     p.set_defaults(func=run)
@@ -300,6 +300,9 @@ def run(args: argparse.Namespace) -> int:
     from lowerbase.scenarios.demo import StatusLine
     from lowerbase.world.maps import load_map
 
+    if args.robot == "legged" and args.camera:
+        raise ConfigError("--camera is the wheeled robot's depth camera; the legged robot has "
+                          "none: drop --camera")
     if getattr(args, "ros2", False):
         return _run_ros2(args)
     if args.ros_args:
@@ -307,11 +310,13 @@ def run(args: argparse.Namespace) -> int:
                           "the robot reads the parameter server (rosparam set "
                           "/move_base/recovery_behaviors ...)")
     if not args.sim_time:
-        for given, flag in ((args.speed is not None, "--speed K"), (args.paused, "--paused"),
-                            (args.seed != 0, "--seed S"),
-                            (args.robot == "legged", "--robot legged")):
+        for given, flag, why in (
+                (args.speed is not None, "--speed K", "real time runs at 1 x"),
+                (args.paused, "--paused", "real time does not wait"),
+                (args.seed != 0, "--seed S", "only a lockstep run repeats"),
+                (args.robot == "legged", "--robot legged", "the legged robot is lockstep only")):
             if given:
-                raise ConfigError(f"{flag} goes with --sim-time (real time runs at 1 x)")
+                raise ConfigError(f"{flag} goes with --sim-time ({why})")
         if args.camera:
             raise ConfigError("--camera goes with --sim-time: the real-time robot's world "
                               "renders the camera always")

@@ -128,5 +128,38 @@ def test_no_scheduler_is_one_error_line(tmp_path: Path,
                  "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
     assert code == 1
-    assert f"--scheduler {address}: cannot connect" in err and "Traceback" not in err
+    assert f"--scheduler {address}: nothing listens there" in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(("address", "says"), [
+    ("http://127.0.0.1:8786", "unknown address scheme 'http'"),
+    ("127.0.0.1:8786", "Must include protocol"),
+    ("tcp://127.0.0.1:99999", "port 99999 is out of range"),
+    ("tcp://nohost.invalid:8786", "unknown host 'nohost.invalid'")])
+def test_a_bad_scheduler_address_is_one_line_at_once(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], address: str, says: str) -> None:
+    path = tmp_path / "c.toml"
+    path.write_text(CAMPAIGN, encoding="utf-8")
+    code = main(["campaign", "run", str(path), "--scheduler", address,
+                 "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and says in err[-1] and "e.g. tcp://127.0.0.1:8786" in err[-1], err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(("args", "says"), [
+    (["--workers", "0"], "argument --workers: '0': must be 1 or more"),
+    (["--workers", "-2"], "argument --workers: '-2': must be 1 or more"),
+    (["--runs", "5-2"], "--runs 5-2: A-B with A <= B, e.g. 2-5")])
+def test_bad_workers_and_runs_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                           args: list[str], says: str) -> None:
+    path = tmp_path / "c.toml"
+    path.write_text(CAMPAIGN, encoding="utf-8")
+    try:
+        code = main(["campaign", "run", str(path), *args, "--out", str(tmp_path / "out")])
+    except SystemExit as e:  # argparse's own refusal
+        code = int(e.code or 0)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code in (1, 2) and says in err[-1], err
     assert not (tmp_path / "out").exists()

@@ -222,6 +222,18 @@ def test_lockstep_and_ros2_options_without_them_are_one_line(args: list[str],
     assert len(lines) == 1 and says in lines[0], out.stderr
 
 
+@pytest.mark.parametrize(("args", "says"), [
+    (["--paused"], "--paused goes with --sim-time (real time does not wait)"),
+    (["--seed", "2"], "--seed S goes with --sim-time (only a lockstep run repeats)"),
+    (["--sim-time", "--seed", "-3"], "argument --seed: '-3': a seed is 0 or more"),
+    (["--sim-time", "--robot", "legged", "--camera"], "the legged robot has none")])
+def test_bad_robot_options_end_in_one_line(args: list[str], says: str) -> None:
+    out = subprocess.run([sys.executable, "-m", "lowerbase", "robot", *args],
+                         capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert out.returncode != 0 and "Traceback" not in out.stderr
+    assert says in out.stderr.strip().splitlines()[-1], out.stderr
+
+
 @pytest.mark.ros
 @pytest.mark.process
 def test_a_second_robot_on_a_master_that_has_one_is_refused_and_sighup_stops_the_first(

@@ -8,7 +8,7 @@ sees woosh_msgs and lowerbase_sim_msgs)::
     lowerbase robot --sim-time --speed max --map warehouse            # free-running
     .venv/bin/python examples/sim_goals.py --goals 20 --mark A2-01
 
-    lowerbase robot --sim-time --paused --map warehouse               # reproducible
+    lowerbase robot --sim-time --speed max --paused --map warehouse   # reproducible
     .venv/bin/python examples/sim_goals.py --goals 20 --mark A2-01 --step
 
 The goals are drawn with ``--seed`` from the free cells of /map at least ``--clearance`` from
@@ -93,11 +93,15 @@ class Clock:
             rospy.wait_for_service("/lowerbase/step", timeout=30.0)
             self.step = rospy.ServiceProxy("/lowerbase/step", Step)
 
-    def run(self, seconds: float, until: str) -> None:
-        if self.step is not None:
-            res = self.step(seconds=seconds, until=until)
-            if not res.success:
-                raise SystemExit(f"/lowerbase/step refused: {res.message}")
+    def run(self, seconds: float, until: str) -> float:
+        """[s] the simulated time now: where the step stopped (this node's ROS time may
+        not have had that /clock message yet), else ROS time."""
+        if self.step is None:
+            return rospy.get_time()
+        res = self.step(seconds=seconds, until=until)
+        if not res.success:
+            raise SystemExit(f"/lowerbase/step refused: {res.message}")
+        return float(res.sim_time)
 
 
 def main() -> int:
@@ -133,8 +137,8 @@ def main() -> int:
     if not client.wait_for_server(rospy.Duration(30.0)):
         print("no /move_base", file=sys.stderr)
         return 2
-    clock.run(2.0, "")  # localized and ready
-    t_start, wall_start = rospy.get_time(), time.monotonic()
+    t_start = clock.run(2.0, "")  # localized and ready
+    wall_start = time.monotonic()
     goals = draw_goals(grid, args.goals, args.seed, args.clearance)
     results = []
     for i, goal in enumerate(goals, 1):

@@ -16,6 +16,17 @@ from lowerbase.errors import CampaignError, ConfigError
 from lowerbase.files import read_toml
 
 KINDS = ("wheeled", "legged", "tasks", "trace")
+#: each kind's metric columns in a run's row (campaign/execute.py fills them where the run has
+#: the data; tests/campaign/test_kinds.py checks a row has no other), and a run's wall time
+METRICS: dict[str, tuple[str, ...]] = {
+    "wheeled": ("sim_s", "odom_error_m", "odom_error_p95_m", "odom_raw_error_m",
+                "odom_raw_error_p95_m", "odom_yaw_error_rad", "soc_final", "reboots"),
+    "tasks": ("sim_s", "localization_error_m", "localization_error_p95_m", "soc_final",
+              "driven_m", "task_time_s"),
+    "legged": ("sim_s", "position_error_m", "position_error_p95_m", "voltage_final"),
+    "trace": ("sim_s",),
+}
+WALL_METRIC = "wall_s"
 DISTRIBUTIONS = ("values", "uniform", "normal", "integers")
 _CAMPAIGN_KEYS = ("name", "description", "scenario", "scenarios", "runs", "grid", "seed",
                   "reseed", "keep_expect")
@@ -244,6 +255,14 @@ def campaign_from_dict(data: Mapping[str, Any], path: Path) -> Campaign:
         timeline=_tables(data, "timeline"), expect=_tables(data, "expect"), keep_expect=keep,
         description=str(head.get("description", "")), metric=metric,
         threshold=None if threshold is None else float(threshold))
+    if metric:
+        known = tuple(dict.fromkeys(m for b in campaign.scenarios for m in METRICS[b.kind]))
+        known = (*known, WALL_METRIC)
+        if metric not in known:
+            close = difflib.get_close_matches(metric, known, n=1)
+            hint = f"did you mean {close[0]!r}?" if close else f"known: {', '.join(known)}"
+            raise CampaignError(f"[report]: metric {metric!r} is not a column of these runs; "
+                                f"{hint}")
     if campaign.total > MAX_RUNS:
         raise CampaignError(f"{campaign.total} runs: more than {MAX_RUNS}; lower runs or "
                             "the grid")

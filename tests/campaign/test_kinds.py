@@ -8,6 +8,7 @@ import pytest
 
 from lowerbase.campaign.execute import EXPECT, run_one
 from lowerbase.campaign.plan import load_campaign, plan_run
+from lowerbase.campaign.spec import METRICS
 
 CASES = {
     "tasks/parking": ('"initial.soc" = { uniform = [60, 90] }',
@@ -30,4 +31,8 @@ def test_one_run_of_each_kind(tmp_path: Path, scenario: str) -> None:
     assert row["error"] == "", row["error"]
     assert any(k.startswith(EXPECT) for k in row)
     assert set(metrics) <= set(row), row
+    # every metric a row has is one [report] metric accepts for its kind
+    fixed = {"run", "scenario", "passed", "error", "wall_s", *plan_run(c, 1).values}
+    others = {k for k in row if not k.startswith(EXPECT) and k not in fixed}
+    assert others <= set(METRICS[c.scenarios[0].kind]), others
     assert row == {**run_one(plan_run(c, 1)), "wall_s": row["wall_s"]}  # the same again

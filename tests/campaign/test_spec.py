@@ -92,3 +92,16 @@ def test_toml_writer_round_trips_the_default_profile() -> None:
     assert tomllib.loads(dumps(profile)) == profile
     odd = {"a b": {"x": [1, 2.5, "q\"r"], "t": {"inf": float("inf")}}, "c": [{"k": True}]}
     assert tomllib.loads(dumps(odd)) == odd
+
+
+def test_a_misspelt_report_metric_is_refused_with_a_hint(tmp_path: Path) -> None:
+    path = tmp_path / "c.toml"
+    path.write_text('[campaign]\nscenario = "loop"\nruns = 2\n[report]\n'
+                    'metric = "odom_eror_m"\n', encoding="utf-8")
+    with pytest.raises(CampaignError, match=r"\[report\]: metric 'odom_eror_m' is not a column "
+                       r"of these runs; did you mean 'odom_error_m'\?"):
+        load_campaign(path)
+    path.write_text('[campaign]\nscenario = "legged_stand_walk_sit"\nruns = 2\n[report]\n'
+                    'metric = "odom_error_m"\n', encoding="utf-8")  # not a legged run's
+    with pytest.raises(CampaignError, match="metric 'odom_error_m' is not a column"):
+        load_campaign(path)

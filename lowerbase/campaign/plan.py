@@ -138,6 +138,7 @@ def build_scenario(spec: RunSpec, workdir: Path) -> Any:
 
     data = copy.deepcopy(spec.data)
     path = Path(spec.path)
+    profile: Path | None = None
     if spec.profile is not None:
         workdir.mkdir(parents=True, exist_ok=True)
         profile = workdir / "profile.toml"
@@ -170,7 +171,12 @@ def build_scenario(spec: RunSpec, workdir: Path) -> Any:
         load_profile(sc.profile)  # a bad varied profile value fails here, not in the run
         return sc
     except ConfigError as e:
-        raise CampaignError(f"{e} (check the campaign's [vary] keys and values)") from None
+        text = str(e)
+        if profile is not None and str(profile.resolve()) in text:  # not a file of the user's
+            raise CampaignError(text.replace(str(profile.resolve()), f"run {spec.index}'s "
+                                             "profile ([vary] \"profile.*\" keys)")) from None
+        raise CampaignError(f"{text} (check the campaign's [vary], [[timeline]] and "
+                            "[[expect]])") from None
 
 
 def check_campaign(campaign: Campaign) -> None:

@@ -105,3 +105,13 @@ def test_a_misspelt_report_metric_is_refused_with_a_hint(tmp_path: Path) -> None
                     'metric = "odom_error_m"\n', encoding="utf-8")  # not a legged run's
     with pytest.raises(CampaignError, match="metric 'odom_error_m' is not a column"):
         load_campaign(path)
+
+
+def test_a_bad_varied_profile_key_names_the_run_not_a_temporary_file(tmp_path: Path) -> None:
+    path = tmp_path / "c.toml"
+    path.write_text('[campaign]\nscenario = "loop"\nruns = 2\n[vary]\n'
+                    '"profile.truth.slip_rate_per_kmh" = [1.0]\n', encoding="utf-8")
+    with pytest.raises(CampaignError) as e:
+        load_campaign(path)
+    assert str(e.value) == (f"{path}: run 0's profile ([vary] \"profile.*\" keys): unknown key "
+                            "truth.slip_rate_per_kmh; did you mean truth.slip_rate_per_km?")

@@ -45,6 +45,8 @@ class PoseHistory:
         self.span = span
         self.samples: deque[tuple[float, Pose]] = deque()
         self.restarts = 0  #: times the stamps went backwards (a restarted /clock): history reset
+        #: the first stamp since the start (or the last restart); None before any
+        self.since: float | None = None
 
     @property
     def newest(self) -> float | None:
@@ -55,6 +57,8 @@ class PoseHistory:
         if s and t < s[-1][0]:
             s.clear()
             self.restarts += 1
+        if not s:
+            self.since = t
         s.append((t, pose))
         while s[-1][0] - s[0][0] > self.span:
             s.popleft()
@@ -94,7 +98,8 @@ class StampedSensors:
         self.depth = depth
         self.wait = wait  #: [s of /odom past a stamp] the longest wait for TF to reach it
         self.pending: dict[str, deque[tuple[float, Any]]] = {}
-        self.stats = {"waited_out": 0, "too_old": 0, "no_localization": 0, "tf_waited_out": 0}
+        self.stats = {"waited_out": 0, "too_old": 0, "no_localization": 0, "tf_waited_out": 0,
+                      "before_odom": 0}
 
     def add(self, sensor: str, stamp: float, data: Any) -> None:
         q = self.pending.setdefault(sensor, deque())
@@ -106,7 +111,8 @@ class StampedSensors:
     def ready(self) -> list[tuple[str, Pose, Any]]:
         """(sensor, map pose at its stamp, data) of every observation /odom and TF have caught
         up with, oldest first per sensor; one older than /odom's history, or than TF's, or
-        that TF has not reached ``wait`` s of /odom after it, is dropped (counted)."""
+        that TF has not reached ``wait`` s of /odom after it, is dropped (counted, warned of);
+        one from before the first /odom (the robot's start) is dropped and counted only."""
         out: list[tuple[str, Pose, Any]] = []
         newest = self.odom.newest
         for sensor, q in self.pending.items():
@@ -115,7 +121,12 @@ class StampedSensors:
                 odom = self.odom.at(stamp)
                 if odom is None:
                     q.popleft()
-                    self._drop("too_old", sensor, stamp, "older than /odom's history")
+                    since = self.odom.since
+                    if since is not None and stamp < since:  # a start: counted, not warned of
+                        self.stats["before_odom"] += 1
+                        log.debug("%s at %.3f dropped: before the first /odom", sensor, stamp)
+                    else:
+                        self._drop("too_old", sensor, stamp, "older than /odom's history")
                     continue
                 m2o = self.map_to_odom(stamp)
                 if m2o is not None:

@@ -93,9 +93,30 @@ def test_observations_wait_for_odom_to_reach_their_stamp_and_old_ones_are_counte
     for k in range(3):
         sensors.add("scan", 11.0 + k, k)
     assert sensors.ready() == []
-    assert sensors.stats == {"waited_out": 2, "too_old": 1, "no_localization": 0,
-                             "tf_waited_out": 0}
+    assert sensors.stats == {"waited_out": 2, "too_old": 0, "no_localization": 0,
+                             "tf_waited_out": 0, "before_odom": 1}
     assert [d for _, d in sensors.pending["scan"]] == [1, 2]
+
+
+def test_a_scan_from_before_the_first_odom_is_counted_quietly_an_old_one_warned_of(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """At the robot's start the lidar's first scans come before driver_base's first /odom:
+    dropped and counted, with no warning on every start; one older than a history that has
+    moved on is a real loss and is warned of."""
+    h = PoseHistory(span=1.0)
+    sensors = StampedSensors(h, lambda t: (0.0, 0.0, 0.0))
+    sensors.add("scan", 0.0, "first")
+    sensors.add("scan", 0.36, "second")
+    for k in range(5, 31):  # /odom from 0.5 s, 50 Hz... a second of it kept
+        h.add(k / 10, (0.0, 0.0, 0.0))
+    with caplog.at_level("WARNING", logger="lowerbase.world.stamped"):
+        assert sensors.ready() == []
+        assert caplog.records == []
+        sensors.add("scan", 1.0, "older than the kept second")
+        assert sensors.ready() == []
+    assert sensors.stats["before_odom"] == 2 and sensors.stats["too_old"] == 1
+    assert [r.getMessage() for r in caplog.records] == [
+        "scan at 1.000 dropped: older than /odom's history (too_old: 1 so far)"]
 
 
 def _phantoms(lag: float, stamped: bool) -> int:

@@ -49,6 +49,8 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
         kl.acquire()
     if kl._key != kl._current_key():
         kl._constants()
+    if kl.slipping:
+        kl.no_slip()
     n = min(n, MAX_RUN)
     v, w, mode = cmd
     targets = kl.targets

@@ -10,10 +10,13 @@ for whoever reads or writes them between periods. The periodic frames' due times
 frames' counters live in arrays while the kernel runs (``acquire``), and go back to the Mcu
 before any Python path steps (``release``).
 
+Slip events and random slip enter as data: ``SlipModel.event_fractions`` (the random draw,
+the events in force) runs in Python before the call and its two fractions go into the
+kernel's ``k`` (C_SLIP_L, C_SLIP_R; 0 without events), the kernel adds the acceleration slip.
 A period goes to the Python LeanLoop instead (``step`` returns False, nothing changed) when
-surroundings are installed (the world's collision check must see each move), slip events or
-random slip are in play, or the BMS is polled this period (every 100th period: its answer
-sets status bits; the pack's step, every 20th period, is called after the kernel). The
+surroundings are installed (the world's collision check must see each move), or the BMS is
+polled in a period that also steps the pack (``poll_ahead``; otherwise the poll, every 100th
+period, is done before the kernel runs; the pack's step, every 20th period, after it). The
 signal layouts of the hot frames come from the codec (start bit, length, scale, offset,
 signedness, raw range); a layout the kernel cannot encode (floats, Motorola order, integer
 scaling) keeps the Python loop. Without numba, or when compilation fails, it is never used.
@@ -179,6 +182,7 @@ class KernelLoop:
         self.zero_rows = np.zeros((1, 12))
         self.k = np.zeros(lk.C_SIZE + lk.R_SIZE)
         self.owned = False
+        self.slipping = False  #: slip fractions of events are in ``k`` (C_SLIP_L, C_SLIP_R)
         self._key: tuple[Any, ...] = ()
 
     # -- ownership of the due times, hot counters and IMU sample -----------------------------------
@@ -235,7 +239,7 @@ class KernelLoop:
             1.0 + ip.gyro_scale_error, 1.0 + ip.accel_scale_error, *imu._limits, ip.gravity,
             dt, 0.0, m.CARRIED, m.ENCODER_FAULT_TIME, m.IMU_FROZEN_SAMPLES,
             m.STANDBY_HINT_TIME, m.BMS_LINK_TIMEOUT)
-        k[lk.C_GF:lk.C_SIZE] = (*imu.gyro_fault, *imu.accel_fault, *imu.gyro_turn_on,
+        k[lk.C_GF:lk.C_SLIP_L] = (*imu.gyro_fault, *imu.accel_fault, *imu.gyro_turn_on,
                                 *imu.accel_turn_on)
         rng = m._RANGES
         ranges = []
@@ -247,6 +251,12 @@ class KernelLoop:
                 ranges += rng[name, s]
         k[lk.C_SIZE:] = ranges
         self._key = self._current_key()
+
+    def no_slip(self) -> None:
+        """No slip event in force: the kernel's event slip back to 0 (the runs' and any
+        period's without events)."""
+        self.k[self.lk.C_SLIP_L:self.lk.C_SLIP_R + 1] = 0.0
+        self.slipping = False
 
     def _current_key(self) -> tuple[Any, ...]:
         lean, mcu = self.lean, self.mcu
@@ -260,7 +270,7 @@ class KernelLoop:
         mcu, m, lean = self.mcu, self.m, self.lean
         truth, slip, bms = mcu.truth, mcu.slip, mcu.bms
         now = mcu.clock.now()
-        if (truth.surroundings is not None or slip.events or slip.params.slip_rate_per_km
+        if (truth.surroundings is not None
                 or (bms is not None and now >= mcu._bms_next_poll and not self.poll_ahead(now))):
             self.release()
             return False
@@ -268,6 +278,12 @@ class KernelLoop:
             self.acquire()
         if self._key != self._current_key():
             self._constants()
+        if slip.events or slip.params.slip_rate_per_km:  # the events' slip, as data
+            self.k[self.lk.C_SLIP_L:self.lk.C_SLIP_R + 1] = slip.event_fractions(
+                now - mcu.boot_time, truth.v * mcu.dt)
+            self.slipping = True
+        elif self.slipping:
+            self.no_slip()
         if mcu.state == m.RobotState.BOOT and now - mcu.boot_time >= m.BOOT_TIME:
             mcu.state = m.RobotState.STANDBY
         target_v, target_w, brake = mcu._target(now)

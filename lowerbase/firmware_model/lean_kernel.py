@@ -53,7 +53,10 @@ C_STALL, C_THR, C_SFRAC, C_TR_L, C_TR_R, C_TRACK, C_TOP, C_IDLE2 = range(2 * M +
 C_GS, C_AS, C_GMAX, C_AMAX, C_GRAV, C_DT = range(2 * M + 17, 2 * M + 23)
 _C_SPARE, C_CARRIED, C_ENC_T, C_IMU_N, C_STANDBY_T, C_LINK_T = range(2 * M + 23, 2 * M + 29)
 C_GF, C_AF, C_GT, C_AT = 2 * M + 29, 2 * M + 32, 2 * M + 35, 2 * M + 38  # 3 each
-C_SIZE = 2 * M + 41
+#: data, not constants: the slip fractions (left, right) of the slip events in force in this
+#: period (SlipModel.event_fractions), written by KernelLoop.step before the call; 0 without
+C_SLIP_L, C_SLIP_R = 2 * M + 41, 2 * M + 42
+C_SIZE = 2 * M + 43
 #: state numbers of RobotState
 ACTIVE, EMERGENCY_STOP, FAULT, STANDBY = 2, 3, 4, 1
 
@@ -168,7 +171,7 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
         k, M, t_r, dt, brake, om_r, sp_r, oc_r, st_r, ot_r, stt_r)
     rim_l = (om_l - before_l) / dt * k[7]
     rim_r = (om_r - before_r) / dt * k[M + 7]
-    s_l = s_r = 0.0  # SlipModel.step without events or random slip
+    s_l, s_r = k[C_SLIP_L], k[C_SLIP_R]  # SlipModel.step: the events' fractions, then accel
     if k[C_THR] > 0.0:
         if abs(rim_l) > k[C_THR]:
             s_l = pymax(s_l, k[C_SFRAC])

@@ -9,6 +9,7 @@ truth step, and without numba the Python loop takes over.
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from typing import Any
 
 import pytest
@@ -158,8 +159,7 @@ def _run(rig: TraceRig, seconds: float) -> tuple[Any, ...]:
     return rig.trace, tr.x, tr.y, tr.yaw, tr.blocked_steps, rig.mcu.encoder_counts()
 
 
-def test_surroundings_and_slip_events_keep_the_python_truth_step(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+def test_surroundings_keep_the_python_truth_step(monkeypatch: pytest.MonkeyPatch) -> None:
     def rig(wall: Wall) -> TraceRig:
         r = TraceRig(profile=load_profile(), keep=False)
         r.mcu.truth.surroundings = wall
@@ -171,6 +171,34 @@ def test_surroundings_and_slip_events_keep_the_python_truth_step(
     assert got[4] > 0 and walls[0].asked == round(1.85 / 0.005)  # asked before every move
     monkeypatch.setattr(Mcu, "lean", False)
     assert got == _run(rig(walls[1]), 1.5)
+
+
+def _slipping(events: bool, rate: float) -> TraceRig:
+    p = load_profile()
+    rig = TraceRig(profile=replace(p, truth=replace(
+        p.truth, slip_rate_per_km=rate, slip_duration=0.05, slip_fraction=0.6)), keep=False)
+    if events:
+        rig.mcu.slip.add_event(SlipEvent("left", 0.6, 0.3, 0.4))
+        rig.mcu.slip.add_event(SlipEvent("both", 0.8, 0.2, 0.25))
+    return rig
+
+
+@pytest.mark.parametrize(("events", "rate"), [(True, 0.0), (False, 3000.0), (True, 3000.0)])
+def test_slip_events_and_random_slip_run_in_the_kernel(
+        monkeypatch: pytest.MonkeyPatch, events: bool, rate: float) -> None:
+    """The events' slip fractions (SlipModel.event_fractions, random events drawn) enter the
+    kernel as data: every lean period compiled, the same frames and truth as the Python lean
+    loop and the general loop; and the slip shows (so a kernel that ignored it would differ)."""
+    seen = _count_kernel_periods(monkeypatch)
+    rig = _slipping(events, rate)
+    got = _run(rig, 1.5)
+    assert seen["kernel"] >= 200 and seen["python"] == 0  # runs after the events (1 s)
+    assert got != _run(_slipping(False, 0.0), 1.5)  # the slip changed the trace
+    monkeypatch.setattr(LeanLoop, "compiled", False)
+    assert got == _run(_slipping(events, rate), 1.5)
+    monkeypatch.setattr(LeanLoop, "compiled", True)
+    monkeypatch.setattr(Mcu, "lean", False)
+    assert got == _run(_slipping(events, rate), 1.5)
 
 
 def test_without_numba_the_python_loop_runs(monkeypatch: pytest.MonkeyPatch) -> None:

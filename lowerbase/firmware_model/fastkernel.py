@@ -13,6 +13,7 @@ before any Python path steps (``release``).
 Slip events and random slip enter as data: ``SlipModel.event_fractions`` (the random draw,
 the events in force) runs in Python before the call and its two fractions go into the
 kernel's ``k`` (C_SLIP_L, C_SLIP_R; 0 without events), the kernel adds the acceleration slip.
+So does an active encoder fault: ``Mcu._drop`` (C_DROP_L, C_DROP_R; the encoders' ``dropout``).
 A period goes to the Python LeanLoop instead (``step`` returns False, nothing changed) when
 surroundings are installed (the world's collision check must see each move), or the BMS is
 polled in a period that also steps the pack (``poll_ahead``; otherwise the poll, every 100th
@@ -183,6 +184,7 @@ class KernelLoop:
         self.k = np.zeros(lk.C_SIZE + lk.R_SIZE)
         self.owned = False
         self.slipping = False  #: slip fractions of events are in ``k`` (C_SLIP_L, C_SLIP_R)
+        self._drop: tuple[bool, bool] | None = None  #: the Mcu._drop in ``k`` (C_DROP_L/R)
         self._key: tuple[Any, ...] = ()
 
     # -- ownership of the due times, hot counters and IMU sample -----------------------------------
@@ -197,7 +199,6 @@ class KernelLoop:
         gyro, accel = mcu.imu_sample
         self.imu[6:] = (*gyro, *accel)
         self.lean.ml.blocked = self.lean.mr.blocked = False  # what _apply_faults does
-        self.lean.el.dropout = self.lean.er.dropout = False
         self.owned = True
 
     def release(self, general: bool = False) -> None:
@@ -205,6 +206,7 @@ class KernelLoop:
         ``general``: the general loop steps next (it may change the IMU fault offsets)."""
         if general:
             self._key = ()
+            self._drop = None
         if not self.owned:
             return
         mcu = self.mcu
@@ -252,6 +254,13 @@ class KernelLoop:
         k[lk.C_SIZE:] = ranges
         self._key = self._current_key()
 
+    def set_drop(self, drop: tuple[bool, bool]) -> None:
+        """The encoders' dropout (the encoder fault, ``Mcu._drop``) into the encoders and the
+        kernel's data (C_DROP_L, C_DROP_R)."""
+        self.lean.el.dropout, self.lean.er.dropout = drop
+        self.k[self.lk.C_DROP_L:self.lk.C_DROP_R + 1] = drop
+        self._drop = drop
+
     def no_slip(self) -> None:
         """No slip event in force: the kernel's event slip back to 0 (the runs' and any
         period's without events)."""
@@ -284,6 +293,8 @@ class KernelLoop:
             self.slipping = True
         elif self.slipping:
             self.no_slip()
+        if mcu._drop is not self._drop:  # the encoder fault's dropout, as data
+            self.set_drop(mcu._drop)
         if mcu.state == m.RobotState.BOOT and now - mcu.boot_time >= m.BOOT_TIME:
             mcu.state = m.RobotState.STANDBY
         target_v, target_w, brake = mcu._target(now)

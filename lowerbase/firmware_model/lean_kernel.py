@@ -56,7 +56,9 @@ C_GF, C_AF, C_GT, C_AT = 2 * M + 29, 2 * M + 32, 2 * M + 35, 2 * M + 38  # 3 eac
 #: data, not constants: the slip fractions (left, right) of the slip events in force in this
 #: period (SlipModel.event_fractions), written by KernelLoop.step before the call; 0 without
 C_SLIP_L, C_SLIP_R = 2 * M + 41, 2 * M + 42
-C_SIZE = 2 * M + 43
+#: data too: 1 while that encoder drops its pulses (the encoder fault; Mcu._drop)
+C_DROP_L, C_DROP_R = 2 * M + 43, 2 * M + 44
+C_SIZE = 2 * M + 45
 #: state numbers of RobotState
 ACTIVE, EMERGENCY_STOP, FAULT, STANDBY = 2, 3, 4, 1
 
@@ -189,8 +191,8 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
     accel_x = (v - tv) / dt
     tv, tw = v, w
     distance += abs(v) * dt
-    moved_l, fr_l = encoder_add(fr_l, a_l, k[C_PPR_L])
-    moved_r, fr_r = encoder_add(fr_r, a_r, k[C_PPR_R])
+    moved_l, fr_l = (0, fr_l) if k[C_DROP_L] else encoder_add(fr_l, a_l, k[C_PPR_L])
+    moved_r, fr_r = (0, fr_r) if k[C_DROP_R] else encoder_add(fr_r, a_r, k[C_PPR_R])
     tot_l += moved_l
     tot_r += moved_r
     ds = 0.0
@@ -319,12 +321,13 @@ def hot_values(k: np.ndarray, vals: np.ndarray, om_l: float, cur_l: float, oc_l:
     vals[V_WF_L + 2] = float(wrap32(tot_l))
     vals[V_WF_L + 3] = clip(vel_l, rg[R_WF_L], rg[R_WF_L + 1])
     vals[V_WF_L + 4] = clip(cur_l, rg[R_WF_L + 2], rg[R_WF_L + 3])
-    vals[V_WF_L + 5] = float((1 if oc_l else 0) | (2 if st_l else 0))
+    enc_l, enc_r = 4 if k[C_DROP_L] else 0, 4 if k[C_DROP_R] else 0  # EncoderCounter.status_bits
+    vals[V_WF_L + 5] = float((1 if oc_l else 0) | (2 if st_l else 0) | enc_l)
     vals[V_WF_R + 1] = 1.0
     vals[V_WF_R + 2] = float(wrap32(tot_r))
     vals[V_WF_R + 3] = clip(vel_r, rg[R_WF_R], rg[R_WF_R + 1])
     vals[V_WF_R + 4] = clip(cur_r, rg[R_WF_R + 2], rg[R_WF_R + 3])
-    vals[V_WF_R + 5] = float((1 if oc_r else 0) | (2 if st_r else 0))
+    vals[V_WF_R + 5] = float((1 if oc_r else 0) | (2 if st_r else 0) | enc_r)
     v, w = 0.5 * (vel_l + vel_r), (vel_r - vel_l) / k[C_DIST]
     vals[V_MS + 1] = clip(v, rg[R_MS], rg[R_MS + 1])
     vals[V_MS + 2] = clip(w, rg[R_MS + 2], rg[R_MS + 3])

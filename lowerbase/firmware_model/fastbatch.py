@@ -51,9 +51,9 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
         kl._constants()
     if kl.slipping:
         kl.no_slip()
-    if kl._drop is not m.NO_DROP:  # no fault is active in a run (Mcu._kernel_for_run)
-        mcu._drop = m.NO_DROP
-        kl.set_drop(m.NO_DROP)
+    if kl._fault_data is not m.NO_FAULT_DATA:  # no fault is active in a run (_kernel_for_run)
+        mcu._fault_data = m.NO_FAULT_DATA
+        kl.set_fault_data(m.NO_FAULT_DATA)
     n = min(n, MAX_RUN)
     v, w, mode = cmd
     targets = kl.targets

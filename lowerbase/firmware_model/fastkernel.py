@@ -13,7 +13,8 @@ before any Python path steps (``release``).
 Slip events and random slip enter as data: ``SlipModel.event_fractions`` (the random draw,
 the events in force) runs in Python before the call and its two fractions go into the
 kernel's ``k`` (C_SLIP_L, C_SLIP_R; 0 without events), the kernel adds the acceleration slip.
-So does an active encoder fault: ``Mcu._drop`` (C_DROP_L, C_DROP_R; the encoders' ``dropout``).
+So do active encoder and imu-freeze faults: ``Mcu._fault_data`` (C_DROP_L, C_DROP_R,
+C_FROZEN: the encoders' ``dropout``, the IMU's ``frozen``).
 A period goes to the Python LeanLoop instead (``step`` returns False, nothing changed) when
 surroundings are installed (the world's collision check must see each move), or the BMS is
 polled in a period that also steps the pack (``poll_ahead``; otherwise the poll, every 100th
@@ -184,7 +185,8 @@ class KernelLoop:
         self.k = np.zeros(lk.C_SIZE + lk.R_SIZE)
         self.owned = False
         self.slipping = False  #: slip fractions of events are in ``k`` (C_SLIP_L, C_SLIP_R)
-        self._drop: tuple[bool, bool] | None = None  #: the Mcu._drop in ``k`` (C_DROP_L/R)
+        #: the Mcu._fault_data in ``k`` (C_DROP_L, C_DROP_R, C_FROZEN)
+        self._fault_data: tuple[bool, bool, bool] | None = None
         self._key: tuple[Any, ...] = ()
 
     # -- ownership of the due times, hot counters and IMU sample -----------------------------------
@@ -206,7 +208,7 @@ class KernelLoop:
         ``general``: the general loop steps next (it may change the IMU fault offsets)."""
         if general:
             self._key = ()
-            self._drop = None
+            self._fault_data = None
         if not self.owned:
             return
         mcu = self.mcu
@@ -254,12 +256,12 @@ class KernelLoop:
         k[lk.C_SIZE:] = ranges
         self._key = self._current_key()
 
-    def set_drop(self, drop: tuple[bool, bool]) -> None:
-        """The encoders' dropout (the encoder fault, ``Mcu._drop``) into the encoders and the
-        kernel's data (C_DROP_L, C_DROP_R)."""
-        self.lean.el.dropout, self.lean.er.dropout = drop
-        self.k[self.lk.C_DROP_L:self.lk.C_DROP_R + 1] = drop
-        self._drop = drop
+    def set_fault_data(self, data: tuple[bool, bool, bool]) -> None:
+        """The encoders' dropout and the IMU's freeze (``Mcu._fault_data``) into the encoders,
+        the IMU model and the kernel's data (C_DROP_L, C_DROP_R, C_FROZEN)."""
+        self.lean.el.dropout, self.lean.er.dropout, self.mcu.imu.frozen = data
+        self.k[self.lk.C_DROP_L:self.lk.C_FROZEN + 1] = data
+        self._fault_data = data
 
     def no_slip(self) -> None:
         """No slip event in force: the kernel's event slip back to 0 (the runs' and any
@@ -293,8 +295,8 @@ class KernelLoop:
             self.slipping = True
         elif self.slipping:
             self.no_slip()
-        if mcu._drop is not self._drop:  # the encoder fault's dropout, as data
-            self.set_drop(mcu._drop)
+        if mcu._fault_data is not self._fault_data:  # encoder, imu-freeze faults, as data
+            self.set_fault_data(mcu._fault_data)
         if mcu.state == m.RobotState.BOOT and now - mcu.boot_time >= m.BOOT_TIME:
             mcu.state = m.RobotState.STANDBY
         target_v, target_w, brake = mcu._target(now)

@@ -101,7 +101,7 @@ class LeanLoop:
             mcu.state = m.RobotState.STANDBY
         ml, mr, el, er = self.ml, self.mr, self.el, self.er
         ml.blocked = mr.blocked = False  # what _apply_faults does with no hook's fault active
-        el.dropout, er.dropout = mcu._drop
+        el.dropout, er.dropout, mcu.imu.frozen = mcu._fault_data
         c = mcu.chassis
         if c is not self._chassis:
             self._derive(c)

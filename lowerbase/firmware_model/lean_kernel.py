@@ -56,9 +56,10 @@ C_GF, C_AF, C_GT, C_AT = 2 * M + 29, 2 * M + 32, 2 * M + 35, 2 * M + 38  # 3 eac
 #: data, not constants: the slip fractions (left, right) of the slip events in force in this
 #: period (SlipModel.event_fractions), written by KernelLoop.step before the call; 0 without
 C_SLIP_L, C_SLIP_R = 2 * M + 41, 2 * M + 42
-#: data too: 1 while that encoder drops its pulses (the encoder fault; Mcu._drop)
-C_DROP_L, C_DROP_R = 2 * M + 43, 2 * M + 44
-C_SIZE = 2 * M + 45
+#: data too (Mcu._fault_data): 1 while that encoder drops its pulses (the encoder fault), 1
+#: while the IMU repeats its last sample (imu-freeze)
+C_DROP_L, C_DROP_R, C_FROZEN = 2 * M + 43, 2 * M + 44, 2 * M + 45
+C_SIZE = 2 * M + 46
 #: state numbers of RobotState
 ACTIVE, EMERGENCY_STOP, FAULT, STANDBY = 2, 3, 4, 1
 
@@ -210,9 +211,10 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
     if imu_due:
         imu_sample(k, z, noise, tv, tw, accel_x, imu)
         same = True
-        for j in range(6):
-            same = same and imu[j] == imu[6 + j]
-            imu[6 + j] = imu[j]
+        if not k[C_FROZEN]:  # frozen: ImuModel.sample gives its last sample again
+            for j in range(6):
+                same = same and imu[j] == imu[6 + j]
+                imu[6 + j] = imu[j]
         imu_same = imu_same + 1 if has_last and same else 0
     if bms:
         total = k[C_IDLE2]

@@ -201,9 +201,10 @@ def test_slip_events_and_random_slip_run_in_the_kernel(
     assert got == _run(_slipping(events, rate), 1.5)
 
 
-def _drive_with_encoder_faults(bms: bool = True) -> tuple[Any, ...]:
+def _drive_with_data_faults(bms: bool = True) -> tuple[Any, ...]:
     """A drive through Mcu.advance with the left encoder failing for 0.6 s (long enough for
-    its fault bit), then both for 0.1 s, then none: every frame and the end state."""
+    its fault bit), the IMU frozen for 0.6 s from 0.1 s later, then both encoders for 0.1 s,
+    then nothing: every frame and the end state."""
     p = load_profile()
     rig = TraceRig(profile=p, bms=McuBmsAdapter.from_battery_table(p.battery) if bms else None,
                    keep=False)
@@ -213,6 +214,7 @@ def _drive_with_encoder_faults(bms: bool = True) -> tuple[Any, ...]:
     mcu.inject(Fault("encoder", "left", start=t + 0.5, duration=0.6))
     mcu.inject(Fault("encoder", "right", start=t + 1.3, duration=0.1))
     mcu.inject(Fault("encoder", "left", start=t + 1.3, duration=0.1))
+    mcu.inject(Fault("imu-freeze", start=t + 0.6, duration=0.6))
     rig.drive(0.5, 0.2, 1.0)
     bits = mcu.status
     rig.drive(0.4, -0.2, 1.5)
@@ -222,22 +224,25 @@ def _drive_with_encoder_faults(bms: bool = True) -> tuple[Any, ...]:
             mcu.status, mcu.motion_fault, int(mcu.state), dict(mcu._counters), list(mcu._due))
 
 
-def test_encoder_faults_run_in_the_kernel(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The encoder fault's dropout enters the kernel as data (Mcu._drop): its active periods
-    compiled, the same frames and end state as the Python lean loop and the general loop;
-    and the fault shows (so a kernel that ignored it would differ)."""
+def test_encoder_and_imu_freeze_faults_run_in_the_kernel(monkeypatch: pytest.MonkeyPatch
+                                                          ) -> None:
+    """The encoder faults' dropout and the IMU's freeze enter the kernel as data
+    (Mcu._fault_data): their active periods compiled, the same frames and end state as the
+    Python lean loop and the general loop; and the faults show (so a kernel that ignored
+    them would differ)."""
     seen = _count_kernel_periods(monkeypatch)
-    got = _drive_with_encoder_faults()
+    got = _drive_with_data_faults()
     assert got[1] & StatusBit.LEFT_ENCODER_FAULT  # the count froze long enough for the bit
+    assert got[1] & StatusBit.IMU_FAULT  # and the IMU's sample
     assert seen["kernel"] >= 180 and seen["python"] == 0 and seen["run"] > 150
     monkeypatch.setattr(Mcu, "inject", lambda self, f: f)  # the same drive without the faults
-    assert got[0] != _drive_with_encoder_faults()[0]
+    assert got[0] != _drive_with_data_faults()[0]
     monkeypatch.undo()
     monkeypatch.setattr(LeanLoop, "compiled", False)
-    assert got == _drive_with_encoder_faults()
+    assert got == _drive_with_data_faults()
     monkeypatch.setattr(LeanLoop, "compiled", True)
     monkeypatch.setattr(Mcu, "lean", False)
-    assert got == _drive_with_encoder_faults()
+    assert got == _drive_with_data_faults()
 
 
 def test_without_numba_the_python_loop_runs(monkeypatch: pytest.MonkeyPatch) -> None:

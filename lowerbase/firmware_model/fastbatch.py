@@ -49,6 +49,11 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
         kl.acquire()
     if kl._key != kl._current_key():
         kl._constants()
+    if kl.slipping:
+        kl.no_slip()
+    if kl._fault_data is not m.NO_FAULT_DATA:  # no fault is active in a run (_kernel_for_run)
+        mcu._fault_data = m.NO_FAULT_DATA
+        kl.set_fault_data(m.NO_FAULT_DATA)
     n = min(n, MAX_RUN)
     v, w, mode = cmd
     targets = kl.targets

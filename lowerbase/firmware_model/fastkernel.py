@@ -10,10 +10,15 @@ for whoever reads or writes them between periods. The periodic frames' due times
 frames' counters live in arrays while the kernel runs (``acquire``), and go back to the Mcu
 before any Python path steps (``release``).
 
+Slip events and random slip enter as data: ``SlipModel.event_fractions`` (the random draw,
+the events in force) runs in Python before the call and its two fractions go into the
+kernel's ``k`` (C_SLIP_L, C_SLIP_R; 0 without events), the kernel adds the acceleration slip.
+So do active encoder and imu-freeze faults: ``Mcu._fault_data`` (C_DROP_L, C_DROP_R,
+C_FROZEN: the encoders' ``dropout``, the IMU's ``frozen``).
 A period goes to the Python LeanLoop instead (``step`` returns False, nothing changed) when
-surroundings are installed (the world's collision check must see each move), slip events or
-random slip are in play, or the BMS is polled this period (every 100th period: its answer
-sets status bits; the pack's step, every 20th period, is called after the kernel). The
+surroundings are installed (the world's collision check must see each move), or the BMS is
+polled in a period that also steps the pack (``poll_ahead``; otherwise the poll, every 100th
+period, is done before the kernel runs; the pack's step, every 20th period, after it). The
 signal layouts of the hot frames come from the codec (start bit, length, scale, offset,
 signedness, raw range); a layout the kernel cannot encode (floats, Motorola order, integer
 scaling) keeps the Python loop. Without numba, or when compilation fails, it is never used.
@@ -179,6 +184,9 @@ class KernelLoop:
         self.zero_rows = np.zeros((1, 12))
         self.k = np.zeros(lk.C_SIZE + lk.R_SIZE)
         self.owned = False
+        self.slipping = False  #: slip fractions of events are in ``k`` (C_SLIP_L, C_SLIP_R)
+        #: the Mcu._fault_data in ``k`` (C_DROP_L, C_DROP_R, C_FROZEN)
+        self._fault_data: tuple[bool, bool, bool] | None = None
         self._key: tuple[Any, ...] = ()
 
     # -- ownership of the due times, hot counters and IMU sample -----------------------------------
@@ -193,7 +201,6 @@ class KernelLoop:
         gyro, accel = mcu.imu_sample
         self.imu[6:] = (*gyro, *accel)
         self.lean.ml.blocked = self.lean.mr.blocked = False  # what _apply_faults does
-        self.lean.el.dropout = self.lean.er.dropout = False
         self.owned = True
 
     def release(self, general: bool = False) -> None:
@@ -201,6 +208,7 @@ class KernelLoop:
         ``general``: the general loop steps next (it may change the IMU fault offsets)."""
         if general:
             self._key = ()
+            self._fault_data = None
         if not self.owned:
             return
         mcu = self.mcu
@@ -235,7 +243,7 @@ class KernelLoop:
             1.0 + ip.gyro_scale_error, 1.0 + ip.accel_scale_error, *imu._limits, ip.gravity,
             dt, 0.0, m.CARRIED, m.ENCODER_FAULT_TIME, m.IMU_FROZEN_SAMPLES,
             m.STANDBY_HINT_TIME, m.BMS_LINK_TIMEOUT)
-        k[lk.C_GF:lk.C_SIZE] = (*imu.gyro_fault, *imu.accel_fault, *imu.gyro_turn_on,
+        k[lk.C_GF:lk.C_SLIP_L] = (*imu.gyro_fault, *imu.accel_fault, *imu.gyro_turn_on,
                                 *imu.accel_turn_on)
         rng = m._RANGES
         ranges = []
@@ -247,6 +255,19 @@ class KernelLoop:
                 ranges += rng[name, s]
         k[lk.C_SIZE:] = ranges
         self._key = self._current_key()
+
+    def set_fault_data(self, data: tuple[bool, bool, bool]) -> None:
+        """The encoders' dropout and the IMU's freeze (``Mcu._fault_data``) into the encoders,
+        the IMU model and the kernel's data (C_DROP_L, C_DROP_R, C_FROZEN)."""
+        self.lean.el.dropout, self.lean.er.dropout, self.mcu.imu.frozen = data
+        self.k[self.lk.C_DROP_L:self.lk.C_FROZEN + 1] = data
+        self._fault_data = data
+
+    def no_slip(self) -> None:
+        """No slip event in force: the kernel's event slip back to 0 (the runs' and any
+        period's without events)."""
+        self.k[self.lk.C_SLIP_L:self.lk.C_SLIP_R + 1] = 0.0
+        self.slipping = False
 
     def _current_key(self) -> tuple[Any, ...]:
         lean, mcu = self.lean, self.mcu
@@ -260,7 +281,7 @@ class KernelLoop:
         mcu, m, lean = self.mcu, self.m, self.lean
         truth, slip, bms = mcu.truth, mcu.slip, mcu.bms
         now = mcu.clock.now()
-        if (truth.surroundings is not None or slip.events or slip.params.slip_rate_per_km
+        if (truth.surroundings is not None
                 or (bms is not None and now >= mcu._bms_next_poll and not self.poll_ahead(now))):
             self.release()
             return False
@@ -268,6 +289,14 @@ class KernelLoop:
             self.acquire()
         if self._key != self._current_key():
             self._constants()
+        if slip.events or slip.params.slip_rate_per_km:  # the events' slip, as data
+            self.k[self.lk.C_SLIP_L:self.lk.C_SLIP_R + 1] = slip.event_fractions(
+                now - mcu.boot_time, truth.v * mcu.dt)
+            self.slipping = True
+        elif self.slipping:
+            self.no_slip()
+        if mcu._fault_data is not self._fault_data:  # encoder, imu-freeze faults, as data
+            self.set_fault_data(mcu._fault_data)
         if mcu.state == m.RobotState.BOOT and now - mcu.boot_time >= m.BOOT_TIME:
             mcu.state = m.RobotState.STANDBY
         target_v, target_w, brake = mcu._target(now)

@@ -100,8 +100,8 @@ class LeanLoop:
         if mcu.state == m.RobotState.BOOT and now - mcu.boot_time >= m.BOOT_TIME:
             mcu.state = m.RobotState.STANDBY
         ml, mr, el, er = self.ml, self.mr, self.el, self.er
-        ml.blocked = mr.blocked = False  # what _apply_faults does without faults
-        el.dropout = er.dropout = False
+        ml.blocked = mr.blocked = False  # what _apply_faults does with no hook's fault active
+        el.dropout, er.dropout, mcu.imu.frozen = mcu._fault_data
         c = mcu.chassis
         if c is not self._chassis:
             self._derive(c)

@@ -91,6 +91,9 @@ class Fault:
 #: faults whose hook acts when their value changes, not in every period they are active: the
 #: gyro bias step (Mcu._apply_faults adds it once; the IMU model then carries it as data)
 ONCE = frozenset({"imu-bias"})
+#: faults the lean and compiled periods take as data (the encoders' dropout and the IMU's
+#: freeze flags, set per period from the active faults: Mcu.step), not the general loop
+DATA = frozenset({"encoder", "imu-freeze"})
 
 
 def any_active(faults: Iterable[Fault], t_since_boot: float,

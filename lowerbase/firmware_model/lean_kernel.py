@@ -53,7 +53,13 @@ C_STALL, C_THR, C_SFRAC, C_TR_L, C_TR_R, C_TRACK, C_TOP, C_IDLE2 = range(2 * M +
 C_GS, C_AS, C_GMAX, C_AMAX, C_GRAV, C_DT = range(2 * M + 17, 2 * M + 23)
 _C_SPARE, C_CARRIED, C_ENC_T, C_IMU_N, C_STANDBY_T, C_LINK_T = range(2 * M + 23, 2 * M + 29)
 C_GF, C_AF, C_GT, C_AT = 2 * M + 29, 2 * M + 32, 2 * M + 35, 2 * M + 38  # 3 each
-C_SIZE = 2 * M + 41
+#: data, not constants: the slip fractions (left, right) of the slip events in force in this
+#: period (SlipModel.event_fractions), written by KernelLoop.step before the call; 0 without
+C_SLIP_L, C_SLIP_R = 2 * M + 41, 2 * M + 42
+#: data too (Mcu._fault_data): 1 while that encoder drops its pulses (the encoder fault), 1
+#: while the IMU repeats its last sample (imu-freeze)
+C_DROP_L, C_DROP_R, C_FROZEN = 2 * M + 43, 2 * M + 44, 2 * M + 45
+C_SIZE = 2 * M + 46
 #: state numbers of RobotState
 ACTIVE, EMERGENCY_STOP, FAULT, STANDBY = 2, 3, 4, 1
 
@@ -168,7 +174,7 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
         k, M, t_r, dt, brake, om_r, sp_r, oc_r, st_r, ot_r, stt_r)
     rim_l = (om_l - before_l) / dt * k[7]
     rim_r = (om_r - before_r) / dt * k[M + 7]
-    s_l = s_r = 0.0  # SlipModel.step without events or random slip
+    s_l, s_r = k[C_SLIP_L], k[C_SLIP_R]  # SlipModel.step: the events' fractions, then accel
     if k[C_THR] > 0.0:
         if abs(rim_l) > k[C_THR]:
             s_l = pymax(s_l, k[C_SFRAC])
@@ -186,8 +192,8 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
     accel_x = (v - tv) / dt
     tv, tw = v, w
     distance += abs(v) * dt
-    moved_l, fr_l = encoder_add(fr_l, a_l, k[C_PPR_L])
-    moved_r, fr_r = encoder_add(fr_r, a_r, k[C_PPR_R])
+    moved_l, fr_l = (0, fr_l) if k[C_DROP_L] else encoder_add(fr_l, a_l, k[C_PPR_L])
+    moved_r, fr_r = (0, fr_r) if k[C_DROP_R] else encoder_add(fr_r, a_r, k[C_PPR_R])
     tot_l += moved_l
     tot_r += moved_r
     ds = 0.0
@@ -205,9 +211,10 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
     if imu_due:
         imu_sample(k, z, noise, tv, tw, accel_x, imu)
         same = True
-        for j in range(6):
-            same = same and imu[j] == imu[6 + j]
-            imu[6 + j] = imu[j]
+        if not k[C_FROZEN]:  # frozen: ImuModel.sample gives its last sample again
+            for j in range(6):
+                same = same and imu[j] == imu[6 + j]
+                imu[6 + j] = imu[j]
         imu_same = imu_same + 1 if has_last and same else 0
     if bms:
         total = k[C_IDLE2]
@@ -316,12 +323,13 @@ def hot_values(k: np.ndarray, vals: np.ndarray, om_l: float, cur_l: float, oc_l:
     vals[V_WF_L + 2] = float(wrap32(tot_l))
     vals[V_WF_L + 3] = clip(vel_l, rg[R_WF_L], rg[R_WF_L + 1])
     vals[V_WF_L + 4] = clip(cur_l, rg[R_WF_L + 2], rg[R_WF_L + 3])
-    vals[V_WF_L + 5] = float((1 if oc_l else 0) | (2 if st_l else 0))
+    enc_l, enc_r = 4 if k[C_DROP_L] else 0, 4 if k[C_DROP_R] else 0  # EncoderCounter.status_bits
+    vals[V_WF_L + 5] = float((1 if oc_l else 0) | (2 if st_l else 0) | enc_l)
     vals[V_WF_R + 1] = 1.0
     vals[V_WF_R + 2] = float(wrap32(tot_r))
     vals[V_WF_R + 3] = clip(vel_r, rg[R_WF_R], rg[R_WF_R + 1])
     vals[V_WF_R + 4] = clip(cur_r, rg[R_WF_R + 2], rg[R_WF_R + 3])
-    vals[V_WF_R + 5] = float((1 if oc_r else 0) | (2 if st_r else 0))
+    vals[V_WF_R + 5] = float((1 if oc_r else 0) | (2 if st_r else 0) | enc_r)
     v, w = 0.5 * (vel_l + vel_r), (vel_r - vel_l) / k[C_DIST]
     vals[V_MS + 1] = clip(v, rg[R_MS], rg[R_MS + 1])
     vals[V_MS + 2] = clip(w, rg[R_MS + 2], rg[R_MS + 3])

@@ -164,6 +164,21 @@ class SlipModel:
         """Slip fractions (left, right) for the step starting at ``t`` [s], over which the base
         travels ``distance`` [m] with wheel rim accelerations ``rim_accel`` [m/s^2]."""
         p = self.params
+        left = right = 0.0
+        if self.events or p.slip_rate_per_km:
+            left, right = self.event_fractions(t, distance)
+        if p.accel_slip_threshold > 0.0:
+            if abs(rim_accel[0]) > p.accel_slip_threshold:
+                left = max(left, p.accel_slip_fraction)
+            if abs(rim_accel[1]) > p.accel_slip_threshold:
+                right = max(right, p.accel_slip_fraction)
+        return left, right
+
+    def event_fractions(self, t: float, distance: float) -> tuple[float, float]:
+        """The first half of :meth:`step`: the random event drawn (or not), the events over
+        dropped, and the slip fractions (left, right) of the events in force at ``t``; the
+        compiled control period takes these as data and adds the acceleration slip itself."""
+        p = self.params
         chance = p.slip_rate_per_km * abs(distance) / 1e3  # events per km * km
         if chance > 0.0 and self.rng.random() < chance:
             wheel: Literal["left", "right"] = "left" if self.rng.random() < 0.5 else "right"
@@ -173,9 +188,4 @@ class SlipModel:
         for e in self.events:
             s_l, s_r = e.fractions(t)
             left, right = max(left, s_l), max(right, s_r)
-        if p.accel_slip_threshold > 0.0:
-            if abs(rim_accel[0]) > p.accel_slip_threshold:
-                left = max(left, p.accel_slip_fraction)
-            if abs(rim_accel[1]) > p.accel_slip_threshold:
-                right = max(right, p.accel_slip_fraction)
         return left, right

@@ -9,6 +9,7 @@ truth step, and without numba the Python loop takes over.
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from typing import Any
 
 import pytest
@@ -158,8 +159,7 @@ def _run(rig: TraceRig, seconds: float) -> tuple[Any, ...]:
     return rig.trace, tr.x, tr.y, tr.yaw, tr.blocked_steps, rig.mcu.encoder_counts()
 
 
-def test_surroundings_and_slip_events_keep_the_python_truth_step(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+def test_surroundings_keep_the_python_truth_step(monkeypatch: pytest.MonkeyPatch) -> None:
     def rig(wall: Wall) -> TraceRig:
         r = TraceRig(profile=load_profile(), keep=False)
         r.mcu.truth.surroundings = wall
@@ -171,6 +171,78 @@ def test_surroundings_and_slip_events_keep_the_python_truth_step(
     assert got[4] > 0 and walls[0].asked == round(1.85 / 0.005)  # asked before every move
     monkeypatch.setattr(Mcu, "lean", False)
     assert got == _run(rig(walls[1]), 1.5)
+
+
+def _slipping(events: bool, rate: float) -> TraceRig:
+    p = load_profile()
+    rig = TraceRig(profile=replace(p, truth=replace(
+        p.truth, slip_rate_per_km=rate, slip_duration=0.05, slip_fraction=0.6)), keep=False)
+    if events:
+        rig.mcu.slip.add_event(SlipEvent("left", 0.6, 0.3, 0.4))
+        rig.mcu.slip.add_event(SlipEvent("both", 0.8, 0.2, 0.25))
+    return rig
+
+
+@pytest.mark.parametrize(("events", "rate"), [(True, 0.0), (False, 3000.0), (True, 3000.0)])
+def test_slip_events_and_random_slip_run_in_the_kernel(
+        monkeypatch: pytest.MonkeyPatch, events: bool, rate: float) -> None:
+    """The events' slip fractions (SlipModel.event_fractions, random events drawn) enter the
+    kernel as data: every lean period compiled, the same frames and truth as the Python lean
+    loop and the general loop; and the slip shows (so a kernel that ignored it would differ)."""
+    seen = _count_kernel_periods(monkeypatch)
+    rig = _slipping(events, rate)
+    got = _run(rig, 1.5)
+    assert seen["kernel"] >= 200 and seen["python"] == 0  # runs after the events (1 s)
+    assert got != _run(_slipping(False, 0.0), 1.5)  # the slip changed the trace
+    monkeypatch.setattr(LeanLoop, "compiled", False)
+    assert got == _run(_slipping(events, rate), 1.5)
+    monkeypatch.setattr(LeanLoop, "compiled", True)
+    monkeypatch.setattr(Mcu, "lean", False)
+    assert got == _run(_slipping(events, rate), 1.5)
+
+
+def _drive_with_data_faults(bms: bool = True) -> tuple[Any, ...]:
+    """A drive through Mcu.advance with the left encoder failing for 0.6 s (long enough for
+    its fault bit), the IMU frozen for 0.6 s from 0.1 s later, then both encoders for 0.1 s,
+    then nothing: every frame and the end state."""
+    p = load_profile()
+    rig = TraceRig(profile=p, bms=McuBmsAdapter.from_battery_table(p.battery) if bms else None,
+                   keep=False)
+    rig.enable()
+    mcu = rig.mcu
+    t = mcu.clock.now() - mcu.boot_time
+    mcu.inject(Fault("encoder", "left", start=t + 0.5, duration=0.6))
+    mcu.inject(Fault("encoder", "right", start=t + 1.3, duration=0.1))
+    mcu.inject(Fault("encoder", "left", start=t + 1.3, duration=0.1))
+    mcu.inject(Fault("imu-freeze", start=t + 0.6, duration=0.6))
+    rig.drive(0.5, 0.2, 1.0)
+    bits = mcu.status
+    rig.drive(0.4, -0.2, 1.5)
+    mcu._lean.release()
+    tr = mcu.truth
+    return (rig.trace, bits, tr.x, tr.y, tr.yaw, mcu.odometer, mcu.encoder_counts(),
+            mcu.status, mcu.motion_fault, int(mcu.state), dict(mcu._counters), list(mcu._due))
+
+
+def test_encoder_and_imu_freeze_faults_run_in_the_kernel(monkeypatch: pytest.MonkeyPatch
+                                                          ) -> None:
+    """The encoder faults' dropout and the IMU's freeze enter the kernel as data
+    (Mcu._fault_data): their active periods compiled, the same frames and end state as the
+    Python lean loop and the general loop; and the faults show (so a kernel that ignored
+    them would differ)."""
+    seen = _count_kernel_periods(monkeypatch)
+    got = _drive_with_data_faults()
+    assert got[1] & StatusBit.LEFT_ENCODER_FAULT  # the count froze long enough for the bit
+    assert got[1] & StatusBit.IMU_FAULT  # and the IMU's sample
+    assert seen["kernel"] >= 180 and seen["python"] == 0 and seen["run"] > 150
+    monkeypatch.setattr(Mcu, "inject", lambda self, f: f)  # the same drive without the faults
+    assert got[0] != _drive_with_data_faults()[0]
+    monkeypatch.undo()
+    monkeypatch.setattr(LeanLoop, "compiled", False)
+    assert got == _drive_with_data_faults()
+    monkeypatch.setattr(LeanLoop, "compiled", True)
+    monkeypatch.setattr(Mcu, "lean", False)
+    assert got == _drive_with_data_faults()
 
 
 def test_without_numba_the_python_loop_runs(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -13,8 +13,9 @@ before any Python path steps (``release``).
 Slip events and random slip enter as data: ``SlipModel.event_fractions`` (the random draw,
 the events in force) runs in Python before the call and its two fractions go into the
 kernel's ``k`` (C_SLIP_L, C_SLIP_R; 0 without events), the kernel adds the acceleration slip.
-So do active encoder and imu-freeze faults: ``Mcu._fault_data`` (C_DROP_L, C_DROP_R,
-C_FROZEN: the encoders' ``dropout``, the IMU's ``frozen``).
+So do active encoder, imu-freeze and overcurrent faults: ``Mcu._fault_data`` (C_DROP_L,
+C_DROP_R, C_FROZEN, C_OVER_L, C_OVER_R: the encoders' ``dropout``, the IMU's ``frozen``, the
+drivers' injected over-current, which the kernel latches before the motors step).
 A period goes to the Python LeanLoop instead (``step`` returns False, nothing changed) when
 surroundings are installed (the world's collision check must see each move), or the BMS is
 polled in a period that also steps the pack (``poll_ahead``; otherwise the poll, every 100th
@@ -185,8 +186,8 @@ class KernelLoop:
         self.k = np.zeros(lk.C_SIZE + lk.R_SIZE)
         self.owned = False
         self.slipping = False  #: slip fractions of events are in ``k`` (C_SLIP_L, C_SLIP_R)
-        #: the Mcu._fault_data in ``k`` (C_DROP_L, C_DROP_R, C_FROZEN)
-        self._fault_data: tuple[bool, bool, bool] | None = None
+        #: the Mcu._fault_data in ``k`` (C_DROP_L .. C_OVER_R)
+        self._fault_data: mcu_defs.FaultData | None = None
         self._key: tuple[Any, ...] = ()
 
     # -- ownership of the due times, hot counters and IMU sample -----------------------------------
@@ -256,11 +257,12 @@ class KernelLoop:
         k[lk.C_SIZE:] = ranges
         self._key = self._current_key()
 
-    def set_fault_data(self, data: tuple[bool, bool, bool]) -> None:
-        """The encoders' dropout and the IMU's freeze (``Mcu._fault_data``) into the encoders,
-        the IMU model and the kernel's data (C_DROP_L, C_DROP_R, C_FROZEN)."""
-        self.lean.el.dropout, self.lean.er.dropout, self.mcu.imu.frozen = data
-        self.k[self.lk.C_DROP_L:self.lk.C_FROZEN + 1] = data
+    def set_fault_data(self, data: mcu_defs.FaultData) -> None:
+        """The encoders' dropout, the IMU's freeze and the injected over-current
+        (``Mcu._fault_data``) into the encoders, the IMU model and the kernel's data (C_DROP_L,
+        C_DROP_R, C_FROZEN, C_OVER_L, C_OVER_R; the kernel latches the over-current)."""
+        self.lean.el.dropout, self.lean.er.dropout, self.mcu.imu.frozen = data[:3]
+        self.k[self.lk.C_DROP_L:self.lk.C_OVER_R + 1] = data
         self._fault_data = data
 
     def no_slip(self) -> None:
@@ -295,7 +297,7 @@ class KernelLoop:
             self.slipping = True
         elif self.slipping:
             self.no_slip()
-        if mcu._fault_data is not self._fault_data:  # encoder, imu-freeze faults, as data
+        if mcu._fault_data is not self._fault_data:  # encoder, imu-freeze, overcurrent: data
             self.set_fault_data(mcu._fault_data)
         if mcu.state == m.RobotState.BOOT and now - mcu.boot_time >= m.BOOT_TIME:
             mcu.state = m.RobotState.STANDBY

@@ -101,7 +101,11 @@ class LeanLoop:
             mcu.state = m.RobotState.STANDBY
         ml, mr, el, er = self.ml, self.mr, self.el, self.er
         ml.blocked = mr.blocked = False  # what _apply_faults does with no hook's fault active
-        el.dropout, er.dropout, mcu.imu.frozen = mcu._fault_data
+        el.dropout, er.dropout, mcu.imu.frozen, over_l, over_r = mcu._fault_data
+        if over_l:  # the overcurrent fault: Mcu._apply_faults
+            ml.inject_over_current()
+        if over_r:
+            mr.inject_over_current()
         c = mcu.chassis
         if c is not self._chassis:
             self._derive(c)

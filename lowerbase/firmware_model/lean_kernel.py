@@ -57,9 +57,11 @@ C_GF, C_AF, C_GT, C_AT = 2 * M + 29, 2 * M + 32, 2 * M + 35, 2 * M + 38  # 3 eac
 #: period (SlipModel.event_fractions), written by KernelLoop.step before the call; 0 without
 C_SLIP_L, C_SLIP_R = 2 * M + 41, 2 * M + 42
 #: data too (Mcu._fault_data): 1 while that encoder drops its pulses (the encoder fault), 1
-#: while the IMU repeats its last sample (imu-freeze)
+#: while the IMU repeats its last sample (imu-freeze), 1 while that driver's over-current is
+#: injected (the overcurrent fault: latched before the motor steps)
 C_DROP_L, C_DROP_R, C_FROZEN = 2 * M + 43, 2 * M + 44, 2 * M + 45
-C_SIZE = 2 * M + 46
+C_OVER_L, C_OVER_R = 2 * M + 46, 2 * M + 47
+C_SIZE = 2 * M + 48
 #: state numbers of RobotState
 ACTIVE, EMERGENCY_STOP, FAULT, STANDBY = 2, 3, 4, 1
 
@@ -167,6 +169,10 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
     v_l, v_r = target_v - half, target_v + half
     t_l = 0.0 if abs(v_l) < k[C_MIN] else v_l * 2.0 * math.pi / k[C_PERIM] * k[C_RL] / k[11]
     t_r = 0.0 if abs(v_r) < k[C_MIN] else v_r * 2.0 * math.pi / k[C_PERIM] * k[C_RR] / k[M + 11]
+    if k[C_OVER_L]:  # WheelMotor.inject_over_current (Mcu._apply_faults)
+        oc_l = True
+    if k[C_OVER_R]:
+        oc_r = True
     before_l, before_r = om_l, om_r
     a_l, om_l, sp_l, cur_l, oc_l, st_l, ot_l, stt_l = motor_step(
         k, 0, t_l, dt, brake, om_l, sp_l, oc_l, st_l, ot_l, stt_l)

@@ -13,9 +13,10 @@ before any Python path steps (``release``).
 Slip events and random slip enter as data: ``SlipModel.event_fractions`` (the random draw,
 the events in force) runs in Python before the call and its two fractions go into the
 kernel's ``k`` (C_SLIP_L, C_SLIP_R; 0 without events), the kernel adds the acceleration slip.
-So do active encoder, imu-freeze and overcurrent faults: ``Mcu._fault_data`` (C_DROP_L,
-C_DROP_R, C_FROZEN, C_OVER_L, C_OVER_R: the encoders' ``dropout``, the IMU's ``frozen``, the
-drivers' injected over-current, which the kernel latches before the motors step).
+So do active encoder, imu-freeze, overcurrent and stall faults: ``Mcu._fault_data``
+(C_DROP_L, C_DROP_R, C_FROZEN, C_OVER_L, C_OVER_R, C_BLOCK_L, C_BLOCK_R: the encoders'
+``dropout``, the IMU's ``frozen``, the drivers' injected over-current, which the kernel
+latches before the motors step, the motors' ``blocked``).
 A period goes to the Python LeanLoop instead (``step`` returns False, nothing changed) when
 surroundings are installed (the world's collision check must see each move), or the BMS is
 polled in a period that also steps the pack (``poll_ahead``; otherwise the poll, every 100th
@@ -186,7 +187,7 @@ class KernelLoop:
         self.k = np.zeros(lk.C_SIZE + lk.R_SIZE)
         self.owned = False
         self.slipping = False  #: slip fractions of events are in ``k`` (C_SLIP_L, C_SLIP_R)
-        #: the Mcu._fault_data in ``k`` (C_DROP_L .. C_OVER_R)
+        #: the Mcu._fault_data in ``k`` (C_DROP_L .. C_BLOCK_R)
         self._fault_data: mcu_defs.FaultData | None = None
         self._key: tuple[Any, ...] = ()
 
@@ -231,7 +232,8 @@ class KernelLoop:
                              motor._ome_dt, motor._half_mass, motor._rolling, g.radius,
                              g.min_speed, p.viscous_friction, p.gear_efficiency, g.ratio,
                              p.torque_constant, p.idle_current, p.over_current_limit,
-                             p.over_current_time, p.stall_speed, p.stall_time)
+                             p.over_current_time, p.stall_speed, p.stall_time,
+                             p.stall_current)
         c = mcu.chassis
         lean._derive(c)
         tg, sp, imu = mcu.truth.geometry, mcu.slip.params, mcu.imu
@@ -258,11 +260,13 @@ class KernelLoop:
         self._key = self._current_key()
 
     def set_fault_data(self, data: mcu_defs.FaultData) -> None:
-        """The encoders' dropout, the IMU's freeze and the injected over-current
-        (``Mcu._fault_data``) into the encoders, the IMU model and the kernel's data (C_DROP_L,
-        C_DROP_R, C_FROZEN, C_OVER_L, C_OVER_R; the kernel latches the over-current)."""
-        self.lean.el.dropout, self.lean.er.dropout, self.mcu.imu.frozen = data[:3]
-        self.k[self.lk.C_DROP_L:self.lk.C_OVER_R + 1] = data
+        """The encoders' dropout, the IMU's freeze, the injected over-current and the wheels
+        blocked (``Mcu._fault_data``) into the encoders, the IMU model, the motors and the
+        kernel's data (C_DROP_L .. C_BLOCK_R; the kernel latches the over-current)."""
+        lean = self.lean
+        lean.el.dropout, lean.er.dropout, self.mcu.imu.frozen = data[:3]
+        lean.ml.blocked, lean.mr.blocked = data[5:]
+        self.k[self.lk.C_DROP_L:self.lk.C_BLOCK_R + 1] = data
         self._fault_data = data
 
     def no_slip(self) -> None:
@@ -297,7 +301,7 @@ class KernelLoop:
             self.slipping = True
         elif self.slipping:
             self.no_slip()
-        if mcu._fault_data is not self._fault_data:  # encoder, imu-freeze, overcurrent: data
+        if mcu._fault_data is not self._fault_data:  # encoder, imu-freeze, overcurrent, stall
             self.set_fault_data(mcu._fault_data)
         if mcu.state == m.RobotState.BOOT and now - mcu.boot_time >= m.BOOT_TIME:
             mcu.state = m.RobotState.STANDBY

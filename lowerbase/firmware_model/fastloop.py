@@ -100,8 +100,9 @@ class LeanLoop:
         if mcu.state == m.RobotState.BOOT and now - mcu.boot_time >= m.BOOT_TIME:
             mcu.state = m.RobotState.STANDBY
         ml, mr, el, er = self.ml, self.mr, self.el, self.er
-        ml.blocked = mr.blocked = False  # what _apply_faults does with no hook's fault active
-        el.dropout, er.dropout, mcu.imu.frozen, over_l, over_r = mcu._fault_data
+        # what Mcu._apply_faults does with only the faults of faults.DATA active
+        el.dropout, er.dropout, mcu.imu.frozen, over_l, over_r, ml.blocked, mr.blocked = (
+            mcu._fault_data)
         if over_l:  # the overcurrent fault: Mcu._apply_faults
             ml.inject_over_current()
         if over_r:
@@ -144,12 +145,12 @@ class LeanLoop:
         ds += 0.5 * moved_r * self.bpp_r
         stuck = mcu._enc_stuck  # Mcu._check_encoder, both sides
         if abs(ml.setpoint) * ml.geometry.radius > self.stall_speed and moved_l == 0 \
-                and not held_l:
+                and not ml.blocked and not held_l:
             stuck["left"] += dt
         else:
             stuck["left"] = 0.0
         if abs(mr.setpoint) * mr.geometry.radius > self.stall_speed and moved_r == 0 \
-                and not held_r:
+                and not mr.blocked and not held_r:
             stuck["right"] += dt
         else:
             stuck["right"] = 0.0

@@ -91,10 +91,10 @@ class Fault:
 #: faults whose hook acts when their value changes, not in every period they are active: the
 #: gyro bias step (Mcu._apply_faults adds it once; the IMU model then carries it as data)
 ONCE = frozenset({"imu-bias"})
-#: faults the lean and compiled periods take as data (the encoders' dropout, the IMU's freeze
-#: and the drivers' injected over-current flags, set per period from the active faults:
-#: Mcu.step), not the general loop
-DATA = frozenset({"encoder", "imu-freeze", "overcurrent"})
+#: faults the lean and compiled periods take as data (the encoders' dropout, the IMU's freeze,
+#: the drivers' injected over-current and the wheels' blocked flags, set per period from the
+#: active faults: Mcu.step), not the general loop
+DATA = frozenset({"encoder", "imu-freeze", "overcurrent", "stall"})
 #: faults active in a lean period without the general loop's fault hooks (Mcu._faults_act)
 LEAN = ONCE | DATA
 

@@ -45,8 +45,8 @@ TWO_PI = 2.0 * math.pi
 # -- indices into the constants array (built by fastkernel.constants) --------------------------
 #: per motor (left at 0, right at M): limit, alpha, tau, ome_zero, ome_dt, half_mass, rolling,
 #: radius, min_speed, viscous, eta, ratio, torque_constant, idle, oc_limit, oc_time,
-#: stall_speed, stall_time
-M = 18
+#: stall_speed, stall_time, stall_current
+M = 19
 #: after both motors: chassis and the rest
 C_DIST, C_MIN, C_PERIM, C_RL, C_RR, C_BPP_L, C_BPP_R, C_PPR_L, C_PPR_R = range(2 * M, 2 * M + 9)
 C_STALL, C_THR, C_SFRAC, C_TR_L, C_TR_R, C_TRACK, C_TOP, C_IDLE2 = range(2 * M + 9, 2 * M + 17)
@@ -61,16 +61,19 @@ C_SLIP_L, C_SLIP_R = 2 * M + 41, 2 * M + 42
 #: injected (the overcurrent fault: latched before the motor steps)
 C_DROP_L, C_DROP_R, C_FROZEN = 2 * M + 43, 2 * M + 44, 2 * M + 45
 C_OVER_L, C_OVER_R = 2 * M + 46, 2 * M + 47
-C_SIZE = 2 * M + 48
+#: data too: 1 while that wheel is blocked (the stall fault; WheelMotor.blocked)
+C_BLOCK_L, C_BLOCK_R = 2 * M + 48, 2 * M + 49
+C_SIZE = 2 * M + 50
 #: state numbers of RobotState
 ACTIVE, EMERGENCY_STOP, FAULT, STANDBY = 2, 3, 4, 1
 
 @_jit
 def motor_step(k: np.ndarray, o: int, target: float, dt: float, brake: bool, omega: float,
                setpoint: float, over_current: bool, stalled: bool, over_time: float,
-               stall_time: float) -> tuple[float, float, float, float, bool, bool, float,
-                                           float]:
-    """WheelMotor.step, unblocked and without load force; constants at ``k[o:]``.
+               stall_time: float, blocked: bool) -> tuple[float, float, float, float, bool,
+                                                          bool, float, float]:
+    """WheelMotor.step without load force (``blocked``: the stall fault's blocked wheel, not
+    pressed); constants at ``k[o:]``.
     Returns (angle, omega, setpoint, current, over_current, stalled, over_time, stall_time)."""
     limit, alpha, tau, ome_zero, ome_dt = k[o], k[o + 1], k[o + 2], k[o + 3], k[o + 4]
     radius = k[o + 7]
@@ -99,20 +102,26 @@ def motor_step(k: np.ndarray, o: int, target: float, dt: float, brake: bool, ome
         omega = setpoint + 0.0 * t - 0.0 * tau + c * (1.0 - one_minus_e)
         angle2 = setpoint * t + 0.5 * 0.0 * t * t - 0.0 * tau * t + c * tau * one_minus_e
     angle += angle2
-    wheel_accel = (omega - omega0) / dt
-    v = omega * radius
-    sign_v = 0.0 if v == 0.0 else math.copysign(1.0, v)
-    force = k[o + 5] * wheel_accel * radius
-    force += sign_v * k[o + 6] + k[o + 9] * v
-    force += 0.0  # the load force
-    wheel_torque = force * radius
-    eta, ratio = k[o + 10], k[o + 11]
-    if wheel_torque * omega >= 0.0:
-        motor_torque = wheel_torque / (ratio * eta)
+    if blocked:  # WheelMotor._update_current, blocked: the driver's saturation when commanded
+        omega, angle = 0.0, 0.0
+        commanded = abs(setpoint) * radius >= k[o + 16] and not over_current
+        current = math.copysign(k[o + 18], setpoint) if commanded else 0.0
+        current += math.copysign(k[o + 13], current)
     else:
-        motor_torque = wheel_torque * eta / ratio
-    amps = motor_torque / k[o + 12]
-    current = amps + math.copysign(k[o + 13], amps)
+        wheel_accel = (omega - omega0) / dt
+        v = omega * radius
+        sign_v = 0.0 if v == 0.0 else math.copysign(1.0, v)
+        force = k[o + 5] * wheel_accel * radius
+        force += sign_v * k[o + 6] + k[o + 9] * v
+        force += 0.0  # the load force
+        wheel_torque = force * radius
+        eta, ratio = k[o + 10], k[o + 11]
+        if wheel_torque * omega >= 0.0:
+            motor_torque = wheel_torque / (ratio * eta)
+        else:
+            motor_torque = wheel_torque * eta / ratio
+        amps = motor_torque / k[o + 12]
+        current = amps + math.copysign(k[o + 13], amps)
     over = abs(current) > k[o + 14]
     over_time = over_time + dt if over else 0.0
     if over and over_time >= k[o + 15]:
@@ -174,10 +183,11 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
     if k[C_OVER_R]:
         oc_r = True
     before_l, before_r = om_l, om_r
+    bl_l, bl_r = k[C_BLOCK_L] != 0.0, k[C_BLOCK_R] != 0.0
     a_l, om_l, sp_l, cur_l, oc_l, st_l, ot_l, stt_l = motor_step(
-        k, 0, t_l, dt, brake, om_l, sp_l, oc_l, st_l, ot_l, stt_l)
+        k, 0, t_l, dt, brake, om_l, sp_l, oc_l, st_l, ot_l, stt_l, bl_l)
     a_r, om_r, sp_r, cur_r, oc_r, st_r, ot_r, stt_r = motor_step(
-        k, M, t_r, dt, brake, om_r, sp_r, oc_r, st_r, ot_r, stt_r)
+        k, M, t_r, dt, brake, om_r, sp_r, oc_r, st_r, ot_r, stt_r, bl_r)
     rim_l = (om_l - before_l) / dt * k[7]
     rim_r = (om_r - before_r) / dt * k[M + 7]
     s_l, s_r = k[C_SLIP_L], k[C_SLIP_R]  # SlipModel.step: the events' fractions, then accel
@@ -205,11 +215,11 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
     ds = 0.0
     ds += 0.5 * moved_l * k[C_BPP_L]
     ds += 0.5 * moved_r * k[C_BPP_R]
-    if abs(sp_l) * k[7] > k[C_STALL] and moved_l == 0:
+    if abs(sp_l) * k[7] > k[C_STALL] and moved_l == 0 and not bl_l:  # Mcu._check_encoder
         stuck_l += dt
     else:
         stuck_l = 0.0
-    if abs(sp_r) * k[M + 7] > k[C_STALL] and moved_r == 0:
+    if abs(sp_r) * k[M + 7] > k[C_STALL] and moved_r == 0 and not bl_r:
         stuck_r += dt
     else:
         stuck_r = 0.0

@@ -214,7 +214,7 @@ class Mcu(McuCommands, McuStatus, McuFrames):
         self.bms_snapshot: Any = None
         self._imu_bias_applied = 0.0
         #: the encoders' dropout (left, right), the IMU frozen, the drivers' injected
-        #: over-current (left, right), for the lean periods
+        #: over-current (left, right), the wheels blocked (left, right), for the lean periods
         self._fault_data = NO_FAULT_DATA
         self._last_save = now
         self._save_state()
@@ -261,8 +261,8 @@ class Mcu(McuCommands, McuStatus, McuFrames):
 
     def _faults_act(self) -> bool:
         """Whether a fault hook acts in this period: a fault active (but the gyro bias, which
-        the IMU model carries once added, and the encoder dropout, IMU freeze and over-current,
-        which the lean periods take as data), or the gyro bias to add or take back."""
+        the IMU model carries once added, and the encoder dropout, IMU freeze, over-current and
+        stall, which the lean periods take as data), or the gyro bias to add or take back."""
         if any_active(self.faults, self.clock.now() - self.boot_time, LEAN):
             return True
         bias = self._active("imu-bias")
@@ -298,12 +298,14 @@ class Mcu(McuCommands, McuStatus, McuFrames):
         """One control period: safety, motion, sensors, BMS, then the frames that are due."""
         if self.lean and not (self._delayed or (
                 (self.faults or self._imu_bias_applied) and self._faults_act())):
-            if self.faults:  # encoder, imu-freeze, overcurrent faults: data for the lean period
+            if self.faults:  # encoder, imu-freeze, overcurrent, stall: data for the lean period
                 self._fault_data = (self._active("encoder", "left") is not None,
                                     self._active("encoder", "right") is not None,
                                     self._active("imu-freeze") is not None,
                                     self._active("overcurrent", "left") is not None,
-                                    self._active("overcurrent", "right") is not None)
+                                    self._active("overcurrent", "right") is not None,
+                                    self._active("stall", "left") is not None,
+                                    self._active("stall", "right") is not None)
             elif self._fault_data is not NO_FAULT_DATA:
                 self._fault_data = NO_FAULT_DATA
             self._lean.step()  # the same, bit for bit, without the fault hooks (fastloop.py)

@@ -50,9 +50,9 @@ BOOT_TIME = 0.3  #: [s] from power-on to standby
 BMS_POLL_PERIOD = 0.5  #: [s]
 BMS_STEP = 0.1  #: [s] the pack model is stepped with the mean load over this period
 #: Mcu._fault_data: the encoders' dropout (left, right), the IMU frozen, the drivers' injected
-#: over-current (left, right)
-FaultData = tuple[bool, bool, bool, bool, bool]
-NO_FAULT_DATA: FaultData = (False, False, False, False, False)  #: with no such fault active
+#: over-current (left, right), the wheels blocked (the stall fault; left, right)
+FaultData = tuple[bool, bool, bool, bool, bool, bool, bool]
+NO_FAULT_DATA: FaultData = (False,) * 7  #: with no such fault active
 BMS_LINK_TIMEOUT = 3.0  #: [s] without an answer -> BMS_LINK_LOST
 ENCODER_FAULT_TIME = 0.2  #: [s] commanded motion without pulses -> encoder fault
 IMU_FROZEN_SAMPLES = 20  #: identical consecutive samples -> IMU fault

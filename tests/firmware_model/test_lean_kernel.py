@@ -245,49 +245,55 @@ def test_encoder_and_imu_freeze_faults_run_in_the_kernel(monkeypatch: pytest.Mon
     assert got == _drive_with_data_faults()
 
 
-def _drive_with_overcurrent() -> tuple[Any, ...]:
-    """A drive through Mcu.advance with the right driver's over-current injected for 0.2 s
-    from 0.5 s in (it latches: the driver brakes, the robot faults): frames and end state."""
+def _drive_with_overcurrent(kind: str = "overcurrent") -> tuple[Any, ...]:
+    """A drive through Mcu.advance with a fault of ``kind`` on the right wheel for 0.5 s from
+    0.5 s in (over-current latches at once; a blocked wheel draws the stall current and its
+    stall latches after stall_time: the driver brakes, the robot faults): frames, end state."""
     p = load_profile()
     rig = TraceRig(profile=p, bms=McuBmsAdapter.from_battery_table(p.battery), keep=False)
     rig.enable()
     mcu = rig.mcu
     t = mcu.clock.now() - mcu.boot_time
-    mcu.inject(Fault("overcurrent", "right", start=t + 0.5, duration=0.2))
+    mcu.inject(Fault(kind, "right", start=t + 0.5, duration=0.5))
     rig.drive(0.5, 0.2, 1.0)
     mcu._lean.release()
     tr = mcu.truth
     return (rig.trace, tr.x, tr.y, tr.yaw, mcu.odometer, mcu.encoder_counts(), mcu.status,
-            mcu.motion_fault, int(mcu.state), mcu.motors["right"].over_current,
+            mcu.motion_fault, int(mcu.state), mcu.motors["right"].status_bits,
             dict(mcu._counters), list(mcu._due))
 
 
-def test_overcurrent_faults_run_in_the_kernel(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The injected over-current enters the kernel as data (Mcu._fault_data: C_OVER_L/R, the
-    kernel latches it): its active periods compiled, the same frames and end state as the
-    Python lean loop and the general loop; the fault shows, and a kernel that ignored the
-    flag would differ."""
+@pytest.mark.parametrize(("kind", "bit", "flag"), [
+    ("overcurrent", StatusBit.RIGHT_OVER_CURRENT, "C_OVER_R"),
+    ("stall", StatusBit.RIGHT_MOTOR_STALLED, "C_BLOCK_R")])
+def test_overcurrent_and_stall_faults_run_in_the_kernel(
+        monkeypatch: pytest.MonkeyPatch, kind: str, bit: int, flag: str) -> None:
+    """The injected over-current and the blocked wheel enter the kernel as data
+    (Mcu._fault_data: C_OVER_L/R, which the kernel latches; C_BLOCK_L/R): their active periods
+    compiled, the same frames and end state as the Python lean loop and the general loop; the
+    fault shows, and a kernel that ignored the flag would differ."""
     seen = _count_kernel_periods(monkeypatch)
-    got = _drive_with_overcurrent()
-    assert got[-3] and got[7] & StatusBit.RIGHT_MOTOR_FAULT  # latched: the robot faulted
-    assert seen["kernel"] >= 40 and seen["python"] == 0
+    got = _drive_with_overcurrent(kind)
+    assert got[6] & bit and got[7] & StatusBit.RIGHT_MOTOR_FAULT  # latched: the robot faulted
+    assert got[-3] == (1 if kind == "overcurrent" else 2)  # DriverStatus
+    assert seen["kernel"] >= 100 and seen["python"] == 0
     monkeypatch.setattr(Mcu, "inject", lambda self, f: f)  # the same drive without the fault
-    assert got[0] != _drive_with_overcurrent()[0]
+    assert got[0] != _drive_with_overcurrent(kind)[0]
     monkeypatch.undo()
     monkeypatch.setattr(LeanLoop, "compiled", False)
-    assert got == _drive_with_overcurrent()
+    assert got == _drive_with_overcurrent(kind)
     monkeypatch.setattr(LeanLoop, "compiled", True)
     monkeypatch.setattr(Mcu, "lean", False)
-    assert got == _drive_with_overcurrent()
+    assert got == _drive_with_overcurrent(kind)
     monkeypatch.undo()
     set_data = KernelLoop.set_fault_data  # a kernel deaf to the flag: not the general trace
 
     def deaf(self: KernelLoop, data: Any) -> None:
         set_data(self, data)
-        self.k[self.lk.C_OVER_L:self.lk.C_OVER_R + 1] = 0.0
+        self.k[getattr(self.lk, flag)] = 0.0
 
     monkeypatch.setattr(KernelLoop, "set_fault_data", deaf)
-    assert _drive_with_overcurrent() != got
+    assert _drive_with_overcurrent(kind) != got
 
 
 def test_without_numba_the_python_loop_runs(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Callable
 
 
 def positive_seconds(text: str) -> float:
@@ -17,23 +18,22 @@ def positive_seconds(text: str) -> float:
     return value
 
 
-def positive_int(text: str) -> int:
-    """A whole number >= 1 (``--workers``); argparse prints the error."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: must be 1 or more")
-    return value
+def _whole_number(least: int, why: str) -> Callable[[str], int]:
+    """An argparse type: a whole number >= ``least``; below it, ``why`` is the error."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        if value < least:
+            raise argparse.ArgumentTypeError(f"{text!r}: {why}")
+        return value
+
+    return parse
 
 
-def seed(text: str) -> int:
-    """A random seed: a whole number >= 0 (``--seed``, as numpy's generators take)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: a seed is 0 or more")
-    return value
+#: a whole number >= 1 (``--workers``)
+positive_int = _whole_number(1, "must be 1 or more")
+#: a random seed, a whole number >= 0 as numpy's generators take (``--seed``)
+seed = _whole_number(0, "a seed is 0 or more")

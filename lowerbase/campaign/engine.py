@@ -5,6 +5,7 @@ the runs it had: the scheduler gives them to another worker."""
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import logging
 import os
@@ -208,7 +209,29 @@ def start_forkserver() -> dict[str, str]:
     multiprocessing.get_context("forkserver").set_forkserver_preload(list(FORKSERVER_PRELOAD))
     with _children_ignore_sigint():
         multiprocessing.forkserver.ensure_running()
+    global _STOP_REGISTERED
+    if not _STOP_REGISTERED:
+        atexit.register(stop_forkserver)
+        _STOP_REGISTERED = True
     return {"distributed.worker.multiprocessing-method": "forkserver"}
+
+
+_STOP_REGISTERED = False  #: whether :func:`stop_forkserver` runs at this process' exit
+
+
+def stop_forkserver() -> None:
+    """Stop this process' forkserver and wait until it has gone (run at exit once
+    :func:`start_forkserver` ran). Left alone, it goes only once it notices its parent has,
+    which on a busy host is seconds later: until then it holds this process' stdout and
+    stderr open, and a pipe reading them (``| tee``, a test) does not end with the CLI."""
+    import multiprocessing.forkserver
+
+    server = getattr(multiprocessing.forkserver, "_forkserver", None)
+    stop = getattr(server, "_stop", None)  # CPython's own (3.10-3.13), for its tests
+    if stop is None or getattr(server, "_forkserver_pid", None) is None:
+        return
+    with contextlib.suppress(OSError):  # already gone (reaped, or its socket file removed)
+        stop()
 
 
 def warm_workers(client: Any) -> None:

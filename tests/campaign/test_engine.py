@@ -163,3 +163,34 @@ def test_two_local_clusters_at_once_start_without_a_port_warning() -> None:
             ports = [c.scheduler_info()["services"]["dashboard"] for c in (a, b)]
     assert [str(w.message) for w in seen if "in use" in str(w.message)] == []
     assert len(set(ports)) == 2 and 8787 not in ports
+
+
+FORKSERVER_EXIT = """
+import multiprocessing.forkserver, sys
+from lowerbase.campaign import engine
+engine.FORKSERVER_PRELOAD = ("slow_preload",)
+engine.start_forkserver()
+print(multiprocessing.forkserver._forkserver._forkserver_pid, flush=True)
+"""
+
+
+@pytest.mark.process
+def test_the_forkserver_has_gone_when_the_process_that_started_it_exits(tmp_path: Path) -> None:
+    """A forkserver left to notice its parent's exit on its own holds the parent's stdout open
+    for as long as it takes (here: a preload of a few seconds; a busy host's scheduling), so
+    ``lowerbase campaign run | tee`` did not end with the CLI; it is stopped at exit."""
+    (tmp_path / "slow_preload.py").write_text("import time\ntime.sleep(3)\n")
+    proc = subprocess.Popen([sys.executable, "-c", FORKSERVER_EXIT], stdout=subprocess.PIPE,
+                            text=True, cwd=tmp_path,
+                            env={**os.environ, "PYTHONPATH": str(tmp_path)})
+    assert proc.stdout is not None
+    pid = int(proc.stdout.readline())
+    assert proc.wait(timeout=120) == 0
+    try:
+        os.kill(pid, 0)
+        alive = True
+    except ProcessLookupError:
+        alive = False
+    assert proc.stdout.read() == ""  # at its end already
+    proc.stdout.close()
+    assert not alive

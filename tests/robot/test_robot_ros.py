@@ -226,7 +226,10 @@ def test_lockstep_and_ros2_options_without_them_are_one_line(args: list[str],
     (["--paused"], "--paused goes with --sim-time (real time does not wait)"),
     (["--seed", "2"], "--seed S goes with --sim-time (only a lockstep run repeats)"),
     (["--sim-time", "--seed", "-3"], "argument --seed: '-3': a seed is 0 or more"),
-    (["--sim-time", "--robot", "legged", "--camera"], "the legged robot has none")])
+    (["--sim-time", "--robot", "legged", "--camera"], "the legged robot has none"),
+    (["--log-dir", "/proc/nope"], "--log-dir /proc/nope: No such file or directory; give a "
+     "folder you can write to"),
+    (["--log-dir", __file__], "test_robot_ros.py: a file, not a folder; give a folder")])
 def test_bad_robot_options_end_in_one_line(args: list[str], says: str) -> None:
     out = subprocess.run([sys.executable, "-m", "lowerbase", "robot", *args],
                          capture_output=True, text=True, cwd=ROOT, timeout=60)

@@ -25,6 +25,8 @@ from lowerbase.errors import CampaignError
 
 #: retries of a run whose worker raised (a run's own exceptions are rows, not raised)
 RETRIES = 2
+log = logging.getLogger(__name__)
+
 #: a LocalCluster's Dask settings where a campaign needs less than Dask's defaults: with them
 #: a worker's own event loop took ~9 % of its process' CPU beside the runs, without them ~3 %
 #: (docs/campaigns.md). The statistical profiler samples every 10 ms for a dashboard that a
@@ -219,19 +221,33 @@ def start_forkserver() -> dict[str, str]:
 _STOP_REGISTERED = False  #: whether :func:`stop_forkserver` runs at this process' exit
 
 
-def stop_forkserver() -> None:
+def stop_forkserver(timeout: float = 20.0) -> None:
     """Stop this process' forkserver and wait until it has gone (run at exit once
     :func:`start_forkserver` ran). Left alone, it goes only once it notices its parent has,
     which on a busy host is seconds later: until then it holds this process' stdout and
-    stderr open, and a pipe reading them (``| tee``, a test) does not end with the CLI."""
+    stderr open, and a pipe reading them (``| tee``, a test) does not end with the CLI. One
+    that has not gone after ``timeout`` [s] (stuck in a preload) is killed."""
     import multiprocessing.forkserver
 
     server = getattr(multiprocessing.forkserver, "_forkserver", None)
-    stop = getattr(server, "_stop", None)  # CPython's own (3.10-3.13), for its tests
-    if stop is None or getattr(server, "_forkserver_pid", None) is None:
+    stop = getattr(server, "_stop", None)  # CPython's own (3.7-3.13), for its tests
+    pid = getattr(server, "_forkserver_pid", None)
+    if stop is None or pid is None:
         return
-    with contextlib.suppress(OSError):  # already gone (reaped, or its socket file removed)
-        stop()
+
+    def run() -> None:
+        with contextlib.suppress(OSError):  # already gone (reaped, its socket file removed)
+            stop()
+
+    waiter = threading.Thread(target=run, name="forkserver-stop", daemon=True)
+    waiter.start()
+    waiter.join(timeout)
+    if waiter.is_alive():
+        log.warning("the campaign's forkserver (pid %d) did not stop in %g s; killed",
+                    pid, timeout)
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+        waiter.join(timeout)
 
 
 def warm_workers(client: Any) -> None:

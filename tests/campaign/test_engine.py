@@ -166,23 +166,31 @@ def test_two_local_clusters_at_once_start_without_a_port_warning() -> None:
 
 
 FORKSERVER_EXIT = """
-import multiprocessing.forkserver, sys
+import atexit, multiprocessing.forkserver, sys
 from lowerbase.campaign import engine
 engine.FORKSERVER_PRELOAD = ("slow_preload",)
 engine.start_forkserver()
+if len(sys.argv) > 1:  # the at-exit stop, with a shorter patience
+    atexit.unregister(engine.stop_forkserver)
+    atexit.register(engine.stop_forkserver, float(sys.argv[1]))
 print(multiprocessing.forkserver._forkserver._forkserver_pid, flush=True)
 """
 
 
 @pytest.mark.process
-def test_the_forkserver_has_gone_when_the_process_that_started_it_exits(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("preload", "patience"), [
+    ("import time\ntime.sleep(3)\n", ()),
+    ("import threading\nthreading.Event().wait()\n", ("0.5",))], ids=["slow", "stuck"])
+def test_the_forkserver_has_gone_when_the_process_that_started_it_exits(
+        tmp_path: Path, preload: str, patience: tuple[str, ...]) -> None:
     """A forkserver left to notice its parent's exit on its own holds the parent's stdout open
     for as long as it takes (here: a preload of a few seconds; a busy host's scheduling), so
-    ``lowerbase campaign run | tee`` did not end with the CLI; it is stopped at exit."""
-    (tmp_path / "slow_preload.py").write_text("import time\ntime.sleep(3)\n")
-    proc = subprocess.Popen([sys.executable, "-c", FORKSERVER_EXIT], stdout=subprocess.PIPE,
-                            text=True, cwd=tmp_path,
-                            env={**os.environ, "PYTHONPATH": str(tmp_path)})
+    ``lowerbase campaign run | tee`` did not end with the CLI; it is stopped at exit, and one
+    stuck in its preload is killed after a while, with a warning."""
+    (tmp_path / "slow_preload.py").write_text(preload)
+    proc = subprocess.Popen([sys.executable, "-c", FORKSERVER_EXIT, *patience],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(tmp_path)})
     assert proc.stdout is not None
     pid = int(proc.stdout.readline())
     assert proc.wait(timeout=120) == 0
@@ -192,5 +200,9 @@ def test_the_forkserver_has_gone_when_the_process_that_started_it_exits(tmp_path
     except ProcessLookupError:
         alive = False
     assert proc.stdout.read() == ""  # at its end already
+    assert proc.stderr is not None
+    err = proc.stderr.read()
     proc.stdout.close()
+    proc.stderr.close()
     assert not alive
+    assert ("did not stop in 0.5 s; killed" in err) == bool(patience), err

@@ -211,14 +211,9 @@ def start_forkserver() -> dict[str, str]:
     multiprocessing.get_context("forkserver").set_forkserver_preload(list(FORKSERVER_PRELOAD))
     with _children_ignore_sigint():
         multiprocessing.forkserver.ensure_running()
-    global _STOP_REGISTERED
-    if not _STOP_REGISTERED:
-        atexit.register(stop_forkserver)
-        _STOP_REGISTERED = True
+    atexit.unregister(stop_forkserver)  # once, however often it is started
+    atexit.register(stop_forkserver)
     return {"distributed.worker.multiprocessing-method": "forkserver"}
-
-
-_STOP_REGISTERED = False  #: whether :func:`stop_forkserver` runs at this process' exit
 
 
 def stop_forkserver(timeout: float = 20.0) -> None:

@@ -209,7 +209,6 @@ def _use_sim_time(uri: str, sim: bool) -> Any:
     return restore
 
 
-
 def _log_dir(path: str) -> Path:
     """``--log-dir``: made if missing, and writable, or one line saying why not."""
     folder = Path(path)
@@ -223,6 +222,7 @@ def _log_dir(path: str) -> Path:
         raise ConfigError(f"--log-dir {path}: {e.strerror or e}; give a folder you can "
                           "write to (it is made if missing)") from None
     return folder
+
 
 def _run_lockstep(args: argparse.Namespace, sup: Any, speed: float, parts: tuple[str, ...],
                   line: Any, log_dir: Path, uri: str) -> int:

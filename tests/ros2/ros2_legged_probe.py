@@ -2,7 +2,8 @@
 --ros2``; prints one JSON line.
 
 ``interface``        the robot's topics and services (names, types) and robot_state's QoS
-``topics``           robot_state per second of /clock's time (this node on sim time), /clock
+``topics``           robot_state per second of /clock's time (each message's publication
+                     time, read from its source timestamp), /clock
 ``services DIR``     planning/*, set_listen and set_map (its PCD file goes to DIR)
 ``walk``             ~walk until IN_CONTROL, /cmd_vel until the base moved 0.3 m, ~stand
 
@@ -15,6 +16,7 @@ import json
 import math
 import struct
 import sys
+from bisect import bisect_right
 from functools import partial
 from itertools import pairwise
 from typing import Any
@@ -26,11 +28,12 @@ from lowerbase_legged_msgs.msg import RobotState, Waypoint
 from lowerbase_legged_msgs.srv import GetWaypoints, SetLaserMap, SetListen, SetWaypoints
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2, PointField
 from std_srvs.srv import Trigger
 
-from lowerbase.ros2.wire import clock_qos, qos_for
+from lowerbase.ros2.wire import qos_for
 
 TIMEOUT = 180.0
 spin_until = partial(probe_common.spin_until, timeout=TIMEOUT)  # every wait's deadline
@@ -49,12 +52,13 @@ SERVICES = {"/planning/set_waypoints": "lowerbase_legged_msgs/srv/SetWaypoints",
 
 
 class States:
-    """robot_state as it comes, with its publication sequence numbers (gaps: lost ones)."""
+    """robot_state as it comes, with its publication sequence numbers (gaps: lost ones) and
+    source timestamps (the robot's wall clock when it published each)."""
 
     def __init__(self, node: Node) -> None:
         self.msgs: list[RobotState] = []
         self.seqs: list[int] = []
-        self.times: list[float] = []  #: this node's ROS time (/clock's) at each message
+        self.sent: list[int] = []  #: [ns] source timestamps
         self.node = node
         node.create_subscription(RobotState, "/robot_state", self._on,
                                  qos_for("/robot_state", 1000))
@@ -62,7 +66,7 @@ class States:
     def _on(self, msg: RobotState, info: Any) -> None:
         self.msgs.append(msg)
         self.seqs.append(int(info["publication_sequence_number"]))
-        self.times.append(self.node.get_clock().now().nanoseconds * 1e-9)
+        self.sent.append(int(info["source_timestamp"]))
 
     def wait(self, done: Any, what: str) -> RobotState:
         spin_until(self.node, lambda: bool(self.msgs) and done(self.msgs[-1]), what)
@@ -102,18 +106,33 @@ def interface(node: Node) -> dict[str, Any]:
 
 
 def topics(node: Node) -> dict[str, Any]:
+    """robot_state's rate in /clock's time. The robot publishes /clock and robot_state from
+    one thread, so each robot_state was sent at the simulated time of the last /clock sent
+    before it (source timestamps, the robot's wall clock): a rate that holds however late this
+    process takes them (on a busy host it takes several of each topic in a burst, so its own
+    ROS time at each message says nothing). Ends are states between two /clock messages 10 ms
+    apart (none lost between them)."""
     states = States(node)
-    clock: list[float] = []
-    node.create_subscription(Clock, "/clock", lambda m: clock.append(probe_common.sec(m.clock)),
-                             clock_qos())
-    spin_until(node, lambda: len(states.msgs) >= 260 and len(clock) > 10,
-               "260 robot_state and /clock")
-    times = [t for t in states.times if t > 0.0][:251]  # ROS time once /clock came
-    return {"state_rate": (len(times) - 1) / (times[-1] - times[0]),
+    clocks: list[tuple[int, float]] = []  #: (source timestamp [ns], /clock [s])
+    node.create_subscription(
+        Clock, "/clock", lambda m, i: clocks.append((int(i["source_timestamp"]),
+                                                     probe_common.sec(m.clock))),
+        QoSProfile(depth=2000, reliability=ReliabilityPolicy.BEST_EFFORT))
+    spin_until(node, lambda: len(states.msgs) >= 300 and len(clocks) > 10,
+               "300 robot_state and /clock")
+    sent = [t for t, _ in clocks]
+    pinned = []  #: (sequence number, simulated time of sending) of the states with a bracket
+    for seq, at in zip(states.seqs, states.sent, strict=True):
+        k = bisect_right(sent, at)
+        if 0 < k < len(clocks) and clocks[k][1] - clocks[k - 1][1] < 0.015:
+            pinned.append((seq, clocks[k - 1][1]))
+    (seq0, t0), (seq1, t1) = pinned[0], pinned[-1]
+    return {"state_rate": (seq1 - seq0) / (t1 - t0), "span": t1 - t0, "pinned": len(pinned),
             "lost": sum(b - a - 1 for a, b in pairwise(states.seqs)),
             "actuators": len(states.msgs[-1].actuator_states),
-            "state": states.msgs[-1].state, "clock_first": clock[0], "clock_last": clock[-1],
-            "clock_backwards": sum(b < a for a, b in pairwise(clock))}
+            "state": states.msgs[-1].state, "clock_first": clocks[0][1],
+            "clock_last": clocks[-1][1],
+            "clock_backwards": sum(b[1] < a[1] for a, b in pairwise(clocks))}
 
 
 def cloud(points: list[tuple[float, float, float]]) -> PointCloud2:

@@ -2,8 +2,8 @@
 with rclpy clients in processes of their own (tests/ros2/ros2_legged_probe.py).
 
 One robot serves the module, at ``--speed 1``: robot_state carries no stamp, so its rate is
-measured against the probe's ROS time (/clock's), which is exact only when the probe keeps up
-with the robot; a busy host slows the robot's simulated time, never the probe's view of it.
+measured in the simulated time at which the robot sent each message (the last /clock it sent
+before, by their source timestamps), which holds however late a busy host lets the probe read.
 The tests run in file order; the one that walks comes last.
 """
 
@@ -52,7 +52,7 @@ def test_the_ros1_interface_on_ros2(robot: tuple[Ros2, Path]) -> None:
 
 def test_robot_state_at_50_hz_of_clock_time(robot: tuple[Ros2, Path]) -> None:
     got = robot[0].run_json("ros2_legged_probe.py", "topics", timeout=300)
-    assert got["state_rate"] == pytest.approx(50.0, rel=0.05), got
+    assert got["state_rate"] == pytest.approx(50.0, rel=0.01) and got["span"] > 5.0, got
     assert got["actuators"] == 12, got
     assert got["clock_last"] > got["clock_first"] and got["clock_backwards"] == 0, got
 

@@ -1,4 +1,6 @@
-"""Reading the user's TOML files and writing files that must survive a crash mid-write."""
+"""Reading the user's TOML files, checking the folders and files a user names for output
+(``--out``, ``--log-dir``, ``--mcap``, ``--record``) before any work starts, and writing files
+that must survive a crash mid-write."""
 
 from __future__ import annotations
 
@@ -26,6 +28,59 @@ def read_toml(path: str | Path, what: str = "file") -> dict[str, Any]:
         raise ConfigError(f"{p}: cannot read {what}: {e.strerror or e}") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise ConfigError(f"{p}: invalid TOML: {e}") from None
+
+
+def _check_writable(folder: Path, named: str, what: str, keep: bool) -> None:
+    """Make ``folder`` (with its parents) and write a scratch file in it, or one line; unless
+    ``keep``, the folders made here are removed again (the writer makes them)."""
+    made = []  #: the folders missing, deepest first
+    missing = folder
+    while not missing.exists() and missing != missing.parent:
+        made.append(missing)
+        missing = missing.parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=folder).close()
+    except OSError as e:
+        if isinstance(e, (FileExistsError, NotADirectoryError)):
+            why = "a file is in the way of its folder"
+        else:
+            why = e.strerror or str(e)
+        raise ConfigError(f"{named}: {why}; give {what}") from None
+    finally:
+        if not keep:
+            for d in made:
+                with contextlib.suppress(OSError):
+                    d.rmdir()
+
+
+def output_dir(path: str | Path, flag: str | None = None, *, make: bool = False) -> Path:
+    """A folder the user named for output (``--out DIR``, ``--log-dir DIR``; ``flag`` names it
+    in the error, None for a default folder): checked writable (by making it and writing a
+    scratch file there), or a one-line :class:`ConfigError` before anything runs. Unless
+    ``make``, nothing is left behind: a run that stops before it writes leaves no empty
+    folder."""
+    folder = Path(path)
+    named = f"{flag} {path}" if flag else str(path)
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{named}: a file, not a folder; give a folder (it is made if "
+                          "missing)")
+    _check_writable(folder, named, "a folder you can write to (it is made if missing)", make)
+    return folder
+
+
+def output_file(path: str | Path, flag: str | None = None) -> Path:
+    """A file the user named for output (``--mcap FILE``, ``--record FILE``; ``flag`` names it
+    in the error, None for a positional argument): not a folder, and its folder made if
+    missing and checked writable, or a one-line :class:`ConfigError` before anything runs.
+    The file itself is left to its writer."""
+    file = Path(path)
+    named = f"{flag} {path}" if flag else str(path)
+    if file.is_dir():
+        raise ConfigError(f"{named}: a folder, not a file; give a file name")
+    _check_writable(file.parent, named,
+                    "a file in a folder you can write to (the folder is made if missing)", True)
+    return file
 
 
 def write_atomic(path: str | Path, text: str) -> None:

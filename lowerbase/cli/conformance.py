@@ -84,8 +84,11 @@ def run(args: argparse.Namespace) -> int:
     )
     from lowerbase.conformance.core import nothing_passed
     from lowerbase.errors import ConfigError, LowerbaseError
+    from lowerbase.files import output_file
     from lowerbase.transport import config_from_args, describe, open_bus
 
+    if args.junit:  # checked before the suite runs, whose results it is to hold
+        output_file(args.junit, "--junit")
     if args.robot == "legged":
         from lowerbase.conformance.legged_cli import run_legged_conformance
 

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from lowerbase.errors import ConfigError
-from lowerbase.files import write_atomic
+from lowerbase.files import output_file, write_atomic
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
         print(DBC_PATH)
         return 0
     if args.export_docs:
-        write_atomic(Path(args.export_docs), render())
+        write_atomic(output_file(args.export_docs, "--export-docs"), render())
         print(f"wrote {args.export_docs}")
         return 0
     if args.check_docs:

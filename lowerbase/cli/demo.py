@@ -55,6 +55,7 @@ def add_subparser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from lowerbase.cli.scenario import check_outputs
     from lowerbase.errors import ConfigError
     from lowerbase.scenarios.catalog import find_scenario, load_any_scenario
     from lowerbase.scenarios.tasks import TasksScenario
@@ -72,8 +73,10 @@ def run(args: argparse.Namespace) -> int:
             from lowerbase.recording.live import parse_address
 
             parse_address(args.foxglove)
+        check_outputs(args, out)
         return run_tasks(scenario, out, debug=args.debug, foxglove=args.foxglove,
                          mcap=args.mcap)
+    check_outputs(args, out)
     return run_chassis(args, scenario, out)
 
 

@@ -12,6 +12,7 @@ from typing import Any
 
 from lowerbase.cli.args import positive_seconds
 from lowerbase.cli.world import add_world_arguments
+from lowerbase.files import output_file
 
 log = logging.getLogger("lowerbase.emulate")
 
@@ -124,6 +125,8 @@ def run(args: argparse.Namespace) -> int:
     if args.simulated and getattr(args, "speed", 1.0) != 1.0:
         raise ConfigError("--speed K paces real time K times faster; --simulated already runs "
                           "as fast as the CPU allows: drop one of them")
+    if args.truth:
+        output_file(args.truth, "--truth")
     if args.truth_udp is not None:  # a bad address is refused before anything starts
         from lowerbase.world.truth_stream import parse_address
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from lowerbase.files import output_file
+
 
 def add_subparser(subparsers: Any) -> None:
     p = subparsers.add_parser(
@@ -46,14 +48,14 @@ def _report(done: Any, output: str) -> None:
 def to_bag_command(args: argparse.Namespace) -> int:
     from lowerbase.recording.convert import mcap_to_bag
 
-    _report(mcap_to_bag(args.input, args.output), args.output)
+    _report(mcap_to_bag(args.input, output_file(args.output)), args.output)
     return 0
 
 
 def from_bag_command(args: argparse.Namespace) -> int:
     from lowerbase.recording.convert import bag_to_mcap
 
-    _report(bag_to_mcap(args.input, args.output), args.output)
+    _report(bag_to_mcap(args.input, output_file(args.output)), args.output)
     return 0
 
 
@@ -68,7 +70,7 @@ def info_command(args: argparse.Namespace) -> int:
 def recover_command(args: argparse.Namespace) -> int:
     from lowerbase.recording.convert import recover_mcap
 
-    done = recover_mcap(args.input, args.output)
+    done = recover_mcap(args.input, output_file(args.output))
     where = f"; reading stopped at: {done.damage}" if done.damage else "; the file was whole"
     print(f"{done.messages} message(s) on {len(done.topics)} topic(s) -> {args.output}{where}")
     return 0

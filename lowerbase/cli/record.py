@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from lowerbase.cli.args import positive_seconds
+from lowerbase.files import output_file
 
 
 class LiveCount:
@@ -114,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
 
     mcap = Path(args.file).suffix.lower() == ".mcap"
     path = Path(args.file) if mcap else check_recording_path(args.file)
+    output_file(path)
     codec = default_codec()
     ids: set[int] | None = None
     if args.only:

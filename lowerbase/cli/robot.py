@@ -20,6 +20,7 @@ from typing import Any
 
 from lowerbase.cli.args import positive_seconds, seed
 from lowerbase.errors import ConfigError, LowerbaseError
+from lowerbase.files import output_dir, output_file
 from lowerbase.text import clip
 
 
@@ -209,21 +210,6 @@ def _use_sim_time(uri: str, sim: bool) -> Any:
     return restore
 
 
-def _log_dir(path: str) -> Path:
-    """``--log-dir``: made if missing, and writable, or one line saying why not."""
-    folder = Path(path)
-    if folder.exists() and not folder.is_dir():
-        raise ConfigError(f"--log-dir {path}: a file, not a folder; give a folder (it is "
-                          "made if missing)")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        tempfile.TemporaryFile(dir=folder).close()
-    except OSError as e:
-        raise ConfigError(f"--log-dir {path}: {e.strerror or e}; give a folder you can "
-                          "write to (it is made if missing)") from None
-    return folder
-
-
 def _run_lockstep(args: argparse.Namespace, sup: Any, speed: float, parts: tuple[str, ...],
                   line: Any, log_dir: Path, uri: str) -> int:
     """--sim-time: the recorder child (if asked) and the lockstep robot in this process."""
@@ -344,7 +330,10 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--mcap {args.mcap}: the file name must end in .mcap")
     if args.foxglove is not None:
         _check_listen(args.foxglove)
-    log_dir = _log_dir(args.log_dir) if args.log_dir else Path(
+    for value, flag in ((args.mcap, "--mcap"), (args.truth, "--truth")):
+        if value is not None:
+            output_file(value, flag)
+    log_dir = output_dir(args.log_dir, "--log-dir", make=True) if args.log_dir else Path(
         tempfile.mkdtemp(prefix="lowerbase-robot-"))
     uri = master_uri()
     sup = Supervisor(log_dir)

@@ -261,7 +261,7 @@ def _run_ros2(args: argparse.Namespace) -> int:
     from lowerbase.world.maps import load_map
 
     for given, flag in ((args.mcap or args.foxglove, "--mcap/--foxglove"),
-                        (args.paused, "--paused"), (args.respawn, "--respawn")):
+                        (args.respawn, "--respawn")):
         if given:
             raise ConfigError(f"{flag} is not on ROS 2 yet (docs/ros2.md)")
     from lowerbase.cli.driver import split_ros_args
@@ -284,7 +284,7 @@ def _run_ros2(args: argparse.Namespace) -> int:
 
         make = LeggedLockstep
     return run_ros2(opts, None if speed == MAX_SPEED else speed, ros_args,
-                    duration=args.duration, make=make)
+                    duration=args.duration, make=make, paused=args.paused)
 
 
 def run(args: argparse.Namespace) -> int:

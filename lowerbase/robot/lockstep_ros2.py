@@ -17,8 +17,9 @@ beside the vendor's move_base (:mod:`lowerbase.navigation.nav2`). The legged rob
 
 An rclpy executor (several threads: an action goal's execute callback follows its goal until
 it ends) serves the subscriptions, services and actions; the lockstep loop runs in the main
-thread, paced by :class:`~lowerbase.robot.pace.Pacer` (``--speed``), until SIGINT/SIGTERM or
-``duration`` wall seconds.
+thread (:class:`~lowerbase.robot.simcontrol.SimControl`, as on ROS 1: paced by ``--speed``, or
+paused and moved by ``/lowerbase/step``, with ``/lowerbase/pause`` and the latched
+``/lowerbase/sim_status``) until SIGINT/SIGTERM or ``duration`` wall seconds.
 """
 
 from __future__ import annotations
@@ -35,7 +36,6 @@ from lowerbase.robot.lockstep import NODE, LockstepOptions, LockstepRobot
 
 log = logging.getLogger(__name__)
 
-CHUNK = 0.05  #: [s] of simulated time run between two looks at the pace and the stop flag
 EXECUTOR_THREADS = 8  #: the action goals followed at once, plus services and subscriptions
 
 
@@ -126,12 +126,14 @@ class Ros2Side:
 
 def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = (),
         duration: float | None = None,
-        make: Callable[[LockstepOptions, Any, Ros2Side], Any] = LockstepRobot) -> int:
-    """Build the robot on ROS 2, run it until a signal or ``duration`` [s of wall time].
-    ``make(opts, rospy, side)``: the robot (:class:`LockstepRobot`, or
-    :class:`~lowerbase.robot.lockstep_legged.LeggedLockstep`)."""
+        make: Callable[[LockstepOptions, Any, Ros2Side], Any] = LockstepRobot,
+        paused: bool = False) -> int:
+    """Build the robot on ROS 2, run it until a signal or ``duration`` [s of wall time];
+    ``paused``: time moves only on /lowerbase/step. ``make(opts, rospy, side)``: the robot
+    (:class:`LockstepRobot`, or :class:`~lowerbase.robot.lockstep_legged.LeggedLockstep`)."""
     from lowerbase.driver.ros2_node import import_rclpy, start_node
     from lowerbase.robot.pace import Pacer
+    from lowerbase.robot.simcontrol import SimControl
 
     rclpy = import_rclpy()
     from rclpy.executors import MultiThreadedExecutor
@@ -145,6 +147,7 @@ def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = ()
     executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=context)
     robot: Any = None
     nav2: Any = None
+    control: SimControl | None = None
 
     def serve() -> None:
         while not stop.is_set() and rclpy.ok(context=context):
@@ -154,8 +157,12 @@ def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = ()
                 log.exception("an rclpy callback failed")
 
     spinner = threading.Thread(target=serve, name="lowerbase_robot-rclpy", daemon=True)
-    previous = {s: signal.signal(s, lambda *_: stop.set())
-                for s in (signal.SIGINT, signal.SIGTERM)}
+    def on_signal(*_: Any) -> None:
+        stop.set()
+        if control is not None:
+            control.stop.set()
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         robot = make(opts, side.shim, side)
         robot.advertise()
@@ -165,23 +172,29 @@ def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = ()
 
             nav2 = Nav2Servers(navigation)
             nav2.start()
+        control = SimControl(robot, Pacer(speed), paused=paused)
+        control.advertise(side.real)
         executor.add_node(node)
         spinner.start()
         parts = getattr(robot, "parts", None)  # the legged robot's; the wheeled one's map
         what = ", ".join(parts) if parts else f"map {opts.map}"
+        moved = "paused: /lowerbase/step moves it" if paused else \
+            f"at {'max' if speed is None else f'{speed:g} x'}"
         print(f"lowerbase robot: {node.get_fully_qualified_name()} on ROS 2 (domain "
-              f"{context.get_domain_id()}), {what}, simulated time at "
-              f"{'max' if speed is None else f'{speed:g} x'}; Ctrl-C stops", flush=True)
-        pacer = Pacer(speed)
-        chunk = max(1, round(CHUNK / robot.dt))  # the MCU's periods (5 ms; legged 1 ms)
-        started = time.monotonic()
-        while not stop.is_set():
-            if duration is not None and time.monotonic() - started >= duration:
-                break
-            pacer.wait(robot.now)
-            robot.run_periods(chunk)
+              f"{context.get_domain_id()}), {what}, simulated time {moved}; Ctrl-C stops",
+              flush=True)
+        deadline = None if duration is None else time.monotonic() + duration
+
+        def tick() -> None:
+            if stop.is_set() or (deadline is not None and time.monotonic() >= deadline):
+                control.stop.set()
+
+        if not stop.is_set():
+            control.run(tick)
     finally:
         stop.set()
+        if control is not None:
+            control.shutdown()
         side.shim.signal_shutdown("robot stopped")
         for s, h in previous.items():
             signal.signal(s, h)
@@ -192,6 +205,9 @@ def run(opts: LockstepOptions, speed: float | None, ros_args: Sequence[str] = ()
         if robot is not None:
             stats = robot.shutdown()
             stats.update(robot.board.stats)
+            if control is not None:
+                stats.update(control.stats)
+                stats["slowed"] = control.pacer.behind
             counts = ", ".join(f"{k} {v}" for k, v in sorted(stats.items()) if v)
             print(f"lowerbase robot: stopped at {robot.now:.2f} s of simulated time; "
                   f"{counts or 'nothing counted'}", file=sys.stderr, flush=True)

@@ -52,16 +52,20 @@ class SimControl:
         self.stats = {"steps_served": 0, "steps_refused": 0}
 
     # -- ROS -----------------------------------------------------------------------------------
-    def advertise(self) -> None:
+    def advertise(self, wire: Any) -> None:
+        """The status topic and the two services on ``wire`` (:class:`lowerbase.ros1.wire.
+        RosWire` on ROS 1, :class:`lowerbase.ros2.wire.Ros2Wire` on ROS 2, where the ROS 1
+        names of the service types come from :func:`lowerbase.ros2.compat.ros1_names`). A step
+        holds its caller until its time has run: ``blocking`` gives it its own callback group
+        on ROS 2, so the faces' callbacks go on meanwhile (rospy has a thread per call)."""
         from lowerbase_sim_msgs.msg import SimStatus
         from lowerbase_sim_msgs.srv import Step
         from std_srvs.srv import SetBool  # type: ignore[import-untyped]
 
-        rospy = self.robot.rospy
-        self._status_pub = rospy.Publisher("/lowerbase/sim_status", SimStatus, queue_size=2,
-                                           latch=True)
-        self._services = [rospy.Service("/lowerbase/step", Step, self._on_step),
-                          rospy.Service("/lowerbase/pause", SetBool, self._on_pause)]
+        self._status_pub = wire.publisher("/lowerbase/sim_status", SimStatus, queue_size=2,
+                                          latch=True)
+        self._services = [wire.service("/lowerbase/step", Step, self._on_step, blocking=True),
+                          wire.service("/lowerbase/pause", SetBool, self._on_pause)]
         self.publish_status()
 
     def publish_status(self) -> None:
@@ -71,8 +75,9 @@ class SimControl:
             return
         self._status_at = time.monotonic()
         self._status_pub.publish(SimStatus(
-            sim_time=self.robot.now, factor=self.pacer.factor() or 0.0,
-            speed=self.pacer.speed or 0.0, paused=self.paused, behind=self.pacer.behind))
+            sim_time=float(self.robot.now), factor=float(self.pacer.factor() or 0.0),
+            speed=float(self.pacer.speed or 0.0), paused=self.paused,
+            behind=int(self.pacer.behind)))
 
     def _on_pause(self, req: Any) -> Any:
         from std_srvs.srv import SetBoolResponse

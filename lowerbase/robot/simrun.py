@@ -22,6 +22,7 @@ from typing import Any
 from lowerbase.robot.lockstep import NODE, LockstepOptions, LockstepRobot
 from lowerbase.robot.pace import Pacer
 from lowerbase.robot.simcontrol import SimControl
+from lowerbase.ros1.wire import RosWire
 
 
 @dataclass(frozen=True)
@@ -95,7 +96,7 @@ def run_sim(run: SimRun, show: Callable[[str], None],
     ended: list[str] = []
     try:
         robot.advertise()
-        control.advertise()
+        control.advertise(RosWire(rospy))
         deadline = None if run.duration is None else time.monotonic() + run.duration
         import rosgraph
 

@@ -83,7 +83,10 @@ class RosWire:
         says)."""
         return self.rospy.Subscriber(name, cls, callback, **kwargs)
 
-    def service(self, name: str, cls: Any, handler: Callable[[Any], Any]) -> Any:
+    def service(self, name: str, cls: Any, handler: Callable[[Any], Any],
+                blocking: bool = False) -> Any:
+        """``blocking``: the handler may wait long (rospy serves each call in a thread of its
+        own, so nothing else waits for it)."""
         return self.rospy.Service(name, cls, handler)
 
     def publish_converted(self, publisher: Any, msg: Any,
@@ -352,7 +355,8 @@ class LocalWire(RosWire):
             _skip_own_publisher(self.rospy, real)
         return _LocalSubscription(self.board, topic, callback, real)
 
-    def service(self, name: str, cls: Any, handler: Callable[[Any], Any]) -> Any:
+    def service(self, name: str, cls: Any, handler: Callable[[Any], Any],
+                blocking: bool = False) -> Any:
         return self.rospy.Service(self.resolve(name), cls, handler)
 
     def publish_converted(self, publisher: Any, msg: Any,

@@ -19,7 +19,8 @@ from types import ModuleType, SimpleNamespace
 from typing import Any
 
 #: srv modules whose services the faces answer: ``XResponse``/``XRequest`` are added
-SRV_MODULES = ("std_srvs.srv", "nav_msgs.srv", "woosh_msgs.srv", "lowerbase_legged_msgs.srv")
+SRV_MODULES = ("std_srvs.srv", "nav_msgs.srv", "woosh_msgs.srv", "lowerbase_legged_msgs.srv",
+               "lowerbase_sim_msgs.srv")
 #: the action packages whose ``<Name>Action``, ``Goal``, ``Result``, ``Feedback`` go to .msg
 ACTION_PACKAGES = ("woosh_msgs",)
 

@@ -56,6 +56,8 @@ PACKAGES = (
                      "Apache-2.0"),
     InterfacePackage("lowerbase_legged_msgs",
                      LOWERBASE / "legged" / "msg" / "lowerbase_legged_msgs", True, "Apache-2.0"),
+    InterfacePackage("lowerbase_sim_msgs",
+                     LOWERBASE / "robot" / "msg" / "lowerbase_sim_msgs", True, "Apache-2.0"),
 )
 
 KINDS = ("msg", "srv", "action")

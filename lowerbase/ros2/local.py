@@ -107,8 +107,9 @@ class Ros2LocalWire(LocalWire):
             real = _Destroy(self.real.node, sub)
         return _LocalSubscription(board, topic, callback, real)
 
-    def service(self, name: str, cls: Any, handler: Callable[[Any], Any]) -> Any:
-        return self.real.service(self.resolve(name), cls, handler)
+    def service(self, name: str, cls: Any, handler: Callable[[Any], Any],
+                blocking: bool = False) -> Any:
+        return self.real.service(self.resolve(name), cls, handler, blocking)
 
     def action_server(self, name: str, cls: Any, execute: Callable[[Any], None],
                       auto_start: bool = False) -> Any:

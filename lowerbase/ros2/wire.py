@@ -273,10 +273,17 @@ class Ros2Wire:
                                             qos_for(self.resolve(name), queue_size))
         return _Subscription(self.node, sub)
 
-    def service(self, name: str, cls: Any, handler: Callable[[Any], Any]) -> Any:
+    def service(self, name: str, cls: Any, handler: Callable[[Any], Any],
+                blocking: bool = False) -> Any:
+        """``blocking``: the handler may wait long, so it gets a callback group of its own (the
+        node's default group runs one callback at a time: the faces' would wait for it)."""
+        from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+
         def serve(request: Any, _response: Any) -> Any:
             return handler(request)
-        return _Service(self.node, self.node.create_service(cls, ros2_name(name), serve))
+        group = MutuallyExclusiveCallbackGroup() if blocking else None
+        return _Service(self.node, self.node.create_service(cls, ros2_name(name), serve,
+                                                            callback_group=group))
 
     def publish_converted(self, publisher: Any, msg: Any,
                           converted: dict[str, Callable[[], Any]]) -> None:

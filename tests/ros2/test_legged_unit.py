@@ -24,20 +24,20 @@ def test_ros2_runs_the_robot_asked_for(monkeypatch: pytest.MonkeyPatch,
                                        capsys: pytest.CaptureFixture[str], robot: str,
                                        make: Any, sim_time: list[str]) -> None:
     """``--robot legged --ros2`` is no longer refused: lockstep_ros2.run builds the legged
-    robot (the wheeled one by default), with the options of ROS 1's. Without --sim-time it is
-    the same lockstep robot, and one line says so."""
+    robot (the wheeled one by default), with the options of ROS 1's (``--paused`` too).
+    Without --sim-time it is the same lockstep robot, and one line says so."""
     import lowerbase.driver.ros2_node as ros2_node
     import lowerbase.robot.lockstep_ros2 as lockstep_ros2
     from lowerbase.cli.robot import ROS2_SIM_TIME
 
     calls: list[tuple[Any, ...]] = []
     monkeypatch.setattr(ros2_node, "import_rclpy", lambda: None)
-    monkeypatch.setattr(lockstep_ros2, "run", lambda opts, speed, ros_args, duration, make:
-                        calls.append((opts, speed, duration, make)) or 0)
+    monkeypatch.setattr(lockstep_ros2, "run", lambda opts, speed, ros_args, duration, make,
+                        paused: calls.append((opts, speed, duration, make, paused)) or 0)
     assert main(["robot", "--robot", robot, "--ros2", *sim_time, "--speed", "max",
-                 "--duration", "3", "--soc", "55"]) == 0
-    [(opts, speed, duration, made)] = calls
-    assert made is make and speed is None and duration == 3.0
+                 "--duration", "3", "--soc", "55", "--paused"]) == 0
+    [(opts, speed, duration, made, paused)] = calls
+    assert made is make and speed is None and duration == 3.0 and paused
     assert opts.soc == 55.0
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ([] if sim_time else [ROS2_SIM_TIME])

@@ -130,6 +130,7 @@ class DriverCore(LinkLifecycle, StatusInput):
         self.imu: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
         self.imu_stamp = 0.0
         self.bms = BmsFrameAccumulator()
+        self.bms_stamp: float | None = None  #: [s] when the last whole BMS burst came
         self.status_code = 0
         self.system_status: dict[str, Any] = {}
         self.measured_twist = (0.0, 0.0)

@@ -20,6 +20,7 @@ class StatusInput:
     versions: dict[str, str]
     imu: tuple[tuple[float, float, float], tuple[float, float, float]] | None
     imu_stamp: float
+    bms_stamp: float | None
     measured_twist: tuple[float, float]
     odometer: float
     status_code: int
@@ -85,6 +86,7 @@ class StatusInput:
         # /battery and /driver_base/bms once a whole 1 Hz burst of five frames is in: the
         # node's tick falling between two frames of one burst gave two, the first torn
         if self.bms.update(name, v) and self.bms.take_burst():
+            self.bms_stamp = now  # the burst's last frame: when the pack's figures were read
             self._notify("battery")
 
     def _on_BmsPack(self, v: dict[str, Any], now: float) -> None:

@@ -46,7 +46,7 @@ from lowerbase.ros1.wire import wanted
 log = logging.getLogger(__name__)
 
 NODE_NAME = "driver_base"
-#: [s] the oldest sample /odom is stamped with its own time; older: the publish time
+#: [s] the oldest sample /odom and /imu are stamped with its own time; older: the publish time
 MAX_STAMP_AGE = 5.0
 
 
@@ -129,6 +129,8 @@ class DriverNode:
         self._tf: Any = None
         self._last_tf_stamp: Any = None  #: of the last odom -> base_link sent
         self._last_odom_stamp: float | None = None  #: [s] of the last /odom
+        self._last_imu_stamp: float | None = None  #: [s] of the last /imu/data_raw
+        self._last_battery_stamp: float | None = None  #: [s] of the last /battery
         self._reader: threading.Thread | None = None
 
     def ros_now(self) -> Any:
@@ -238,8 +240,10 @@ class DriverNode:
                     and self._wants("imu")):
                 gyro, accel = core.imu
                 s = self.settings
+                stamp, self._last_imu_stamp = self._stamp_at(core.imu_stamp,
+                                                             self._last_imu_stamp)
                 self._publish("imu", self.io.imu_msg(
-                    self.ros_now(), s.imu_frame, gyro, accel,
+                    stamp, s.imu_frame, gyro, accel,
                     s.imu_angular_velocity_variance, s.imu_linear_acceleration_variance))
         elif what == "twist":
             if self._throttles["odom_twist"].ready(now) and self._wants("odom_twist"):
@@ -259,15 +263,24 @@ class DriverNode:
         """ROS time of the odometry's sample (the EKF's stamp, aged on the core's clock), not
         of publishing: the world and navigation pair scans with /odom by stamp, and a frame
         handled late (a backlog at K=2) was stamped up to 2 s of /clock after its motion."""
-        now, at, last = self.ros_now(), self.core.ekf.stamp, self._last_odom_stamp
+        stamp, self._last_odom_stamp = self._stamp_at(self.core.ekf.stamp,
+                                                      self._last_odom_stamp)
+        return stamp
+
+    def _stamp_at(self, at: float | None, last: float | None) -> tuple[Any, float]:
+        """The ROS time of a sample taken at ``at`` [s, the core's clock: its frame's receive
+        stamp], aged from now, and that time [s]: a reader that fell behind (a busy host)
+        publishes a backlog at once, and its samples keep their own times. Never before
+        ``last`` (the previous one's); with no believable age (none, or above
+        :data:`MAX_STAMP_AGE`), now."""
+        now = self.ros_now()
         age = self.core.clock.now() - at if at is not None else math.nan
         stamp = now - self.rospy.Duration.from_sec(age) if 0.0 < age <= MAX_STAMP_AGE else now
         sec = stamp.to_sec()
         if last is not None and last - MAX_STAMP_AGE < sec < last:
             stamp = self.rospy.Time.from_sec(last)  # never back (after an EKF reset, "now")
             sec = stamp.to_sec()
-        self._last_odom_stamp = sec
-        return stamp
+        return stamp, sec
 
     def _publish_odometry(self) -> None:
         core, io, s = self.core, self.io, self.settings
@@ -305,7 +318,8 @@ class DriverNode:
         if self._battery_dirty and self._throttles["battery"].ready(now):
             self._battery_dirty = False
             battery, bms = core.bms.battery_fields(), core.bms.bms_fields()
-            stamp = self.ros_now()
+            stamp, self._last_battery_stamp = self._stamp_at(core.bms_stamp,
+                                                             self._last_battery_stamp)
             if battery is not None and bms is not None:
                 self._publish("battery", io.battery_msg(stamp, battery))
                 self._publish("bms", io.bms_msg(stamp, bms))

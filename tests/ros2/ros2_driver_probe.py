@@ -148,22 +148,47 @@ def imu(node: Node) -> dict[str, Any]:
 
 
 def rates(node: Node) -> dict[str, Any]:
-    """/imu/data_raw (sensor-data QoS) and /battery: their rates by their stamps (101 and 6
-    messages), and the last battery."""
+    """/imu/data_raw (sensor-data QoS) and /battery: their rates by their stamps over ~5 s (501
+    and 6 messages; /imu's by its publication sequence numbers, since a busy probe drops best
+    effort samples), and the last battery; with the times driver_base said on /rosout that
+    the lower computer fell behind real time (its Overruns moved) while they came: on a busy
+    host the emulator's time may slip, and then fewer samples come per second, said."""
+    from rcl_interfaces.msg import Log
+    from rclpy.qos import DurabilityPolicy, QoSProfile
     from woosh_msgs.msg import Battery
 
     imu: list[Imu] = []
+    imu_seq: list[int] = []  #: publication sequence numbers: best effort may drop some here
     battery: list[Battery] = []
-    node.create_subscription(Imu, "/imu/data_raw", imu.append, qos_profile_sensor_data)
+    logs: list[Log] = []
+
+    def on_imu(msg: Imu, info: Any) -> None:
+        imu.append(msg)
+        imu_seq.append(int(info["publication_sequence_number"]))
+
+    node.create_subscription(Imu, "/imu/data_raw", on_imu, qos_profile_sensor_data)
     node.create_subscription(Battery, "/battery", battery.append, qos_for("/battery", 10))
-    spin_until(node, lambda: len(imu) > 100 and len(battery) > 5, "/imu/data_raw and /battery")
+    node.create_subscription(Log, "/rosout", logs.append, QoSProfile(
+        depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    spin_until(node, lambda: len(imu) > 500 and len(battery) > 5, "/imu/data_raw and /battery")
 
-    def rate(msgs: list[Any], n: int) -> float:
-        stamps = [sec(m.header.stamp) for m in msgs[: n + 1]]
-        return n / (stamps[-1] - stamps[0])
+    def stamps(msgs: list[Any], n: int) -> list[float]:
+        return [sec(m.header.stamp) for m in msgs[: n + 1]]
 
+    def rate(msgs: list[Any], n: int, seq: list[int] | None = None) -> float:
+        s = stamps(msgs, n)
+        sent = n if seq is None else seq[n] - seq[0]  # published, whether all came or not
+        return sent / (s[-1] - s[0])
+
+    first = min(stamps(imu, 500)[0], stamps(battery, 5)[0])
+    last_at = max(stamps(imu, 500)[-1], stamps(battery, 5)[-1])
+    for _ in range(20):  # a slip is said with the next Heartbeat (every 0.5 s): until then
+        rclpy.spin_once(node, timeout_sec=0.1)
+    slips = [m.msg for m in logs if "fell behind real time" in m.msg
+             and first <= sec(m.stamp) <= last_at + 1.0]
     last = battery[-1]
-    return {"imu": rate(imu, 100), "battery": rate(battery, 5),
+    return {"imu": rate(imu, 500, imu_seq), "battery": rate(battery, 5), "slips": slips,
+            "imu_dropped_here": imu_seq[500] - imu_seq[0] - 500,
             "percentage": last.batteryPercentage, "voltage": last.batteryVoltage}
 
 

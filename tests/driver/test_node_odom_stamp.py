@@ -103,16 +103,15 @@ def test_odom_stamps_never_go_back_after_the_ekf_lost_its_stamp(woosh_msgs: Any)
     assert [m.header.stamp.to_sec() for m in sent] == pytest.approx([10.0, 10.0, 10.02])
 
 
-def test_imu_after_a_backlog_carries_the_stamp_of_its_frame(woosh_msgs: Any) -> None:
-    """/imu/data_raw likewise: a backlog handed over at once keeps each sample's own time
-    (its frame's receive stamp), 10 ms apart as the lower computer sent them, not the instant
-    the node got to it (it was stamped so: on a busy host 100 samples spanned 0.9 s)."""
+def backlog_of(loop: SimLoop, key: str, seconds: float) -> tuple[list[Any], list[Any]]:
+    """A DriverNode around ``loop``'s core (ROS time = its clock) publishing ``key`` into the
+    first list returned; the lower computer runs ``seconds`` while the reader stalls, and the
+    frames that waited (the second list: receive time, ID, data) are handed over at once,
+    each with its age."""
     import rospy
 
     from lowerbase.driver.node import DriverNode
 
-    loop = SimLoop(bms=None)
-    assert loop.run_until(lambda lp: lp.driver.state == LinkState.READY, timeout=3.0)
     settings, config = load_settings({})
     link = StubLink()
     node = DriverNode(settings, config, link, clock=loop.clock)
@@ -122,18 +121,30 @@ def test_imu_after_a_backlog_carries_the_stamp_of_its_frame(woosh_msgs: Any) -> 
         now=lambda: rospy.Time.from_sec(loop.clock.now()), from_sec=rospy.Time.from_sec),
         Duration=rospy.Duration)
     sent: list[Any] = []
-    node._pubs = {"imu": SimpleNamespace(publish=sent.append)}
-    gyro_id = loop.driver.codec.message("ImuGyro").frame_id
+    node._pubs = {key: SimpleNamespace(publish=sent.append)}
     held: list[tuple[float, int, bytes]] = []
-    for _ in range(round(BACKLOG / loop.mcu.dt)):  # the reader stalls: frames wait
+    for _ in range(round(seconds / loop.mcu.dt)):  # the reader stalls: frames wait
         loop.mcu.step()
         held += loop._to_driver
         loop._to_driver = []
         loop.clock.advance(loop.mcu.dt)
-    sent_at = [t for t, frame_id, _ in held if frame_id == gyro_id]
     for received, frame_id, data in held:  # handed over at once, each with its age
         link.last_age = loop.clock.now() - received
         node.on_frame(frame_id, data)
+    if key == "battery":
+        node.publish_periodic()
+    return sent, held
+
+
+def test_imu_after_a_backlog_carries_the_stamp_of_its_frame(woosh_msgs: Any) -> None:
+    """/imu/data_raw likewise: a backlog handed over at once keeps each sample's own time
+    (its frame's receive stamp), 10 ms apart as the lower computer sent them, not the instant
+    the node got to it (it was stamped so: on a busy host 100 samples spanned 0.9 s)."""
+    loop = SimLoop(bms=None)
+    assert loop.run_until(lambda lp: lp.driver.state == LinkState.READY, timeout=3.0)
+    sent, held = backlog_of(loop, "imu", BACKLOG)
+    gyro_id = loop.driver.codec.message("ImuGyro").frame_id
+    sent_at = [t for t, frame_id, _ in held if frame_id == gyro_id]
     stamps = [m.header.stamp.to_sec() for m in sent]
     assert len(sent_at) == round(BACKLOG / 0.01) and len(stamps) >= len(sent_at)
     # each gyro sample's message carries its frame's time (ImuAccel's, 0 s apart, may share it)
@@ -144,35 +155,12 @@ def test_imu_after_a_backlog_carries_the_stamp_of_its_frame(woosh_msgs: Any) -> 
 def test_battery_after_a_backlog_carries_the_stamp_of_its_burst(woosh_msgs: Any) -> None:
     """/battery (and /driver_base/bms) carry the time their BMS burst came, not the instant
     the node published it: a backlog handed over late, the last burst keeps its own time."""
-    import rospy
-
-    from lowerbase.driver.node import DriverNode
-
     loop = SimLoop()  # with its BMS: a burst of five frames every second
     assert loop.run_until(lambda lp: lp.driver.state == LinkState.READY, timeout=3.0)
-    settings, config = load_settings({})
-    link = StubLink()
-    node = DriverNode(settings, config, link, clock=loop.clock)
-    node.core = loop.driver
-    loop.driver.listeners.append(node._on_event)
-    node.rospy = SimpleNamespace(Time=SimpleNamespace(
-        now=lambda: rospy.Time.from_sec(loop.clock.now()), from_sec=rospy.Time.from_sec),
-        Duration=rospy.Duration)
-    sent: list[Any] = []
-    node._pubs = {"battery": SimpleNamespace(publish=sent.append)}
-    held: list[tuple[float, int, bytes]] = []
-    for _ in range(round(1.5 / loop.mcu.dt)):  # the reader stalls for 1.5 s
-        loop.mcu.step()
-        held += loop._to_driver
-        loop._to_driver = []
-        loop.clock.advance(loop.mcu.dt)
+    sent, held = backlog_of(loop, "battery", 1.5)
     bms_ids = {loop.driver.codec.message(n).frame_id for n in BMS_FRAMES}
     bursts = [t for t, frame_id, _ in held if frame_id in bms_ids]
     assert bursts, "no BMS burst in the backlog"
-    for received, frame_id, data in held:
-        link.last_age = loop.clock.now() - received
-        node.on_frame(frame_id, data)
-    node.publish_periodic()
     [msg] = sent
     assert max(bursts) < loop.clock.now() - 0.1
     assert msg.header.stamp.to_sec() == pytest.approx(max(bursts), abs=1e-6), (

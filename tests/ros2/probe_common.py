@@ -1,4 +1,4 @@
-"""What the ROS 2 probes (ros2_driver_probe.py, ros2_robot_probe.py) share. They run as scripts
+"""What the ROS 2 probes (ros2_*_probe.py) share. They run as scripts
 in the ROS 2 venv, where ``tests`` is not importable: they import this as ``probe_common``,
 found through their own directory (sys.path[0] for a script)."""
 
@@ -25,6 +25,16 @@ def spin_until(node: Node, done: Callable[[], bool], what: str, timeout: float) 
         if time.monotonic() > deadline:
             sys.exit(f"probe: {what} not seen within {timeout:.0f} s")
         rclpy.spin_once(node, timeout_sec=0.1)
+
+
+def call(node: Node, cls: Any, name: str, request: Any, timeout: float) -> Any:
+    """Service ``name`` (type ``cls``) called with ``request`` once it is there: its response;
+    each wait fails in one line after ``timeout`` [s]."""
+    client = node.create_client(cls, name)
+    spin_until(node, client.service_is_ready, f"{name} ready", timeout)
+    future = client.call_async(request)
+    spin_until(node, future.done, f"{name}'s answer", timeout)
+    return future.result()
 
 
 def sec(stamp: Any) -> float:

@@ -37,6 +37,7 @@ from lowerbase.ros2.wire import qos_for
 
 TIMEOUT = 180.0
 spin_until = partial(probe_common.spin_until, timeout=TIMEOUT)  # every wait's deadline
+call = partial(probe_common.call, timeout=TIMEOUT)
 ROBOT = "/lowerbase_robot"
 STATE_PERIOD = 0.02  #: [s] robot_state's period (~publish_rate 50 Hz)
 TOPICS = {"/robot_state": "lowerbase_legged_msgs/msg/RobotState",
@@ -71,14 +72,6 @@ class States:
     def wait(self, done: Any, what: str) -> RobotState:
         spin_until(self.node, lambda: bool(self.msgs) and done(self.msgs[-1]), what)
         return self.msgs[-1]
-
-
-def call(node: Node, cls: Any, name: str, request: Any) -> Any:
-    client = node.create_client(cls, name)
-    spin_until(node, client.service_is_ready, f"{name} ready")
-    future = client.call_async(request)
-    spin_until(node, future.done, f"{name}'s answer")
-    return future.result()
 
 
 def interface(node: Node) -> dict[str, Any]:

@@ -30,14 +30,7 @@ from lowerbase.ros2.wire import clock_qos, qos_for
 
 TIMEOUT = 180.0
 spin_until = partial(probe_common.spin_until, timeout=TIMEOUT)  # every wait's deadline
-
-
-def call(node: Node, cls: Any, name: str, request: Any) -> Any:
-    client = node.create_client(cls, name)
-    spin_until(node, client.service_is_ready, f"{name} ready")
-    future = client.call_async(request)
-    spin_until(node, future.done, f"{name}'s answer")
-    return future.result()
+call = partial(probe_common.call, timeout=TIMEOUT)
 
 
 def step(node: Node, seconds: float) -> dict[str, Any]:

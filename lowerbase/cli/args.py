@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Callable
+from pathlib import Path
+
+from lowerbase.files import output_dir, output_file
 
 
 def positive_seconds(text: str) -> float:
@@ -37,3 +40,14 @@ def _whole_number(least: int, why: str) -> Callable[[str], int]:
 positive_int = _whole_number(1, "must be 1 or more")
 #: a random seed, a whole number >= 0 as numpy's generators take (``--seed``)
 seed = _whole_number(0, "a seed is 0 or more")
+
+
+def check_outputs(args: argparse.Namespace, out: Path) -> None:
+    """The report folder ``out`` (``--out``, or a command's default folder) and the files
+    ``--record``/``--mcap`` name, where the command has them: writable, or one line before
+    the run starts (:mod:`lowerbase.files`)."""
+    output_dir(out, "--out" if getattr(args, "out", None) else None)
+    for value, flag in ((getattr(args, "record", None), "--record"),
+                        (getattr(args, "mcap", None), "--mcap")):
+        if isinstance(value, str):  # --no-mcap is False
+            output_file(value, flag)

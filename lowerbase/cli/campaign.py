@@ -88,12 +88,13 @@ def run_command(args: argparse.Namespace) -> int:
     from lowerbase.campaign.progress import CampaignProgress
     from lowerbase.campaign.report import write_report
     from lowerbase.campaign.table import RowLog, write_csv
-    from lowerbase.files import output_dir
+    from lowerbase.cli.args import check_outputs
 
     campaign = load_campaign(args.campaign)
     indices = _range(args.runs, campaign.total)
-    out = output_dir(args.out, "--out") if args.out else output_dir(
-        Path("reports") / f"campaign-{campaign.name}-{time.strftime('%Y%m%d-%H%M%S')}")
+    out = Path(args.out) if args.out else \
+        Path("reports") / f"campaign-{campaign.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    check_outputs(args, out)
     if args.scheduler is None:  # its workers' warm-up begins now, beside Dask's import here
         engine.start_forkserver()
     n = campaign.total if indices is None else len(indices)
@@ -154,13 +155,14 @@ def check_command(args: argparse.Namespace) -> int:
 def replay_command(args: argparse.Namespace) -> int:
     from lowerbase.campaign.plan import build_scenario, load_campaign, plan_run
     from lowerbase.campaign.toml_out import dumps
+    from lowerbase.cli.args import check_outputs
     from lowerbase.cli.scenario import run_loaded
-    from lowerbase.files import output_dir
 
     campaign = load_campaign(args.campaign)
     spec = plan_run(campaign, args.run)
-    out = output_dir(args.out, "--out") if args.out else output_dir(Path("reports") / (
-        f"{campaign.name}-run{args.run}-{time.strftime('%Y%m%d-%H%M%S')}"))
+    out = Path(args.out) if args.out else Path("reports") / (
+        f"{campaign.name}-run{args.run}-{time.strftime('%Y%m%d-%H%M%S')}")
+    check_outputs(args, out)
     scenario = build_scenario(spec, out)  # writes out/profile.toml when the run varies it
     out.mkdir(parents=True, exist_ok=True)
     (out / "scenario.toml").write_text(dumps(spec.data), encoding="utf-8")

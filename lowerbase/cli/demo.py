@@ -55,7 +55,7 @@ def add_subparser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lowerbase.cli.scenario import check_outputs
+    from lowerbase.cli.args import check_outputs
     from lowerbase.errors import ConfigError
     from lowerbase.scenarios.catalog import find_scenario, load_any_scenario
     from lowerbase.scenarios.tasks import TasksScenario

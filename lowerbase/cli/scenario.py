@@ -8,6 +8,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from lowerbase.cli.args import check_outputs
+
 MODES = ("simulated", "realtime", "processes")
 
 
@@ -188,18 +190,6 @@ def run_command(args: argparse.Namespace) -> int:
     return run_loaded(args, scenario, out)
 
 
-def check_outputs(args: argparse.Namespace, out: Path) -> None:
-    """The report folder ``out`` and the files ``--record``/``--mcap`` name (when given):
-    writable, or one line before the run starts."""
-    from lowerbase.files import output_dir, output_file
-
-    output_dir(out, "--out" if getattr(args, "out", None) else None)
-    for value, flag in ((getattr(args, "record", None), "--record"),
-                        (getattr(args, "mcap", None), "--mcap")):
-        if isinstance(value, str):
-            output_file(value, flag)
-
-
 def run_loaded(args: argparse.Namespace, scenario: Any, out: Path) -> int:
     """``lowerbase scenario run`` of a scenario already built (``lowerbase campaign replay``
     builds one run's); its report goes to ``out``."""
@@ -259,13 +249,12 @@ def list_command(args: argparse.Namespace) -> int:
 def replay_command(args: argparse.Namespace) -> int:
     import json
 
-    from lowerbase.files import output_dir
     from lowerbase.reports.wheeled import _pyplot, plot_status, plot_trajectory, plot_velocities
     from lowerbase.scenarios.replay import check_recording_path, replay
 
     path = check_recording_path(args.recording, must_exist=True)
-    out = output_dir(args.out, "--out") if args.out else \
-        output_dir(default_out(f"replay-{path.stem}"))
+    out = Path(args.out) if args.out else default_out(f"replay-{path.stem}")
+    check_outputs(args, out)
     result = replay(path, pose=tuple(args.pose))
     out.mkdir(parents=True, exist_ok=True)
     plt = _pyplot()

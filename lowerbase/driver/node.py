@@ -46,7 +46,8 @@ from lowerbase.ros1.wire import wanted
 log = logging.getLogger(__name__)
 
 NODE_NAME = "driver_base"
-#: [s] the oldest sample /odom and /imu are stamped with its own time; older: the publish time
+#: [s] the oldest sample stamped with its own time (/odom, /imu, /battery); older: the publish
+#: time
 MAX_STAMP_AGE = 5.0
 
 

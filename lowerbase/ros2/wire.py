@@ -34,6 +34,7 @@ from types import ModuleType
 from typing import Any
 
 from builtin_interfaces.msg import Time as TimeMsg
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import (
     DurabilityPolicy,
@@ -277,8 +278,6 @@ class Ros2Wire:
                 blocking: bool = False) -> Any:
         """``blocking``: the handler may wait long, so it gets a callback group of its own (the
         node's default group runs one callback at a time: the faces' would wait for it)."""
-        from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-
         def serve(request: Any, _response: Any) -> Any:
             return handler(request)
         group = MutuallyExclusiveCallbackGroup() if blocking else None

@@ -44,6 +44,7 @@ from lowerbase.ros2.wire import Ros2Wire, qos_for
 
 TIMEOUT = 120.0
 spin_until = partial(probe_common.spin_until, timeout=TIMEOUT)  # every wait's deadline
+call = partial(probe_common.call, timeout=TIMEOUT)
 
 
 def odom(node: Node, n: int) -> dict[str, Any]:
@@ -70,14 +71,6 @@ def latched(node: Node) -> dict[str, Any]:
     return {"link_state": state[-1].data, "wheelPerimeter": param[-1].wheelPerimeter,
             "pulsePerCircle": param[-1].pulsePerCircle,
             "hardwareVersion": info[-1].hardwareVersion}
-
-
-def call(node: Node, cls: Any, name: str, request: Any) -> Any:
-    client = node.create_client(cls, name)
-    spin_until(node, lambda: client.wait_for_service(timeout_sec=0.1), f"service {name}")
-    future = client.call_async(request)
-    spin_until(node, future.done, f"the response of {name}")
-    return future.result()
 
 
 def wait_ready(node: Node) -> None:

@@ -30,7 +30,7 @@ def sim_speed(seconds: float, lean: bool = True, compiled: bool = True, schedule
     20 ms with its rolling Counter; ``scheduled``: a second of them at a time handed to
     ``Mcu.advance(n, incoming)`` with their periods (runs of compiled periods span repeated
     commands), else ``SimRig.drive`` (each command received, then ``advance(4)``).
-    ``lean=False`` sends every step through the general, fault-aware loop; ``compiled=False``
+    ``lean=False`` checks the fault hooks in every period (Mcu.step); ``compiled=False``
     keeps the lean loop in Python (no numba kernel)."""
     best = 0.0
     for _ in range(repeat):
@@ -167,7 +167,7 @@ def run(quick: bool = False) -> list[Row]:
     speed = sim_speed(20.0 if quick else 120.0)
     per_call = sim_speed(20.0 if quick else 120.0, scheduled=False)
     python = sim_speed(20.0 if quick else 120.0, compiled=False, repeat=1)
-    general = sim_speed(20.0 if quick else 120.0, lean=False, repeat=1)
+    hooked = sim_speed(20.0 if quick else 120.0, lean=False, repeat=1)
     per_core, fps = chassis_per_core(10.0 if quick else 60.0)
     rows = [
         Row("emulator", "simulated clock, one chassis", speed, "x real time",
@@ -180,9 +180,9 @@ def run(quick: bool = False) -> list[Row]:
             "compiled run per command)"),
         Row("emulator", "simulated clock, one chassis, Python lean loop", python, "x real time",
             "the same without the compiled period (no numba; docs/emulator.md)"),
-        Row("emulator", "simulated clock, one chassis, general loop", general, "x real time",
-            "the same with every step through the fault-aware loop (what the periods with "
-            "a fault active cost; docs/emulator.md)"),
+        Row("emulator", "simulated clock, one chassis, fault hooks in every period", hooked,
+            "x real time", "the same with the fault hooks checked in every period, in Python "
+            "(what the periods with a fault acting cost; docs/emulator.md)"),
         Row("emulator", "chassis per core in real time", per_core, "chassis",
             f"target >= 300; all frames ({fps:.0f}/s each) sent on udp_multicast; one "
             "chassis alone (bench_fleet: a fleet of N)"),

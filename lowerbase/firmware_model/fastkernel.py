@@ -205,10 +205,11 @@ class KernelLoop:
         self.lean.ml.blocked = self.lean.mr.blocked = False  # what _apply_faults does
         self.owned = True
 
-    def release(self, general: bool = False) -> None:
+    def release(self, hooks: bool = False) -> None:
         """Hand the due times and counters back to the Mcu (before any Python path steps);
-        ``general``: the general loop steps next (it may change the IMU fault offsets)."""
-        if general:
+        ``hooks``: a period with the fault hooks steps next (they may change the IMU's
+        offsets and the wheels' flags)."""
+        if hooks:
             self._key = ()
             self._fault_data = None
         if not self.owned:

@@ -1,14 +1,18 @@
-"""The control loop's lean path: one control period of :class:`~.mcu.Mcu` when no fault, no
-defect hook and no delayed frame is in play (the common case, and all of a long soak).
+"""The control period of :class:`~.mcu.Mcu`, once in Python: what ``Mcu.step`` runs.
 
-It does exactly what the general ``Mcu.step`` does, with the same floating-point operations in
-the same order (so the frame trace is bit-identical; tests/firmware_model/test_frame_trace.py
-runs the standard drive both ways against one pinned hash), but without what the general path
-spends its time on (docs/emulator.md, "Where the time goes"): the dicts of per-side targets
-and angles, a method call per concern and per wheel, fault look-ups on every check, a scan of
-all periodic messages with name-keyed dicts and a generic frame builder, and a Counter
-increment per frame. Constants of the hardware and of the believed chassis are derived once
-(again when ``Mcu.chassis`` is replaced).
+Without a fault hook in play (no fault active but those the period takes as data, no
+delayed frame: the common case, and all of a long soak) a period runs in compiled code
+(fastkernel.py, lean_kernel.py) where numba is there, this Python loop being the reference it
+is tested against bit for bit. With ``hooks`` (a fault of faults.py acting, a delayed frame, a
+gyro bias to add or take back, or ``Mcu.lean`` False) the same period checks the fault hooks:
+the faults' effects on the wheels, encoders and IMU (``Mcu._apply_faults``), the button
+e-stop and bus-error bits, the BMS's silence, and every frame out through
+``Mcu._send_out`` (silence, drop, corrupt, delay) with the conformance defects' counters and
+Heartbeat cycle. tests/firmware_model/test_frame_trace.py pins the trace of a drive through
+every fault kind (recorded with the emulator as it was before the speed work of issue 10).
+
+Constants of the hardware and of the believed chassis are derived once (again when
+``Mcu.chassis`` is replaced); the 10 and 20 ms frames have builders of their own.
 """
 
 from __future__ import annotations
@@ -77,7 +81,7 @@ class LeanLoop:
     def release(self) -> None:
         """Before a Python path steps: the compiled loop hands its state back to the Mcu."""
         if self.kernel is not None:
-            self.kernel.release(general=True)
+            self.kernel.release(hooks=True)
 
     # -- the believed chassis ------------------------------------------------------------------
 
@@ -89,24 +93,30 @@ class LeanLoop:
 
     # -- one control period ----------------------------------------------------------------------
 
-    def step(self) -> None:
+    def step(self, hooks: bool = False) -> None:
+        """One control period; ``hooks``: with the fault hooks (see the module docstring)."""
         if self.kernel is not None:
-            if self.compiled and self.kernel.step():
-                return
-            self.kernel.release()
+            if hooks:  # the fault hooks may change the IMU's offsets and the wheels' flags
+                self.kernel.release(hooks=True)
+            else:
+                if self.compiled and self.kernel.step():
+                    return
+                self.kernel.release()
         mcu, m = self.mcu, self.m
         now = mcu.clock.now()
         dt = mcu.dt
         if mcu.state == m.RobotState.BOOT and now - mcu.boot_time >= m.BOOT_TIME:
             mcu.state = m.RobotState.STANDBY
         ml, mr, el, er = self.ml, self.mr, self.el, self.er
-        # what Mcu._apply_faults does with only the faults of faults.DATA active
-        el.dropout, er.dropout, mcu.imu.frozen, over_l, over_r, ml.blocked, mr.blocked = (
-            mcu._fault_data)
-        if over_l:  # the overcurrent fault: Mcu._apply_faults
-            ml.inject_over_current()
-        if over_r:
-            mr.inject_over_current()
+        if hooks:
+            mcu._apply_faults()
+        else:  # what Mcu._apply_faults does with only the faults of faults.DATA active
+            el.dropout, er.dropout, mcu.imu.frozen, over_l, over_r, ml.blocked, mr.blocked = (
+                mcu._fault_data)
+            if over_l:  # the overcurrent fault
+                ml.inject_over_current()
+            if over_r:
+                mr.inject_over_current()
         c = mcu.chassis
         if c is not self._chassis:
             self._derive(c)
@@ -124,7 +134,7 @@ class LeanLoop:
             t_r = v_r * 2.0 * math.pi / c.wheel_perimeter * c.ratio_right / mr.geometry.ratio
         before_l, before_r = ml.omega, mr.omega
         truth = mcu.truth
-        pressable = truth.surroundings is not None  # Mcu.step: a refused move, redone pressed
+        pressable = truth.surroundings is not None  # a refused move is redone pressed
         if pressable:
             saved_l, saved_r = ml.save(), mr.save()
         a_l = ml.step(t_l, dt, brake=brake)
@@ -159,15 +169,20 @@ class LeanLoop:
             mcu._sample_imu()
             mcu._imu_due += self.imu_cycle
         if mcu.bms is not None:
-            self._bms(now, dt, c)
-        self._status(now)
+            self._bms(now, dt, c, hooks and mcu._active("bms-silence") is not None)
+        self._status(now, hooks)
         if mcu.odometer != mcu._saved_odometer and now - mcu._last_save >= m.ODOMETER_SAVE_PERIOD:
             mcu._save_state()
         if now + 1e-9 >= mcu._next_any_due:
-            self._emit_due(now)
+            self._emit_due(now, hooks)
+        if mcu._delayed:
+            mcu._release_delayed(now)
 
-    def _bms(self, now: float, dt: float, c: ChassisParams) -> None:
-        """Mcu._update_bms with Mcu.load_current inline (no bms-silence fault)."""
+    def _bms(self, now: float, dt: float, c: ChassisParams, silent: bool = False) -> None:
+        """The pack's charge and step, and its poll when due (none answered when ``silent``:
+        the bms-silence fault), with Mcu.load_current inline. Stepping the pack in every
+        period would cost more than the whole control loop: it integrates the charge over
+        m.BMS_STEP exactly."""
         mcu, m = self.mcu, self.m
         total = self.idle2
         ml, mr = self.ml, self.mr
@@ -182,16 +197,19 @@ class LeanLoop:
         if now < mcu._bms_next_poll:
             return
         mcu._bms_next_poll += m.BMS_POLL_PERIOD
-        snapshot = mcu.bms.poll()
+        snapshot = None if silent else mcu.bms.poll()
         if snapshot is not None:
             mcu.bms_snapshot = snapshot
             mcu._bms_bits = int(mcu.bms.status_bits(snapshot))
             mcu._bms_last_answer = now
 
-    def _status(self, now: float) -> None:
-        """Mcu._update_status without faults: no button e-stop, no bus fault."""
+    def _status(self, now: float, hooks: bool = False) -> None:
+        """The status word from its causes (event-latched bits carried over) and the state it
+        forces; with ``hooks``, the button e-stop and the bus faults too."""
         mcu, m = self.mcu, self.m
         s = mcu.status & m.CARRIED
+        if hooks and mcu._active("estop"):
+            s |= bits.ESTOP_BUTTON
         if mcu.estop_command:
             s |= bits.ESTOP_COMMAND
         if mcu._watchdog:
@@ -215,9 +233,14 @@ class LeanLoop:
         s |= mcu.motion_fault
         if mcu._imu_same >= m.IMU_FROZEN_SAMPLES:
             s |= bits.IMU_FAULT
+        if hooks and (mcu._active("silence") or mcu._active("drop") or mcu._active("corrupt")):
+            s |= bits.BUS_ERROR
         if mcu.bms is not None:
             lost = now - mcu._bms_last_answer > m.BMS_LINK_TIMEOUT
             s |= (bits.BMS_LINK_LOST if lost else 0) | mcu._bms_bits
+        # the button e-stop is latched only while pressed; releasing needs EStopRelease too
+        if s & bits.ESTOP_BUTTON:
+            mcu.estop_command = True
         mcu.status = s
         state = mcu.state
         rs = m.RobotState
@@ -231,43 +254,53 @@ class LeanLoop:
 
     # -- frames out ------------------------------------------------------------------------------
 
-    def _emit_due(self, now: float) -> None:
-        """Mcu._emit_due + Mcu._emit without faults: straight out, one stats update."""
+    def _emit_due(self, now: float, hooks: bool = False) -> None:
+        """The periodic frames due now, in catalog order; a message late by more than its
+        cycle skips the missed slots instead of bursting. Without ``hooks`` straight out with
+        one stats update; with them through ``Mcu._send_out`` (which counts each frame) and
+        the conformance defects slow-heartbeat and counter-stuck."""
         mcu = self.mcu
         due = mcu._due
         send_rows = self.send_rows
         counters = mcu._counters
-        send = mcu._send
+        send = mcu._send_out if hooks else mcu._send
+        slow = hooks and mcu._active("defect", "slow-heartbeat") is not None
+        stuck = hooks and mcu._active("defect", "counter-stuck") is not None
         sent = 0
         edge = now + 1e-9
-        for i, (_, _, _, _, period, _) in enumerate(self.tx):
+        for i, (_, name, _, _, period, _) in enumerate(self.tx):
             d = due[i]
             if edge < d:
                 continue
+            if slow and name == "Heartbeat":
+                period *= 2  # defect hook (conformance)
             missed = max(0, math.floor((now - d) / period)) if period else 0
             due[i] = d + (missed + 1) * period
-            sent += send_rows(i, counters, send)
+            sent += send_rows(i, counters, send, stuck)
         mcu._next_any_due = min(due)
-        if sent:
+        if sent and not hooks:
             mcu.stats["tx_frames"] += sent
 
-    def send_rows(self, i: int, counters: dict[str, int], send: Send) -> int:
+    def send_rows(self, i: int, counters: dict[str, int], send: Send,
+                  stuck: bool = False) -> int:
         """Build, count and send the rows of periodic message ``i`` (``self.tx[i]``): a shared
         rolling Counter for all rows, or one per row that lacks its own (``counters``,
-        ``send``: the Mcu's); returns how many
-        frames went out (the Python emitter's and the kernel's non-hot frames both)."""
+        ``send``: the Mcu's; ``stuck``: the counters do not advance, the counter-stuck
+        defect); returns how many frames were built (the Python emitter's and the kernel's
+        non-hot frames both)."""
         encode, name, frame_id, has_counter, _, shared = self.tx[i]
         rows = self.builders[i]()
+        step = 0 if stuck else 1
         if shared and rows and has_counter:
             counter = counters[name]
-            counters[name] = (counter + 1) & 0xF
+            counters[name] = (counter + step) & 0xF
             for values in rows:
                 values["Counter"] = counter
         memo = self.memo[i]
         for values in rows:
             if has_counter and "Counter" not in values:
                 values["Counter"] = counters[name]
-                counters[name] = (counters[name] + 1) & 0xF
+                counters[name] = (counters[name] + step) & 0xF
             if memo is None:
                 send(frame_id, encode(values))
                 continue

@@ -93,9 +93,9 @@ class Fault:
 ONCE = frozenset({"imu-bias"})
 #: faults the lean and compiled periods take as data (the encoders' dropout, the IMU's freeze,
 #: the drivers' injected over-current and the wheels' blocked flags, set per period from the
-#: active faults: Mcu.step), not the general loop
+#: active faults: Mcu.step), not the fault hooks
 DATA = frozenset({"encoder", "imu-freeze", "overcurrent", "stall"})
-#: faults active in a lean period without the general loop's fault hooks (Mcu._faults_act)
+#: faults active in a period without the fault hooks (Mcu._faults_act)
 LEAN = ONCE | DATA
 
 

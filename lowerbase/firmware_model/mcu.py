@@ -65,7 +65,6 @@ from lowerbase.firmware_model.mcu_defs import (  # re-exported: the names import
     _clip,
 )
 from lowerbase.firmware_model.mcu_frames import McuFrames
-from lowerbase.firmware_model.mcu_status import McuStatus
 from lowerbase.firmware_model.motor import WheelGeometry, WheelMotor
 from lowerbase.firmware_model.parameters import ParameterStore
 from lowerbase.firmware_model.profile import ChassisParams, Profile
@@ -102,11 +101,11 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
-class Mcu(McuCommands, McuStatus, McuFrames):
+class Mcu(McuCommands, McuFrames):
     """The chassis MCU. See the module docstring for the contract."""
 
-    #: take the lean control loop (fastloop.py) in every period in which no fault is active;
-    #: False forces the general one (the tests compare the two)
+    #: check the fault hooks only in the periods that need them (fastloop.py; compiled in the
+    #: others); False checks them in every period (the tests compare the two)
     lean = True
 
     def __init__(
@@ -268,17 +267,6 @@ class Mcu(McuCommands, McuStatus, McuFrames):
         bias = self._active("imu-bias")
         return (bias.value if bias else 0.0) != self._imu_bias_applied
 
-    def _wheel_target(self, side: str, rim: float) -> float:
-        """What the firmware makes the real wheel do [rad/s] for a commanded rim speed [m/s]:
-        the motor speed its beliefs give (rim / believed radius x believed ratio; the minSpeed
-        deadband), turned by the REAL gearbox."""
-        c = self.chassis
-        if abs(rim) < c.min_speed:
-            return 0.0
-        ratio = c.ratio_left if side == "left" else c.ratio_right
-        motor_rad_s = kinematics.rim_speed_to_wheel_rad_s(rim, c.wheel_perimeter) * ratio
-        return motor_rad_s / self._motors[side].geometry.ratio
-
     def _belief_per_pulse(self, side: str) -> float:
         """Rim distance [m] the firmware counts per encoder pulse (its parameters)."""
         c = self.chassis
@@ -295,10 +283,12 @@ class Mcu(McuCommands, McuStatus, McuFrames):
     # -- the control loop --------------------------------------------------------------------
 
     def step(self) -> None:
-        """One control period: safety, motion, sensors, BMS, then the frames that are due."""
-        if self.lean and not (self._delayed or (
-                (self.faults or self._imu_bias_applied) and self._faults_act())):
-            if self.faults:  # encoder, imu-freeze, overcurrent, stall: data for the lean period
+        """One control period: safety, motion, sensors, BMS, then the frames that are due
+        (fastloop.py: compiled unless a fault hook is in play)."""
+        hooks = not self.lean or bool(self._delayed) or bool(
+            (self.faults or self._imu_bias_applied) and self._faults_act())
+        if not hooks:
+            if self.faults:  # encoder, imu-freeze, overcurrent, stall: data for the period
                 self._fault_data = (self._active("encoder", "left") is not None,
                                     self._active("encoder", "right") is not None,
                                     self._active("imu-freeze") is not None,
@@ -308,53 +298,7 @@ class Mcu(McuCommands, McuStatus, McuFrames):
                                     self._active("stall", "right") is not None)
             elif self._fault_data is not NO_FAULT_DATA:
                 self._fault_data = NO_FAULT_DATA
-            self._lean.step()  # the same, bit for bit, without the fault hooks (fastloop.py)
-            return
-        self._lean.release()  # the compiled lean loop's due times and counters, back here
-        now = self.clock.now()
-        dt = self.dt
-        if self.state == RobotState.BOOT and now - self.boot_time >= BOOT_TIME:
-            self.state = RobotState.STANDBY
-        self._apply_faults()
-        target_v, target_w, brake = self._target(now)
-        c = self.chassis
-        v_l, v_r = kinematics.wheel_speeds_from_twist(target_v, target_w, c.wheel_distant)
-        targets = {"left": self._wheel_target("left", v_l),
-                   "right": self._wheel_target("right", v_r)}
-        angles, accel = {}, {}
-        truth = self.truth
-        # with surroundings, a refused move is redone as pressed (motor.py: traction)
-        saved = None if truth.surroundings is None else {
-            side: motor.save() for side, motor in self._motors.items()}
-        for side, motor in self._motors.items():
-            before = motor.omega
-            angles[side] = motor.step(targets[side], dt, brake=brake)
-            accel[side] = (motor.omega - before) / dt * motor.geometry.radius  # real rim
-        rim_accel = (accel["left"], accel["right"])
-        slip = self.slip.step(now - self.boot_time, truth.v * dt, rim_accel)
-        truth.step(angles["left"] / dt, angles["right"] / dt, dt, slip, now + dt)
-        pressed = False
-        if saved is not None and truth.blocked:
-            pressed = True
-            for side, motor in self._motors.items():
-                angles[side] = motor.press(saved[side], targets[side], dt, brake=brake)
-        ds = 0.0
-        for side, enc in self._encoders.items():
-            before = enc.total
-            enc.add(angles[side])
-            moved = enc.total - before
-            ds += 0.5 * moved * self._belief_per_pulse(side)
-            self._check_encoder(side, moved, dt, held=pressed and self._motors[side].held)
-        self.odometer += abs(ds)
-        if now >= self._imu_due:
-            self._sample_imu()
-            self._imu_due += self._cycle("ImuGyro")
-        self._update_bms(now, dt)
-        self._update_status(now)
-        if self.odometer != self._saved_odometer and now - self._last_save >= ODOMETER_SAVE_PERIOD:
-            self._save_state()
-        self._emit_due(now)
-        self._release_delayed(now)
+        self._lean.step(hooks)
 
     def advance(self, periods: int, incoming: fastbatch.Incoming = ()) -> None:
         """``periods`` control periods on a SimClock, each followed by ``clock.advance(dt)``:
@@ -427,6 +371,17 @@ class Mcu(McuCommands, McuStatus, McuFrames):
             self.smoother.reset(v, w)
         return v, w, False
 
+    def load_current(self) -> float:
+        """Battery current drawn by the motor drivers [A] (positive = discharge). The
+        electronics (computers, sensors, LEDs) are the battery's ``idle_current_a``, counted
+        by the pack model once (fastloop.LeanLoop._bms has this inline)."""
+        total = self.profile.motor.idle_current * 2
+        for motor in self._motors.values():
+            # electrical power ~ torque current x motor speed share, at the pack voltage
+            rpm_share = abs(motor.motor_rpm) / max(self.chassis.max_rpm, 1.0)
+            total += abs(motor.current) * rpm_share
+        return total
+
     def _measured_twist(self) -> tuple[float, float]:
         return kinematics.twist_from_wheel_speeds(
             self.wheel_velocity("left"), self.wheel_velocity("right"), self.chassis.wheel_distant)
@@ -448,16 +403,6 @@ class Mcu(McuCommands, McuStatus, McuFrames):
         if want != self._imu_bias_applied:
             self.imu.bias_step(gyro=(0.0, 0.0, want - self._imu_bias_applied))
             self._imu_bias_applied = want
-
-    def _check_encoder(self, side: str, moved: int, dt: float, held: bool = False) -> None:
-        """Commanded without pulses: the encoder's fault timer (not while the wheel is blocked
-        or ``held`` by the floor against a refused move: that is a stall, not the encoder)."""
-        motor = self._motors[side]
-        commanded = abs(motor.setpoint) * motor.geometry.radius > self.profile.motor.stall_speed
-        if commanded and moved == 0 and not motor.blocked and not held:
-            self._enc_stuck[side] += dt
-        else:
-            self._enc_stuck[side] = 0.0
 
     def _sample_imu(self) -> None:
         gyro, accel = self.imu.sample(self.truth.body_omega, self.truth.body_accel,

@@ -1,11 +1,12 @@
-"""The Mcu's sending side: the periodic frames at their cycle times (built from the state, a
-rolling Counter each) and the fault hooks on the way out (silence, drop, corrupt, delay).
+"""The Mcu's sending side: the rows of the periodic frames (built from the state; the 10 and
+20 ms frames have their own builders in fastloop.py, which sends them at their cycle times),
+the frames sent on request, and the fault hooks on the way out (silence, drop, corrupt,
+delay).
 Mixed into :class:`.mcu.Mcu`."""
 
 from __future__ import annotations
 
 import heapq
-import math
 from typing import Any
 
 from lowerbase.firmware_model.mcu_defs import (
@@ -13,7 +14,6 @@ from lowerbase.firmware_model.mcu_defs import (
     ESTOP_BITS,
     PROTOCOL_VERSION,
     SB,
-    SHARED_COUNTER,
     STOPPING,
     McuParts,
     RobotState,
@@ -26,49 +26,12 @@ class McuFrames(McuParts):
     def _cycle(self, name: str) -> float:
         return self.codec.message(name).cycle_time or 0.0
 
-    def _emit_due(self, now: float) -> None:
-        if now + 1e-9 < self._next_any_due:
-            return
-        for i, msg in enumerate(self._periodic):
-            due = self._due[i]
-            if now + 1e-9 < due:
-                continue
-            # keep the period; after a stall, skip the missed slots instead of bursting
-            period = msg.cycle_time or 0.0
-            if msg.name == "Heartbeat" and self._active("defect", "slow-heartbeat"):
-                period *= 2  # defect hook (conformance)
-            missed = max(0, math.floor((now - due) / period)) if period else 0
-            self._due[i] = due + (missed + 1) * period
-            rows = self._build(msg)
-            if msg.name in SHARED_COUNTER and rows and msg.has_counter:
-                counter = self._counters[msg.name]  # one counter for all rows of a cycle
-                self._advance_counter(msg.name)
-                for values in rows:
-                    values["Counter"] = counter
-            for values in rows:
-                self._emit(msg.name, values)
-        self._next_any_due = min(self._due)
-
     def _build(self, msg: MessageCodec) -> list[dict[str, Any]]:
+        """The rows of periodic message ``msg`` (WheelFeedback, MotionState and the IMU's have
+        builders of their own in fastloop.LeanLoop)."""
         name = msg.name
-        if name == "WheelFeedback":
-            rows = []
-            for wheel, side in ((0, "left"), (1, "right")):  # multiplexed: Left*/Right*
-                motor, enc, s = self._motors[side], self._encoders[side], side.title()
-                rows.append({
-                    f"{s}Count": enc.count,
-                    f"{s}Velocity": _clip(self.wheel_velocity(side), msg, f"{s}Velocity"),
-                    f"{s}Current": _clip(motor.current, msg, f"{s}Current"), "Wheel": wheel,
-                    f"{s}DriverStatus": motor.status_bits | enc.status_bits})
-            return rows
-        if name == "MotionState":
-            v, w = self._measured_twist()
-            return [{"Linear": _clip(v, msg, "Linear"), "Angular": _clip(w, msg, "Angular")}]
         if name == "Odometer":
             return [{"Distance": _clip(self.odometer, msg, "Distance")}]
-        if name in ("ImuGyro", "ImuAccel"):
-            xyz = self.imu_sample[0 if name == "ImuGyro" else 1]
-            return [{axis: _clip(val, msg, axis) for axis, val in zip("XYZ", xyz, strict=True)}]
         if name == "StatusCode":
             return [{"Code": self.status}]
         if name == "SystemStatus":
@@ -105,10 +68,13 @@ class McuFrames(McuParts):
         if msg.has_counter and "Counter" not in values:
             values["Counter"] = self._counters[name]
             self._advance_counter(name)
-        data = msg.encode(values)
+        self._send_out(msg.frame_id, msg.encode(values))
+
+    def _send_out(self, frame_id: int, data: bytes) -> None:
+        """Send a frame through the fault hooks (silence, drop, corrupt, delay), counted."""
         if not self.faults:  # the common case: straight out
             self.stats["tx_frames"] += 1
-            self._send(msg.frame_id, data)
+            self._send(frame_id, data)
             return
         if self._active("silence"):
             self.stats["tx_silenced"] += 1
@@ -125,10 +91,10 @@ class McuFrames(McuParts):
         if delay and delay.value > 0:
             self._seq += 1
             heapq.heappush(self._delayed, (self.clock.now() + delay.value, self._seq,
-                                           msg.frame_id, data))
+                                           frame_id, data))
             return
         self.stats["tx_frames"] += 1
-        self._send(msg.frame_id, data)
+        self._send(frame_id, data)
 
     def _advance_counter(self, name: str) -> None:
         if self.faults and self._active("defect", "counter-stuck"):  # defect hook (conformance)

@@ -2,8 +2,8 @@
 
 The pinned frame trace (test_frame_trace.py) runs with the kernel; here: the kernel really
 runs, the Python lean loop (its reference) gives the same trace, switching between the kernel
-and the general loop at arbitrary periods is seamless, surroundings and slip keep the Python
-truth step, and without numba the Python loop takes over.
+and the period with its fault hooks at arbitrary periods is seamless, surroundings and slip
+keep the Python truth step, and without numba the Python loop takes over.
 """
 
 from __future__ import annotations
@@ -65,9 +65,9 @@ def test_the_python_lean_loop_gives_the_same_trace(monkeypatch: pytest.MonkeyPat
     assert seen == {"kernel": 0, "python": 0, "run": 0}
 
 
-def _drive_switching(general_every: int | None, runs: bool = False
+def _drive_switching(hooked_every: int | None, runs: bool = False
                      ) -> tuple[list[Any], tuple[Any, ...]]:
-    """A drive in which a fault is injected (active but without effect: the general loop) and
+    """A drive in which a fault is injected (active but without effect: the hooked period) and
     cleared again at irregular periods; every frame and the end state. ``runs``: the periods
     between two changes go through ``Mcu.advance`` (runs of compiled periods), else
     ``step()`` each."""
@@ -79,11 +79,11 @@ def _drive_switching(general_every: int | None, runs: bool = False
         if k % 4 == 0:
             rig.send("MotionCommand", Linear=0.5 + 0.001 * (k % 50), Angular=0.3 - 0.002 * (
                 k % 30), Mode="Raw" if k < 500 or k > 1000 else "Smoothed")
-        if general_every is not None and k % general_every in (0, 3, 4):
+        if hooked_every is not None and k % hooked_every in (0, 3, 4):
             if rig.mcu.faults:
                 rig.mcu.clear_fault()
             else:
-                rig.mcu.inject("delay:0")  # active (the general loop), changes nothing
+                rig.mcu.inject("delay:0")  # active (the hooked period), changes nothing
         if k == 1200:  # commands stop: the watchdog brakes
             k += 200
             rig.mcu.advance(200) if runs else rig.run(1.0)
@@ -104,7 +104,7 @@ def _drive_switching(general_every: int | None, runs: bool = False
 
 
 @pytest.mark.parametrize(("every", "runs"), [(7, False), (23, False), (11, True), (37, True)])
-def test_switching_kernel_and_general_loop_is_seamless(monkeypatch: pytest.MonkeyPatch,
+def test_switching_kernel_and_hooked_period_is_seamless(monkeypatch: pytest.MonkeyPatch,
                                                        every: int, runs: bool) -> None:
     seen = _count_kernel_periods(monkeypatch)
     switching = _drive_switching(every, runs)
@@ -188,7 +188,7 @@ def test_slip_events_and_random_slip_run_in_the_kernel(
         monkeypatch: pytest.MonkeyPatch, events: bool, rate: float) -> None:
     """The events' slip fractions (SlipModel.event_fractions, random events drawn) enter the
     kernel as data: every lean period compiled, the same frames and truth as the Python lean
-    loop and the general loop; and the slip shows (so a kernel that ignored it would differ)."""
+    loop and the hooked period; and the slip shows (so a kernel that ignored it would differ)."""
     seen = _count_kernel_periods(monkeypatch)
     rig = _slipping(events, rate)
     got = _run(rig, 1.5)
@@ -228,7 +228,7 @@ def test_encoder_and_imu_freeze_faults_run_in_the_kernel(monkeypatch: pytest.Mon
                                                           ) -> None:
     """The encoder faults' dropout and the IMU's freeze enter the kernel as data
     (Mcu._fault_data): their active periods compiled, the same frames and end state as the
-    Python lean loop and the general loop; and the faults show (so a kernel that ignored
+    Python lean loop and the hooked period; and the faults show (so a kernel that ignored
     them would differ)."""
     seen = _count_kernel_periods(monkeypatch)
     got = _drive_with_data_faults()
@@ -270,7 +270,7 @@ def test_overcurrent_and_stall_faults_run_in_the_kernel(
         monkeypatch: pytest.MonkeyPatch, kind: str, bit: int, flag: str) -> None:
     """The injected over-current and the blocked wheel enter the kernel as data
     (Mcu._fault_data: C_OVER_L/R, which the kernel latches; C_BLOCK_L/R): their active periods
-    compiled, the same frames and end state as the Python lean loop and the general loop; the
+    compiled, the same frames and end state as the Python lean loop and the hooked period; the
     fault shows, and a kernel that ignored the flag would differ."""
     seen = _count_kernel_periods(monkeypatch)
     got = _drive_with_overcurrent(kind)
@@ -286,7 +286,7 @@ def test_overcurrent_and_stall_faults_run_in_the_kernel(
     monkeypatch.setattr(Mcu, "lean", False)
     assert got == _drive_with_overcurrent(kind)
     monkeypatch.undo()
-    set_data = KernelLoop.set_fault_data  # a kernel deaf to the flag: not the general trace
+    set_data = KernelLoop.set_fault_data  # a kernel deaf to the flag: not the hooked trace
 
     def deaf(self: KernelLoop, data: Any) -> None:
         set_data(self, data)
@@ -350,8 +350,8 @@ def test_bms_polls_run_in_the_kernel_unless_the_pack_steps_in_the_same_period(
     got, _ = _drive_polled(shift)
     assert got[2] & int(StatusBit.CHARGING) and got[1] & int(StatusBit.CHARGING)
     monkeypatch.setattr(Mcu, "lean", False)
-    general, both = _drive_polled(shift)  # the general loop, step by step
-    assert got == general
+    hooked, both = _drive_polled(shift)  # the hooked period, step by step
+    assert got == hooked
     # only a poll in a period that also steps the pack leaves the kernel (shift 19: some do)
     assert seen["python"] == both and (both > 0) == (shift == 19)
 
@@ -425,7 +425,7 @@ def test_runs_span_repeated_motion_commands(monkeypatch: pytest.MonkeyPatch) -> 
     assert got == _drive_scheduled(False)  # receive, then one period, each period
     assert max(runs) == 1
     monkeypatch.setattr(Mcu, "lean", False)
-    assert got == _drive_scheduled(True)  # the general loop
+    assert got == _drive_scheduled(True)  # the hooked period
 
 
 def test_incoming_frames_out_of_the_periods_are_refused() -> None:

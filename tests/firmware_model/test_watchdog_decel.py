@@ -22,9 +22,10 @@ from lowerbase.firmware_model.sim import SimRig
 from lowerbase.protocol.status_codes import StatusBit
 
 
-@pytest.fixture(autouse=True, params=["lean", "general"])
+@pytest.fixture(autouse=True, params=["lean", "hooked"])
 def control_loop(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Every test on both control loops: the lean one (fastloop.py) and the general one."""
+    """Every test both ways: the period without the fault hooks (fastloop.py) and with them
+    checked in every period."""
     monkeypatch.setattr(Mcu, "lean", request.param == "lean", raising=False)
 
 

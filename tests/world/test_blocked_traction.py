@@ -34,7 +34,7 @@ TOUCH = 1e-4  # [m] the footprint may reach into the wall's cell by rounding (a 
 LOADED_MASS = 250.0  # [kg] a 150 kg base with a 100 kg load: mu m g / 2 = 736 N > 675 N
 
 
-@pytest.fixture(params=[True, False], ids=["lean", "general"])
+@pytest.fixture(params=[True, False], ids=["lean", "hooked"])
 def control_loop(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> bool:
     monkeypatch.setattr(Mcu, "lean", request.param)
     return bool(request.param)
@@ -148,6 +148,6 @@ def test_a_slipping_robot_loads_its_motors_with_the_traction(control_loop: bool)
     assert run.first_status is None
     # the wheels really turn while slipping: the encoders count past the truth
     assert run.wheel_distance > run.true_distance + 0.3
-    # the pack: idle + each motor's current times its speed share (McuStatus.load_current)
+    # the pack: idle + each motor's current times its speed share (Mcu.load_current)
     assert mcu.load_current() == pytest.approx(pack, rel=1e-12)
     assert mcu.load_current() > 4.0  # [A] on free floor at 0.5 m/s: 2 * 0.3 + 2 * 0.8 * 0.32

@@ -51,7 +51,7 @@ def loop_with(world: WorldSurroundings) -> SimLoop:
     return loop
 
 
-@pytest.fixture(params=[True, False], ids=["lean", "general"])
+@pytest.fixture(params=[True, False], ids=["lean", "hooked"])
 def control_loop(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> bool:
     monkeypatch.setattr(Mcu, "lean", request.param)
     return bool(request.param)

@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, cast
 
 from lowerbase.clock import SimClock
-from lowerbase.firmware_model.fastkernel import MAX_RUN
+from lowerbase.firmware_model.fastkernel import MAX_RUN, NO_HOOKS
 
 if TYPE_CHECKING:  # pragma: no cover
     from lowerbase.firmware_model.fastkernel import KernelLoop
@@ -54,6 +54,8 @@ def run(kl: KernelLoop, n: int, fresh: Sequence[int] = ()) -> int:
     if kl._fault_data is not m.NO_FAULT_DATA:  # no fault is active in a run (_kernel_for_run)
         mcu._fault_data = m.NO_FAULT_DATA
         kl.set_fault_data(m.NO_FAULT_DATA)
+    if kl.hooks != NO_HOOKS:  # nor a fault hook
+        kl.set_hooks(NO_HOOKS)
     n = min(n, MAX_RUN)
     v, w, mode = cmd
     targets = kl.targets

@@ -16,7 +16,14 @@ kernel's ``k`` (C_SLIP_L, C_SLIP_R; 0 without events), the kernel adds the accel
 So do active encoder, imu-freeze, overcurrent and stall faults: ``Mcu._fault_data``
 (C_DROP_L, C_DROP_R, C_FROZEN, C_OVER_L, C_OVER_R, C_BLOCK_L, C_BLOCK_R: the encoders'
 ``dropout``, the IMU's ``frozen``, the drivers' injected over-current, which the kernel
-latches before the motors step, the motors' ``blocked``).
+latches before the motors step, the motors' ``blocked``). So do the other fault hooks
+(``step(hooks=True)``, :meth:`KernelLoop.set_hooks`): the status bits the faults assert
+(the button e-stop, which also latches ``Mcu.estop_command``; the bus error: C_FAULT_BITS),
+the rolling counters' step (C_COUNT_STEP: 0 with the counter-stuck defect) and the
+Heartbeat's cycle (``per``: twice with slow-heartbeat) go into the kernel; the BMS's
+silence leaves the poll unanswered; the frames leave through ``Mcu._send_out`` (silence,
+drop, corrupt, delay: drawn frame by frame in their order, as the Python period does) and
+the delayed ones are released after the period's.
 A period goes to the Python LeanLoop instead (``step`` returns False, nothing changed) when
 surroundings are installed (the world's collision check must see each move), or the BMS is
 polled in a period that also steps the pack (``poll_ahead``; otherwise the poll, every 100th
@@ -66,8 +73,14 @@ class LeanParts(Protocol):
     idle2: float
 
     def _derive(self, c: ChassisParams) -> None: ...
-    def _emit_due(self, now: float) -> None: ...
-    def send_rows(self, i: int, counters: dict[str, int], send: Send) -> int: ...
+    def _emit_due(self, now: float, hooks: bool = False) -> None: ...
+    def send_rows(self, i: int, counters: dict[str, int], send: Send,
+                  stuck: bool = False) -> int: ...
+
+#: what the fault hooks give a kernel period (:meth:`KernelLoop.set_hooks`): the status bits
+#: the faults assert, the rolling counters' step, the Heartbeat at twice its cycle
+Hooks = tuple[int, int, bool]
+NO_HOOKS: Hooks = (0, 1, False)
 
 #: the hot frames: message, multiplexer value (None: plain), value slots after the Counter
 HOT: dict[str, list[tuple[int | None, tuple[str, ...]]]] = {
@@ -185,6 +198,9 @@ class KernelLoop:
         self.targets = np.zeros((MAX_RUN, 2))
         self.zero_rows = np.zeros((1, 12))
         self.k = np.zeros(lk.C_SIZE + lk.R_SIZE)
+        self.k[lk.C_COUNT_STEP] = 1.0
+        self.hooks = NO_HOOKS  #: the fault hooks' data in ``k`` and ``per`` (set_hooks)
+        self.hb = [msg.name for msg in mcu._periodic].index("Heartbeat")
         self.owned = False
         self.slipping = False  #: slip fractions of events are in ``k`` (C_SLIP_L, C_SLIP_R)
         #: the Mcu._fault_data in ``k`` (C_DROP_L .. C_BLOCK_R)
@@ -270,6 +286,25 @@ class KernelLoop:
         self.k[self.lk.C_DROP_L:self.lk.C_BLOCK_R + 1] = data
         self._fault_data = data
 
+    def set_hooks(self, hooks: Hooks) -> None:
+        """The fault hooks' data (:data:`Hooks`, :meth:`hook_data`) into ``k`` and ``per``."""
+        bits, step, slow = hooks
+        self.k[self.lk.C_FAULT_BITS] = bits
+        self.k[self.lk.C_COUNT_STEP] = step
+        cycle = self.mcu._periodic[self.hb].cycle_time or 0.0
+        self.per[self.hb] = 2 * cycle if slow else cycle  # defect hook (conformance)
+        self.hooks = hooks
+
+    def hook_data(self) -> Hooks:
+        """What the fault hooks acting now give the period (LeanLoop's _status and _emit_due
+        do the same in Python)."""
+        mcu, m = self.mcu, self.m
+        bits = m.SB.ESTOP_BUTTON if mcu._active("estop") else 0
+        if mcu._active("silence") or mcu._active("drop") or mcu._active("corrupt"):
+            bits |= m.SB.BUS_ERROR
+        return (int(bits), 0 if mcu._active("defect", "counter-stuck") else 1,
+                mcu._active("defect", "slow-heartbeat") is not None)
+
     def no_slip(self) -> None:
         """No slip event in force: the kernel's event slip back to 0 (the runs' and any
         period's without events)."""
@@ -283,15 +318,20 @@ class KernelLoop:
 
     # -- one period ------------------------------------------------------------------------------
 
-    def step(self) -> bool:
-        """One lean period in the kernel; False (nothing done) when it is the Python loop's."""
+    def step(self, hooks: bool = False) -> bool:
+        """One period in the kernel, ``hooks``: with the fault hooks acting (see the module
+        docstring); False (nothing done) when it is the Python loop's."""
         mcu, m, lean = self.mcu, self.m, self.lean
         truth, slip, bms = mcu.truth, mcu.slip, mcu.bms
         now = mcu.clock.now()
         if (truth.surroundings is not None
-                or (bms is not None and now >= mcu._bms_next_poll and not self.poll_ahead(now))):
-            self.release()
+                or (bms is not None and now >= mcu._bms_next_poll and not self.poll_ahead(
+                    now, hooks and mcu._active("bms-silence") is not None))):
+            self.release(hooks)
             return False
+        h = self.hook_data() if hooks else NO_HOOKS
+        if h != self.hooks:
+            self.set_hooks(h)
         if not self.owned:
             self.acquire()
         if self._key != self._current_key():
@@ -336,6 +376,8 @@ class KernelLoop:
             emit_now, self.due, self.per, self.hot, self.counters, self.vals, self.sig,
             self.scale, self.frames, self.out, self.ids, self.lens, 0))
         ml._steady = mr._steady = None
+        if h[0] and mcu.status & m.SB.ESTOP_BUTTON:  # latched while pressed (LeanLoop._status)
+            mcu.estop_command = True
         if bms is not None and mcu._bms_elapsed >= m.BMS_STEP - 1e-9:  # nothing above reads it
             bms.step(mcu._bms_elapsed, mcu._bms_charge / mcu._bms_elapsed)
             mcu._bms_charge = mcu._bms_elapsed = 0.0
@@ -354,20 +396,23 @@ class KernelLoop:
         if mcu.odometer != mcu._saved_odometer and now - mcu._last_save >= m.ODOMETER_SAVE_PERIOD:
             mcu._save_state()
         if count:
-            self._send(now, count)
+            self._send(now, count, hooks)
+        if mcu._delayed:
+            mcu._release_delayed(now)
         return True
 
-    def poll_ahead(self, now: float) -> bool:
+    def poll_ahead(self, now: float, silent: bool = False) -> bool:
         """The BMS poll of the period at ``now``, done before the kernel runs the period
         (LeanLoop polls after the period's current integration and pack step: the poll reads
         only the pack, which only the step changes); False, nothing done, when this period
-        also steps the pack (the same float sum as the kernel's): Python then runs it."""
+        also steps the pack (the same float sum as the kernel's): Python then runs it.
+        ``silent``: the poll goes unanswered (the bms-silence fault)."""
         mcu, m = self.mcu, self.m
         bms = mcu.bms
         if bms is None or mcu._bms_elapsed + mcu.dt >= m.BMS_STEP - 1e-9:
             return False
         mcu._bms_next_poll += m.BMS_POLL_PERIOD
-        snapshot = bms.poll()
+        snapshot = None if silent else bms.poll()
         if snapshot is not None:
             mcu.bms_snapshot = snapshot
             mcu._bms_bits = int(bms.status_bits(snapshot))
@@ -390,24 +435,28 @@ class KernelLoop:
          mcu._imu_same, mcu.status, mcu.motion_fault) = r[:33]
         return r[33:]
 
-    def _send(self, now: float, count: int) -> None:
-        """The frames the kernel emitted (``count`` -1: the Python emitter's turn)."""
+    def _send(self, now: float, count: int, hooks: bool = False) -> None:
+        """The frames the kernel emitted (``count`` -1: the Python emitter's turn), through
+        the fault hooks with ``hooks`` (``Mcu._send_out`` counts each frame then)."""
         if count < 0:  # a hot frame the codec refuses: the Python emitter raises as it did
             self.release()
-            self.lean._emit_due(now)
+            self.lean._emit_due(now, hooks)
             return
         self._next = float(self.due[-1])
+        mcu = self.mcu
         sent = self.send_frames(self.out[:count].tobytes(), self.ids[:count].tolist(),
-                                self.lens[:count].tolist(), 0, count)
-        if sent:
-            self.mcu.stats["tx_frames"] += sent
+                                self.lens[:count].tolist(), 0, count,
+                                mcu._send_out if hooks else mcu._send, self.hooks[1] == 0)
+        if sent and not hooks:
+            mcu.stats["tx_frames"] += sent
 
     def send_frames(self, data: bytes, ids: list[int], lens: list[int], start: int,
-                    end: int) -> int:
+                    end: int, send: Send | None = None, stuck: bool = False) -> int:
         """Frames ``start`` .. ``end`` of an emission, in order, the non-hot ones built here
-        (``data``: the payload slots, 8 bytes each); returns how many were sent."""
+        (``data``: the payload slots, 8 bytes each; ``send``: the Mcu's unless given;
+        ``stuck``: the counter-stuck defect); returns how many were built."""
         mcu = self.mcu
-        send, counters = mcu._send, mcu._counters
+        send, counters = send or mcu._send, mcu._counters
         send_rows = self.lean.send_rows
         sent = 0
         for j in range(start, end):
@@ -416,5 +465,5 @@ class KernelLoop:
                 send(fid, data[8 * j:8 * j + lens[j]])
                 sent += 1
             else:
-                sent += send_rows(-1 - fid, counters, send)
+                sent += send_rows(-1 - fid, counters, send, stuck)
         return sent

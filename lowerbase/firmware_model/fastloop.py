@@ -1,15 +1,16 @@
 """The control period of :class:`~.mcu.Mcu`, once in Python: what ``Mcu.step`` runs.
 
-Without a fault hook in play (no fault active but those the period takes as data, no
-delayed frame: the common case, and all of a long soak) a period runs in compiled code
-(fastkernel.py, lean_kernel.py) where numba is there, this Python loop being the reference it
-is tested against bit for bit. With ``hooks`` (a fault of faults.py acting, a delayed frame, a
-gyro bias to add or take back, or ``Mcu.lean`` False) the same period checks the fault hooks:
-the faults' effects on the wheels, encoders and IMU (``Mcu._apply_faults``), the button
-e-stop and bus-error bits, the BMS's silence, and every frame out through
-``Mcu._send_out`` (silence, drop, corrupt, delay) with the conformance defects' counters and
+A period runs in compiled code (fastkernel.py, lean_kernel.py) where numba is there and the
+kernel takes it (not with surroundings installed, nor when the BMS poll falls in a period that
+steps the pack), this Python loop being the reference it is tested against bit for bit; the
+faults enter both as data. With ``hooks`` (a fault of faults.py acting other than those the
+period always takes as data, or a delayed frame; ``Mcu.step``) the period also checks the
+fault hooks: the faults' effects on the wheels, encoders and IMU (``Mcu._apply_faults``), the
+button e-stop and bus-error bits, the BMS's silence, every frame out through
+``Mcu._send_out`` (silence, drop, corrupt, delay), the conformance defects' counters and
 Heartbeat cycle. tests/firmware_model/test_frame_trace.py pins the trace of a drive through
-every fault kind (recorded with the emulator as it was before the speed work of issue 10).
+every fault kind (recorded with the emulator as it was before the speed work of issue 10),
+compiled and in this Python period.
 
 Constants of the hardware and of the believed chassis are derived once (again when
 ``Mcu.chassis`` is replaced); the 10 and 20 ms frames have builders of their own.
@@ -78,6 +79,12 @@ class LeanLoop:
             except ValueError as exc:  # a frame layout the kernel does not encode
                 log.warning("the compiled control loop is not used: %s", exc)
 
+    def invalidate(self) -> None:
+        """The IMU's offsets changed (a gyro bias step): the kernel derives its constants
+        again before its next period."""
+        if self.kernel is not None:
+            self.kernel._key = ()
+
     def release(self) -> None:
         """Before a Python path steps: the compiled loop hands its state back to the Mcu."""
         if self.kernel is not None:
@@ -93,15 +100,13 @@ class LeanLoop:
 
     # -- one control period ----------------------------------------------------------------------
 
-    def step(self, hooks: bool = False) -> None:
-        """One control period; ``hooks``: with the fault hooks (see the module docstring)."""
+    def step(self, hooks: bool = False, kernel: bool = True) -> None:
+        """One control period; ``hooks``: with the fault hooks (see the module docstring);
+        ``kernel``: compiled if it may be (False: this Python period, the reference)."""
         if self.kernel is not None:
-            if hooks:  # the fault hooks may change the IMU's offsets and the wheels' flags
-                self.kernel.release(hooks=True)
-            else:
-                if self.compiled and self.kernel.step():
-                    return
-                self.kernel.release()
+            if kernel and self.compiled and self.kernel.step(hooks):
+                return
+            self.kernel.release(hooks)
         mcu, m = self.mcu, self.m
         now = mcu.clock.now()
         dt = mcu.dt

@@ -89,13 +89,15 @@ class Fault:
 
 
 #: faults whose hook acts when their value changes, not in every period they are active: the
-#: gyro bias step (Mcu._apply_faults adds it once; the IMU model then carries it as data)
+#: gyro bias step (Mcu._apply_bias adds it once, before a period; the IMU model then carries
+#: it as data)
 ONCE = frozenset({"imu-bias"})
-#: faults the lean and compiled periods take as data (the encoders' dropout, the IMU's freeze,
-#: the drivers' injected over-current and the wheels' blocked flags, set per period from the
-#: active faults: Mcu.step), not the fault hooks
+#: faults every period takes as data (the encoders' dropout, the IMU's freeze, the drivers'
+#: injected over-current and the wheels' blocked flags, set per period from the active
+#: faults: Mcu.step), without the fault hooks
 DATA = frozenset({"encoder", "imu-freeze", "overcurrent", "stall"})
-#: faults active in a period without the fault hooks (Mcu._faults_act)
+#: faults active in a period without the fault hooks; the others turn the hooks on (still
+#: compiled: fastkernel.KernelLoop.set_hooks)
 LEAN = ONCE | DATA
 
 

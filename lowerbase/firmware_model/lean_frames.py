@@ -75,13 +75,14 @@ def valid(vals: np.ndarray, sig: np.ndarray, scale: np.ndarray, row: int, n: int
 def emit(now: float, due: np.ndarray, period: np.ndarray, hot: np.ndarray,
          counters: np.ndarray, vals: np.ndarray, sig: np.ndarray, scale: np.ndarray,
          frames: np.ndarray, out: np.ndarray, ids: np.ndarray, lens: np.ndarray,
-         at: int) -> int:
+         at: int, step: int = 1) -> int:
     """LeanLoop._emit_due: the frames due now, in catalog order, into ``out``/``ids``/``lens``
     from slot ``at``
     (``ids`` -1 - i: periodic message i, built in Python); ``due`` ends with their minimum.
     ``hot[i]``: the first row of ``frames`` (frame id, length, first signal row, signal count,
     value base, shared counter) of message i and how many (0: not hot). Returns the frame
-    count (from slot 0), or -1 (nothing changed) when a hot frame would not encode."""
+    count (from slot 0), or -1 (nothing changed) when a hot frame would not encode. ``step``:
+    what a rolling counter advances by (0: the counter-stuck defect)."""
     edge = now + 1e-9
     count = at
     n = due.size - 1  # due[n]: the earliest of them (Mcu._next_any_due)
@@ -106,12 +107,12 @@ def emit(now: float, due: np.ndarray, period: np.ndarray, hot: np.ndarray,
         shared = frames[hot[i, 0], 5] != 0
         counter = counters[i]
         if shared:
-            counters[i] = (counter + 1) & 0xF
+            counters[i] = (counter + step) & 0xF
         for f in range(hot[i, 0], hot[i, 0] + hot[i, 1]):
             base = frames[f, 4]
             if not shared:
                 counter = counters[i]
-                counters[i] = (counter + 1) & 0xF
+                counters[i] = (counter + step) & 0xF
             vals[base] = float(counter)
             encode(vals[base:], sig, scale, frames[f, 2], frames[f, 3], out, count)
             ids[count] = frames[f, 0]

@@ -63,7 +63,11 @@ C_DROP_L, C_DROP_R, C_FROZEN = 2 * M + 43, 2 * M + 44, 2 * M + 45
 C_OVER_L, C_OVER_R = 2 * M + 46, 2 * M + 47
 #: data too: 1 while that wheel is blocked (the stall fault; WheelMotor.blocked)
 C_BLOCK_L, C_BLOCK_R = 2 * M + 48, 2 * M + 49
-C_SIZE = 2 * M + 50
+#: data too (KernelLoop.set_hooks, from the fault hooks acting): the status bits the faults
+#: assert (the button e-stop, the bus error) and the rolling counters' step (1; 0 with the
+#: counter-stuck defect)
+C_FAULT_BITS, C_COUNT_STEP = 2 * M + 50, 2 * M + 51
+C_SIZE = 2 * M + 52
 #: state numbers of RobotState
 ACTIVE, EMERGENCY_STOP, FAULT, STANDBY = 2, 3, 4, 1
 
@@ -255,6 +259,7 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
     s |= motion_fault
     if imu_same >= k[C_IMU_N]:
         s |= IMU_FAULT
+    s |= int(k[C_FAULT_BITS])
     if bms:
         lost = now - last_answer > k[C_LINK_T]
         s |= (BMS_LINK_LOST if lost else 0) | bms_bits
@@ -269,7 +274,8 @@ def period(k: np.ndarray, now: float, boot_time: float, target_v: float, target_
     count = at
     if emit_now:
         hot_values(k, vals, om_l, cur_l, oc_l, st_l, tot_l, om_r, cur_r, oc_r, st_r, tot_r, imu)
-        count = emit(now, due, per, hot, counters, vals, sig, scale, frames, out, ids, lens, at)
+        count = emit(now, due, per, hot, counters, vals, sig, scale, frames, out, ids, lens, at,
+                     int(k[C_COUNT_STEP]))
     return (om_l, sp_l, cur_l, oc_l, st_l, ot_l, stt_l,
             om_r, sp_r, cur_r, oc_r, st_r, ot_r, stt_r,
             tot_l, fr_l, tot_r, fr_r,

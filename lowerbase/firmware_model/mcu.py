@@ -104,8 +104,9 @@ log = logging.getLogger(__name__)
 class Mcu(McuCommands, McuFrames):
     """The chassis MCU. See the module docstring for the contract."""
 
-    #: check the fault hooks only in the periods that need them (fastloop.py; compiled in the
-    #: others); False checks them in every period (the tests compare the two)
+    #: compiled periods where they may be, the fault hooks checked only where a fault acts
+    #: (fastloop.py); False: the Python period with every hook checked in every period (the
+    #: reference the tests compare with)
     lean = True
 
     def __init__(
@@ -258,14 +259,15 @@ class Mcu(McuCommands, McuFrames):
                 return f
         return None
 
-    def _faults_act(self) -> bool:
-        """Whether a fault hook acts in this period: a fault active (but the gyro bias, which
-        the IMU model carries once added, and the encoder dropout, IMU freeze, over-current and
-        stall, which the lean periods take as data), or the gyro bias to add or take back."""
-        if any_active(self.faults, self.clock.now() - self.boot_time, LEAN):
-            return True
+    def _apply_bias(self) -> None:
+        """Add the imu-bias fault's gyro bias step, or take it back, when it changes (the IMU
+        model carries it in between; the compiled period reads it from its constants)."""
         bias = self._active("imu-bias")
-        return (bias.value if bias else 0.0) != self._imu_bias_applied
+        want = bias.value if bias else 0.0
+        if want != self._imu_bias_applied:
+            self.imu.bias_step(gyro=(0.0, 0.0, want - self._imu_bias_applied))
+            self._imu_bias_applied = want
+            self._lean.invalidate()
 
     def _belief_per_pulse(self, side: str) -> float:
         """Rim distance [m] the firmware counts per encoder pulse (its parameters)."""
@@ -284,20 +286,26 @@ class Mcu(McuCommands, McuFrames):
 
     def step(self) -> None:
         """One control period: safety, motion, sensors, BMS, then the frames that are due
-        (fastloop.py: compiled unless a fault hook is in play)."""
-        hooks = not self.lean or bool(self._delayed) or bool(
-            (self.faults or self._imu_bias_applied) and self._faults_act())
-        if not hooks:
-            if self.faults:  # encoder, imu-freeze, overcurrent, stall: data for the period
-                self._fault_data = (self._active("encoder", "left") is not None,
-                                    self._active("encoder", "right") is not None,
-                                    self._active("imu-freeze") is not None,
-                                    self._active("overcurrent", "left") is not None,
-                                    self._active("overcurrent", "right") is not None,
-                                    self._active("stall", "left") is not None,
-                                    self._active("stall", "right") is not None)
-            elif self._fault_data is not NO_FAULT_DATA:
-                self._fault_data = NO_FAULT_DATA
+        (fastloop.py: compiled where it may be, faults entering as data; the fault hooks
+        checked only while a fault acts that the period does not always take as data, or a
+        frame is delayed)."""
+        if not self.lean:  # the reference: every hook checked, in Python, in every period
+            self._lean.step(True, kernel=False)
+            return
+        hooks = bool(self._delayed)
+        if self.faults or self._imu_bias_applied:
+            self._apply_bias()
+            hooks = hooks or any_active(self.faults, self.clock.now() - self.boot_time, LEAN)
+            # encoder, imu-freeze, overcurrent, stall: data for every period
+            self._fault_data = (self._active("encoder", "left") is not None,
+                                self._active("encoder", "right") is not None,
+                                self._active("imu-freeze") is not None,
+                                self._active("overcurrent", "left") is not None,
+                                self._active("overcurrent", "right") is not None,
+                                self._active("stall", "left") is not None,
+                                self._active("stall", "right") is not None)
+        elif self._fault_data is not NO_FAULT_DATA:
+            self._fault_data = NO_FAULT_DATA
         self._lean.step(hooks)
 
     def advance(self, periods: int, incoming: fastbatch.Incoming = ()) -> None:
@@ -398,11 +406,7 @@ class Mcu(McuCommands, McuFrames):
                 self._motors[side].inject_over_current()
             self._encoders[side].dropout = self._active("encoder", side) is not None
         self.imu.freeze(self._active("imu-freeze") is not None)
-        bias = self._active("imu-bias")
-        want = bias.value if bias else 0.0
-        if want != self._imu_bias_applied:
-            self.imu.bias_step(gyro=(0.0, 0.0, want - self._imu_bias_applied))
-            self._imu_bias_applied = want
+        self._apply_bias()
 
     def _sample_imu(self) -> None:
         gyro, accel = self.imu.sample(self.truth.body_omega, self.truth.body_accel,

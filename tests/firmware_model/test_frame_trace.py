@@ -25,6 +25,7 @@ from typing import Any
 import pytest
 
 from lowerbase.bms.adapter import McuBmsAdapter
+from lowerbase.firmware_model.fastkernel import KernelLoop, kernel
 from lowerbase.firmware_model.fastloop import LeanLoop
 from lowerbase.firmware_model.mcu import Command, Mcu
 from lowerbase.firmware_model.profile import Profile, load_profile
@@ -216,16 +217,16 @@ def test_the_fault_hooks_in_every_period_give_the_same_trace(
 
 
 def test_the_hooks_are_checked_only_while_a_fault_acts(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The periods without the fault hooks (those the compiled loop may take) are every
-    period but those with a fault acting, and one each to add and take back a gyro bias."""
+    """The periods without the fault hooks are every period but those with a fault acting that
+    is not always data (a gyro bias, added and taken back before its periods, is)."""
     calls: list[None] = []
     monkeypatch.setattr(LeanLoop, "compiled", False)  # runs of compiled periods skip step()
     lean_step = LeanLoop.step
 
-    def step(self: LeanLoop, hooks: bool = False) -> None:
+    def step(self: LeanLoop, hooks: bool = False, kernel: bool = True) -> None:
         if not hooks:
             calls.append(None)
-        lean_step(self, hooks)
+        lean_step(self, hooks, kernel)
 
     monkeypatch.setattr(LeanLoop, "step", step)
     rig = TraceRig(profile=load_profile(), keep=False)
@@ -241,13 +242,58 @@ def test_the_hooks_are_checked_only_while_a_fault_acts(monkeypatch: pytest.Monke
     rig.mcu.clear_fault()
     rig.drive(0.5, 0.1, 1.0)
     assert len(calls) == round((rig.now - 1.0) / rig.mcu.dt)
-    before = len(calls)
-    rig.mcu.inject("imu-bias:0.05")  # added in one hooked period, then the IMU model's data
+    rig.mcu.inject("imu-bias:0.05")
     rig.drive(0.5, 0.1, 1.0)
-    assert len(calls) == before + round(1.0 / rig.mcu.dt) - 1
-    rig.mcu.clear_fault()  # taken back in one hooked period
+    rig.mcu.clear_fault()
     rig.drive(0.5, 0.1, 1.0)
-    assert len(calls) == before + 2 * round(1.0 / rig.mcu.dt) - 2
+    assert len(calls) == round((rig.now - 1.0) / rig.mcu.dt)
+    assert rig.mcu._imu_bias_applied == 0.0  # added, then taken back
+
+
+#: a fault of every kind the compiled period takes as data with the hooks (the frame trace's
+#: drive pins what each does, compiled and in Python)
+HOOKED = ["silence", "drop:0.5", "corrupt:0.5", "delay:0.03", "bms-silence",
+          "defect:slow-heartbeat", "defect:counter-stuck", "defect:no-watchdog", "estop"]
+
+
+def test_every_fault_is_data_of_the_compiled_period(monkeypatch: pytest.MonkeyPatch) -> None:
+    """While any fault acts, the periods are the kernel's as without one: the Python period
+    runs only where it runs without faults (the BMS poll in a period that steps the pack)."""
+    if kernel() is None:
+        pytest.skip("numba is not available: no compiled period")
+    seen: list[tuple[bool, bool]] = []
+    real = KernelLoop.step
+
+    def step(self: KernelLoop, hooks: bool = False) -> bool:
+        done = real(self, hooks)
+        seen.append((hooks, done))
+        return done
+
+    monkeypatch.setattr(KernelLoop, "step", step)
+    p = load_profile()
+    rig = TraceRig(profile=p, bms=McuBmsAdapter.from_battery_table(p.battery), keep=False)
+    rig.enable()
+    periods = round(1.0 / rig.mcu.dt)
+    rig.drive(0.5, 0.1, 1.0)
+    seen.clear()
+    rig.mcu.inject("encoder:left")  # data of every period, no hooks: period by period
+    rig.drive(0.5, 0.1, 1.0)
+    assert len(seen) == periods and not any(hooks for hooks, _ in seen)
+    python = sum(not done for _, done in seen)
+    assert python < periods // 20
+    rig.mcu.clear_fault()
+    for spec in ["imu-bias:0.05", *HOOKED]:
+        rig.drive(0.5, 0.1, 1.0)
+        seen.clear()
+        rig.mcu.inject(spec)
+        rig.drive(0.5, 0.1, 1.0)
+        assert len(seen) == periods, spec
+        assert all(hooks for hooks, _ in seen) == (spec != "imu-bias:0.05"), spec
+        assert sum(not done for _, done in seen) == python, spec
+        rig.mcu.clear_fault()
+    stats = rig.mcu.stats
+    assert stats["tx_silenced"] and stats["tx_dropped"] and stats["tx_corrupted"]
+    assert rig.mcu.status & StatusBit.ESTOP_BUTTON and rig.mcu.estop_command
 
 
 def test_the_trace_covers_every_kind_of_frame() -> None:

@@ -24,10 +24,12 @@ Heartbeat's cycle (``per``: twice with slow-heartbeat) go into the kernel; the B
 silence leaves the poll unanswered; the frames leave through ``Mcu._send_out`` (silence,
 drop, corrupt, delay: drawn frame by frame in their order, as the Python period does) and
 the delayed ones are released after the period's.
-A period goes to the Python LeanLoop instead (``step`` returns False, nothing changed) when
-surroundings are installed (the world's collision check must see each move), or the BMS is
-polled in a period that also steps the pack (``poll_ahead``; otherwise the poll, every 100th
-period, is done before the kernel runs; the pack's step, every 20th period, after it). The
+The BMS poll, every 100th period, is done before the kernel runs (``poll_ahead``: it reads
+only the pack, which only the pack's step changes); in a period that also steps the pack
+(every 20th, after the kernel) it is done after the step, and the status word is then made
+again from its causes in Python (``LeanLoop._status``, LeanLoop's order). A period goes to
+the Python LeanLoop instead (``step`` returns False, nothing changed) only when surroundings
+are installed (the world's collision check, a Python callback, must see each move). The
 signal layouts of the hot frames come from the codec (start bit, length, scale, offset,
 signedness, raw range); a layout the kernel cannot encode (floats, Motorola order, integer
 scaling) keeps the Python loop. Without numba, or when compilation fails, it is never used.
@@ -73,6 +75,7 @@ class LeanParts(Protocol):
     idle2: float
 
     def _derive(self, c: ChassisParams) -> None: ...
+    def _status(self, now: float, hooks: bool = False) -> None: ...
     def _emit_due(self, now: float, hooks: bool = False) -> None: ...
     def send_rows(self, i: int, counters: dict[str, int], send: Send,
                   stuck: bool = False) -> int: ...
@@ -324,11 +327,12 @@ class KernelLoop:
         mcu, m, lean = self.mcu, self.m, self.lean
         truth, slip, bms = mcu.truth, mcu.slip, mcu.bms
         now = mcu.clock.now()
-        if (truth.surroundings is not None
-                or (bms is not None and now >= mcu._bms_next_poll and not self.poll_ahead(
-                    now, hooks and mcu._active("bms-silence") is not None))):
+        if truth.surroundings is not None:
             self.release(hooks)
             return False
+        late_poll = (bms is not None and now >= mcu._bms_next_poll
+                     and not self.poll_ahead(now, hooks and mcu._active("bms-silence")
+                                             is not None))
         h = self.hook_data() if hooks else NO_HOOKS
         if h != self.hooks:
             self.set_hooks(h)
@@ -359,6 +363,7 @@ class KernelLoop:
         ml, mr, el, er = lean.ml, lean.mr, lean.el, lean.er
         stuck = mcu._enc_stuck
         emit_now = now + 1e-9 >= self._next
+        status_in, fault_in, state_in = mcu.status, mcu.motion_fault, mcu.state
         state, count = self.store_state(self.lk.period(
             self.k, now, mcu.boot_time, target_v, target_w, brake,
             ml.omega, ml.setpoint, ml.current, ml.over_current, ml.stalled, ml._over_time,
@@ -376,13 +381,20 @@ class KernelLoop:
             emit_now, self.due, self.per, self.hot, self.counters, self.vals, self.sig,
             self.scale, self.frames, self.out, self.ids, self.lens, 0))
         ml._steady = mr._steady = None
-        if h[0] and mcu.status & m.SB.ESTOP_BUTTON:  # latched while pressed (LeanLoop._status)
-            mcu.estop_command = True
         if bms is not None and mcu._bms_elapsed >= m.BMS_STEP - 1e-9:  # nothing above reads it
             bms.step(mcu._bms_elapsed, mcu._bms_charge / mcu._bms_elapsed)
             mcu._bms_charge = mcu._bms_elapsed = 0.0
-        if state != mcu.state:
-            mcu.state = m.RobotState(state)
+        if late_poll:  # the poll after the pack's step, then the status word from its causes
+            # again (the kernel's read the last poll's answer): LeanLoop's order, whose status
+            # reads only what the kernel has stored by now; the hot frames read no status
+            mcu._poll_bms(now, hooks and mcu._active("bms-silence") is not None)
+            mcu.status, mcu.motion_fault, mcu.state = status_in, fault_in, state_in
+            lean._status(now, hooks)
+        else:
+            if h[0] and mcu.status & m.SB.ESTOP_BUTTON:  # latched while pressed (_status)
+                mcu.estop_command = True
+            if state != mcu.state:
+                mcu.state = m.RobotState(state)
         if imu_due:
             mcu._imu_due += lean.imu_cycle
             s = self.imu[6:].tolist()
@@ -405,18 +417,13 @@ class KernelLoop:
         """The BMS poll of the period at ``now``, done before the kernel runs the period
         (LeanLoop polls after the period's current integration and pack step: the poll reads
         only the pack, which only the step changes); False, nothing done, when this period
-        also steps the pack (the same float sum as the kernel's): Python then runs it.
-        ``silent``: the poll goes unanswered (the bms-silence fault)."""
+        also steps the pack (the same float sum as the kernel's): the poll then comes after
+        the period (``step``). ``silent``: the poll goes unanswered (the bms-silence fault)."""
         mcu, m = self.mcu, self.m
         bms = mcu.bms
         if bms is None or mcu._bms_elapsed + mcu.dt >= m.BMS_STEP - 1e-9:
             return False
-        mcu._bms_next_poll += m.BMS_POLL_PERIOD
-        snapshot = None if silent else bms.poll()
-        if snapshot is not None:
-            mcu.bms_snapshot = snapshot
-            mcu._bms_bits = int(bms.status_bits(snapshot))
-            mcu._bms_last_answer = now
+        mcu._poll_bms(now, silent)
         return True
 
     def store_state(self, r: tuple[Any, ...]) -> tuple[Any, ...]:

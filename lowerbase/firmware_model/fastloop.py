@@ -1,9 +1,9 @@
 """The control period of :class:`~.mcu.Mcu`, once in Python: what ``Mcu.step`` runs.
 
 A period runs in compiled code (fastkernel.py, lean_kernel.py) where numba is there and the
-kernel takes it (not with surroundings installed, nor when the BMS poll falls in a period that
-steps the pack), this Python loop being the reference it is tested against bit for bit; the
-faults enter both as data. With ``hooks`` (a fault of faults.py acting other than those the
+kernel takes it (not with surroundings installed: the world's collision check is a Python
+callback), this Python loop being the reference it is tested against bit for bit; the faults
+enter both as data. With ``hooks`` (a fault of faults.py acting other than those the
 period always takes as data, or a delayed frame; ``Mcu.step``) the period also checks the
 fault hooks: the faults' effects on the wheels, encoders and IMU (``Mcu._apply_faults``), the
 button e-stop and bus-error bits, the BMS's silence, every frame out through
@@ -199,14 +199,8 @@ class LeanLoop:
         if mcu._bms_elapsed >= m.BMS_STEP - 1e-9:
             mcu.bms.step(mcu._bms_elapsed, mcu._bms_charge / mcu._bms_elapsed)
             mcu._bms_charge = mcu._bms_elapsed = 0.0
-        if now < mcu._bms_next_poll:
-            return
-        mcu._bms_next_poll += m.BMS_POLL_PERIOD
-        snapshot = None if silent else mcu.bms.poll()
-        if snapshot is not None:
-            mcu.bms_snapshot = snapshot
-            mcu._bms_bits = int(mcu.bms.status_bits(snapshot))
-            mcu._bms_last_answer = now
+        if now >= mcu._bms_next_poll:
+            mcu._poll_bms(now, silent)
 
     def _status(self, now: float, hooks: bool = False) -> None:
         """The status word from its causes (event-latched bits carried over) and the state it

@@ -408,6 +408,15 @@ class Mcu(McuCommands, McuFrames):
         self.imu.freeze(self._active("imu-freeze") is not None)
         self._apply_bias()
 
+    def _poll_bms(self, now: float, silent: bool = False) -> None:
+        """The BMS poll due at ``now``; unanswered when ``silent`` (the bms-silence fault)."""
+        self._bms_next_poll += BMS_POLL_PERIOD
+        snapshot = None if silent else self.bms.poll()
+        if snapshot is not None:
+            self.bms_snapshot = snapshot
+            self._bms_bits = int(self.bms.status_bits(snapshot))
+            self._bms_last_answer = now
+
     def _sample_imu(self) -> None:
         gyro, accel = self.imu.sample(self.truth.body_omega, self.truth.body_accel,
                                       self._cycle("ImuGyro"))

@@ -37,6 +37,10 @@ GRAVITY_TOLERANCE = 1.0
 GRAVITY_ON_Z = 0.9
 REST_WINDOW = 0.5  #: [s] of frames averaged at rest
 MEASURE_WINDOW = 1.0  #: [s] of frames averaged per motion
+#: windows measured per motion while the lower computer reports that its time slipped in them
+#: (Heartbeat.Overruns: a control loop too far behind to catch up, an emulator on a busy host,
+#: skips the missed slots of its frames, so their Counters no longer count its time)
+WINDOW_TRIES = 3
 SETTLE = 0.3  #: [s] the speed controller's settling time, on top of the ramp
 #: steady-state speed error allowed of the wheels' controller (relative) ...
 SPEED_TOLERANCE = 0.05
@@ -109,6 +113,26 @@ def _window(ctx: Context, seconds: float) -> tuple[float, float]:
     return t0, time.monotonic()
 
 
+def _steady_window(ctx: Context) -> tuple[float, float]:
+    """A window of MEASURE_WINDOW s (reception times) in which the lower computer reports no
+    slip of its time: Heartbeat.Overruns the same in its last Heartbeat before the window and
+    its first after it (waited for, two cycles at most). Up to WINDOW_TRIES windows while the
+    motion goes on; the last one when each slipped (judged all the same: the frame checks and
+    frame.Heartbeat.uptime count the slips), or the first one when no Heartbeat comes."""
+    cycle = ctx.codec.message("Heartbeat").cycle_time or 0.5
+    for _ in range(WINDOW_TRIES):
+        t0, t1 = _window(ctx, MEASURE_WINDOW)
+        before = [f for f in ctx.client.frames("Heartbeat", t0 - 2 * cycle) if f.t <= t0]
+        after = ctx.client.expect("Heartbeat", timeout=2 * cycle, since=t1)
+        if not before or after is None:
+            break
+        a, b = before[-1].values, after.values
+        if a.get("BootCounter") != b.get("BootCounter") or int(a.get("Overruns", 0)) == int(
+                b.get("Overruns", 0)):
+            break  # a reboot is the reboot checks' finding
+    return t0, t1
+
+
 def _between(ctx: Context, name: str, t0: float, t1: float) -> list[dict[str, Any]]:
     return [f.values for f in ctx.client.frames(name, t0) if f.t <= t1]
 
@@ -152,7 +176,7 @@ def _measure_motions(ctx: Context) -> list[Segment]:
                                             ("spin", 0.0, spin, ramp_w)):
             with ctx.driving(linear, angular):
                 time.sleep(ramp + SETTLE)
-                t0, t1 = _window(ctx, MEASURE_WINDOW)
+                t0, t1 = _steady_window(ctx)
             wheels = wheel_samples((f.t, f.values) for f in ctx.client.frames("WheelFeedback", t0)
                                    if f.t <= t1)
             motion = [(float(v["Linear"]), float(v["Angular"]))

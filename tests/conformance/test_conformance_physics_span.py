@@ -8,7 +8,9 @@ from types import SimpleNamespace
 
 import pytest
 
+from lowerbase.conformance import physics
 from lowerbase.conformance.catalog import WheelSample
+from lowerbase.conformance.lower_client import Received
 from lowerbase.conformance.physics import _firmware_span
 from lowerbase.protocol.codec import default_codec
 
@@ -65,3 +67,63 @@ def test_one_cycle_pairs_ignore_the_receiving_hosts_bursts() -> None:
     assert pulses / 1000.0 == pytest.approx(metres) and span < 74 * CYCLE
     pulses, metres, _ = _one_cycle_pairs(CTX, _moving({}, skip_at=40))  # type: ignore[misc]
     assert pulses / 1000.0 == pytest.approx(metres)  # the pair across the skip is left out
+
+
+class _Heartbeats:
+    """A LowerClient's Heartbeats: one every 0.5 s from -0.2 s, Overruns +1 at the listed
+    reception times (the lower computer's time slipped just before them)."""
+
+    def __init__(self, slips: tuple[float, ...], boot_at: float | None = None) -> None:
+        self.got: list[Received] = []
+        overruns, boot = 0, 1
+        for k in range(20):
+            t = -0.2 + 0.5 * k
+            overruns += sum(1 for s in slips if t - 0.5 < s <= t)
+            boot += boot_at is not None and t - 0.5 < boot_at <= t
+            self.got.append(Received(t, "Heartbeat", {"Overruns": overruns % 16,
+                                                      "BootCounter": boot}, b""))
+
+    def frames(self, name: str, since: float = 0.0) -> list[Received]:
+        return [f for f in self.got if f.t >= since]
+
+    def expect(self, name: str, timeout: float = 2.0, since: float | None = None
+               ) -> Received | None:
+        return next((f for f in self.got if since is not None and f.t >= since), None)
+
+
+@pytest.fixture
+def windows(monkeypatch: pytest.MonkeyPatch) -> list[tuple[float, float]]:
+    """The windows physics._window measures, in order (1 s each, 0.5 s apart); no sleeping."""
+    given: list[tuple[float, float]] = []
+
+    def window(ctx: object, seconds: float) -> tuple[float, float]:
+        t0 = 1.5 * len(given)
+        given.append((t0, t0 + seconds))
+        return given[-1]
+
+    monkeypatch.setattr(physics, "_window", window)
+    return given
+
+
+@pytest.mark.parametrize(("slips", "tries"), [((), 1), ((0.6,), 2), ((0.6, 2.0), 3),
+                                              ((0.6, 2.0, 3.4), 3), ((-0.3, 1.35), 1)])
+def test_a_window_in_which_the_lower_computer_slipped_is_measured_again(
+        windows: list[tuple[float, float]], slips: tuple[float, ...], tries: int) -> None:
+    """Issue 18's real-time path: physics.odometer failed on a busy host, the emulator's
+    skipped WheelFeedback slots (2 of 50, under SPAN_DISAGREEMENT) making the Counter's span
+    short; the Heartbeat's Overruns said so. A window with a slip is measured again (the
+    motion goes on), at most WINDOW_TRIES times; slips outside the Heartbeats around a window
+    do not count."""
+    ctx = SimpleNamespace(codec=default_codec(), client=_Heartbeats(slips))
+    got = physics._steady_window(ctx)  # type: ignore[arg-type]
+    assert len(windows) == tries == min(tries, physics.WINDOW_TRIES)
+    assert got == windows[-1]
+
+
+def test_a_reboot_or_no_heartbeat_ends_the_tries(windows: list[tuple[float, float]]) -> None:
+    ctx = SimpleNamespace(codec=default_codec(), client=_Heartbeats((0.6,), boot_at=0.6))
+    assert physics._steady_window(ctx) == windows[0]  # type: ignore[arg-type]
+    silent = SimpleNamespace(codec=default_codec(), client=_Heartbeats(()))
+    silent.client.got.clear()
+    assert physics._steady_window(silent) == windows[1]  # type: ignore[arg-type]
+    assert len(windows) == 2

@@ -36,7 +36,7 @@ from lowerbase.world.localization.lostwatch import LOCALIZED, LostWatch
 from lowerbase.world.localization.poses import compose
 from lowerbase.world.node_inputs import WorldInputs
 from lowerbase.world.node_setup import Pose, WorldSetup
-from lowerbase.world.pacing import RateWatch, pace_for, paced_loop
+from lowerbase.world.pacing import RateWatch, RosPace, pace_for, paced_loop
 from lowerbase.world.raycast import Scene, Solid
 from lowerbase.world.scan_odom import ScanOdom
 from lowerbase.world.sim_clock import TruthTime
@@ -101,7 +101,7 @@ class WorldNode(WorldInputs):
         self.scan_odom = ScanOdom()  #: each scan with /odom at its stamp, for the localizer
         self.stats: dict[str, int] = {"scans": 0, "scans_cast": 0, "frames": 0, "bad_odom": 0,
                                       "bad_initialpose": 0, "amcl_poses": 0}
-        self._watches: list[RateWatch] = []  #: the dropping loops' (the camera's)
+        self._watches: list[RateWatch] = []  #: the loops' (camera, lidar on wall time)
         self._pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
         self._services: list[Any] = []
@@ -269,27 +269,33 @@ class WorldNode(WorldInputs):
     def spin(self) -> None:
         """Scans at the lidars' rate in this thread, camera frames at the camera's rate in a
         thread of its own (numpy releases the GIL: the two share the cores), until rospy
-        shuts down. A late scan is caught up (within 1 s); a late frame is dropped, counted.
-        Rates are per second of ROS time: sim time under /use_sim_time."""
+        shuts down. Rates are per second of ROS time: sim time under /use_sim_time, where a
+        late scan is caught up (within 1 s: each simulated tick is scanned). On wall time a
+        late scan, like a late frame, is dropped and counted, as a real lidar's missed
+        revolution is never sent later (a catch-up would send scans of one pose with stamps
+        bunched together)."""
         rospy = self.rospy
         rospy.on_shutdown(self.stop.set)
         camera = None
         if self.camera is not None:
             camera = threading.Thread(target=self._loop, name="world-camera", daemon=True,
-                                      args=(self.frame_once, self.camera.config.rate_hz, False))
+                                      args=(self.frame_once, self.camera.config.rate_hz, False,
+                                            "camera"))
             camera.start()
-        self._loop(self.scan_once, self.lidars.rate_hz, True)
+        self._loop(self.scan_once, self.lidars.rate_hz, True, "lidar")
         if camera is not None:
             camera.join(timeout=5.0)
 
-    def _loop(self, work: Any, rate_hz: float, catch_up: bool) -> None:
+    def _loop(self, work: Any, rate_hz: float, catch_up: bool, name: str) -> None:
         """``work`` at ``rate_hz`` per second of ROS time under /use_sim_time (woken by
-        /clock), else of wall time (lowerbase.world.pacing)."""
+        /clock), else of wall time (lowerbase.world.pacing); ``catch_up``: late ticks are
+        caught up under /use_sim_time (on wall time they are dropped, counted)."""
         def running() -> bool:
             return not self.stop.is_set() and not self.rospy.is_shutdown()
 
         pace = pace_for(self.rospy, self.stop)
-        watch = RateWatch("camera", rate_hz)  # the dropping loop says what rate it keeps
+        catch_up = catch_up and isinstance(pace, RosPace)
+        watch = RateWatch(name, rate_hz)  # the dropping loop says what rate it keeps
         self._watches.append(watch)
 
         def guarded() -> None:
@@ -314,7 +320,13 @@ class WorldNode(WorldInputs):
     def frames_dropped(self) -> int:
         """Camera frames dropped so far (their loop could not keep its rate): the stop line's
         ``frames_dropped``, counted once, by the loop's :class:`RateWatch`."""
-        return sum(w.total_dropped for w in self._watches)
+        return sum(w.total_dropped for w in self._watches if w.name == "camera")
+
+    @property
+    def scans_dropped(self) -> int:
+        """Scans dropped on wall time (the lidar loop could not keep its rate): the stop
+        line's ``scans_dropped``."""
+        return sum(w.total_dropped for w in self._watches if w.name == "lidar")
 
     def shutdown(self) -> None:
         self.stop.set()
@@ -341,5 +353,5 @@ def run(setup: WorldSetup, truth: Any, ros_args: Sequence[str], truth_where: str
         finally:
             node.shutdown()
             session.stopped({**node.stats, "frames_dropped": node.frames_dropped,
-                             **node.scan_odom.counts})
+                             "scans_dropped": node.scans_dropped, **node.scan_odom.counts})
     return 0

@@ -85,6 +85,17 @@ class LeanParts(Protocol):
 Hooks = tuple[int, int, bool]
 NO_HOOKS: Hooks = (0, 1, False)
 
+
+def hook_data(mcu: McuParts) -> Hooks:
+    """What the fault hooks acting now give a period, compiled or in Python (LeanLoop's
+    _status and _emit_due): the status bits of the button e-stop and of a bus fault, the
+    rolling counters' step (0: counter-stuck), the Heartbeat at twice its cycle."""
+    bits = mcu_defs.SB.ESTOP_BUTTON if mcu._active("estop") else 0
+    if mcu._active("silence") or mcu._active("drop") or mcu._active("corrupt"):
+        bits |= mcu_defs.SB.BUS_ERROR
+    return (int(bits), 0 if mcu._active("defect", "counter-stuck") else 1,
+            mcu._active("defect", "slow-heartbeat") is not None)
+
 #: the hot frames: message, multiplexer value (None: plain), value slots after the Counter
 HOT: dict[str, list[tuple[int | None, tuple[str, ...]]]] = {
     "WheelFeedback": [
@@ -290,23 +301,13 @@ class KernelLoop:
         self._fault_data = data
 
     def set_hooks(self, hooks: Hooks) -> None:
-        """The fault hooks' data (:data:`Hooks`, :meth:`hook_data`) into ``k`` and ``per``."""
+        """The fault hooks' data (:data:`Hooks`, :func:`hook_data`) into ``k`` and ``per``."""
         bits, step, slow = hooks
         self.k[self.lk.C_FAULT_BITS] = bits
         self.k[self.lk.C_COUNT_STEP] = step
         cycle = self.mcu._periodic[self.hb].cycle_time or 0.0
         self.per[self.hb] = 2 * cycle if slow else cycle  # defect hook (conformance)
         self.hooks = hooks
-
-    def hook_data(self) -> Hooks:
-        """What the fault hooks acting now give the period (LeanLoop's _status and _emit_due
-        do the same in Python)."""
-        mcu, m = self.mcu, self.m
-        bits = m.SB.ESTOP_BUTTON if mcu._active("estop") else 0
-        if mcu._active("silence") or mcu._active("drop") or mcu._active("corrupt"):
-            bits |= m.SB.BUS_ERROR
-        return (int(bits), 0 if mcu._active("defect", "counter-stuck") else 1,
-                mcu._active("defect", "slow-heartbeat") is not None)
 
     def no_slip(self) -> None:
         """No slip event in force: the kernel's event slip back to 0 (the runs' and any
@@ -333,7 +334,7 @@ class KernelLoop:
         late_poll = (bms is not None and now >= mcu._bms_next_poll
                      and not self.poll_ahead(now, hooks and mcu._active("bms-silence")
                                              is not None))
-        h = self.hook_data() if hooks else NO_HOOKS
+        h = hook_data(mcu) if hooks else NO_HOOKS
         if h != self.hooks:
             self.set_hooks(h)
         if not self.owned:

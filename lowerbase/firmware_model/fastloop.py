@@ -27,7 +27,7 @@ from lowerbase.clock import SimClock
 from lowerbase.firmware_model import lean_bits as bits
 from lowerbase.firmware_model import mcu_defs as m
 from lowerbase.firmware_model.encoder import wrap_int32 as wrap
-from lowerbase.firmware_model.fastkernel import KernelLoop, kernel
+from lowerbase.firmware_model.fastkernel import KernelLoop, hook_data, kernel
 
 if TYPE_CHECKING:  # pragma: no cover
     from lowerbase.firmware_model.mcu_defs import McuParts, Send
@@ -207,8 +207,8 @@ class LeanLoop:
         forces; with ``hooks``, the button e-stop and the bus faults too."""
         mcu, m = self.mcu, self.m
         s = mcu.status & m.CARRIED
-        if hooks and mcu._active("estop"):
-            s |= bits.ESTOP_BUTTON
+        if hooks:  # the button e-stop, a bus fault
+            s |= hook_data(mcu)[0]
         if mcu.estop_command:
             s |= bits.ESTOP_COMMAND
         if mcu._watchdog:
@@ -232,8 +232,6 @@ class LeanLoop:
         s |= mcu.motion_fault
         if mcu._imu_same >= m.IMU_FROZEN_SAMPLES:
             s |= bits.IMU_FAULT
-        if hooks and (mcu._active("silence") or mcu._active("drop") or mcu._active("corrupt")):
-            s |= bits.BUS_ERROR
         if mcu.bms is not None:
             lost = now - mcu._bms_last_answer > m.BMS_LINK_TIMEOUT
             s |= (bits.BMS_LINK_LOST if lost else 0) | mcu._bms_bits
@@ -263,8 +261,8 @@ class LeanLoop:
         send_rows = self.send_rows
         counters = mcu._counters
         send = mcu._send_out if hooks else mcu._send
-        slow = hooks and mcu._active("defect", "slow-heartbeat") is not None
-        stuck = hooks and mcu._active("defect", "counter-stuck") is not None
+        _, step, slow = hook_data(mcu) if hooks else (0, 1, False)
+        stuck = step == 0
         sent = 0
         edge = now + 1e-9
         for i, (_, name, _, _, period, _) in enumerate(self.tx):

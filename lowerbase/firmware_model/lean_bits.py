@@ -15,7 +15,6 @@ IMU_FAULT = _B["IMU_FAULT"]
 BMS_LINK_LOST = _B["BMS_LINK_LOST"]
 ESTOP_BUTTON = _B["ESTOP_BUTTON"]
 ESTOP_BITS = ESTOP_BUTTON | ESTOP_COMMAND
-BUS_ERROR = _B["BUS_ERROR"]
 BMS_PROTECTION = _B["BMS_PROTECTION"]
 #: per side: over-current, stalled, motor fault, encoder fault
 L_OVER, L_STALL, L_FAULT, L_ENC = (_B[f"LEFT_{w}"] for w in (

@@ -25,6 +25,8 @@ from lowerbase.errors import CampaignError
 
 #: retries of a run whose worker raised (a run's own exceptions are rows, not raised)
 RETRIES = 2
+#: the longest a Ctrl-C'd campaign waits for the scheduler to cancel what is left [s]
+CANCEL_WAIT = 10.0
 log = logging.getLogger(__name__)
 
 #: a LocalCluster's Dask settings where a campaign needs less than Dask's defaults: with them
@@ -253,6 +255,40 @@ def warm_workers(client: Any) -> None:
     client.register_plugin(WarmPlugin(), name=WarmPlugin.name)
 
 
+def _cancels(client: Any) -> int:
+    """How many cancels the scheduler has acted on for ``client`` (its event log)."""
+    return sum(1 for _, event in client.get_events(client.id)
+               if isinstance(event, dict) and event.get("action") == "cancel")
+
+
+def cancel_and_wait(client: Any, futures: Sequence[Any], timeout: float = CANCEL_WAIT
+                    ) -> bool:
+    """Cancel ``futures`` and wait until the scheduler has acted on it (its events for this
+    client show the cancel), at most ``timeout`` [s]; False (and a warning) if it had not.
+    Dask sends a cancel down the client's stream with no answer: a client closed at once
+    after it (a Ctrl-C's campaign) left the scheduler to report the cancelled runs to a closed
+    connection, and a LocalCluster's scheduler, in this process, printed a traceback for it.
+    A second Ctrl-C ends the wait."""
+    if not futures:
+        return True
+    try:
+        before = _cancels(client)
+        client.cancel(list(futures))
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if _cancels(client) > before:
+                return True
+            time.sleep(0.02)
+    except KeyboardInterrupt:
+        return False
+    except Exception as e:  # the scheduler gone: nothing is left to report to
+        log.debug("cancel: %s", e)
+        return False
+    log.warning("the scheduler had not cancelled the %d unfinished run(s) after %g s; "
+                "closing anyway", len(futures), timeout)
+    return False
+
+
 def plan_runs(campaign: Campaign, indices: Sequence[int] | None = None
               ) -> dict[int, RunSpec]:
     """The run specs of every run (or ``indices``), by index."""
@@ -318,7 +354,7 @@ def run_campaign(campaign: Campaign, client: Any, *,
                                 running=running() if len(out.rows) < len(futures) else 0)
     except KeyboardInterrupt:
         out.interrupted = True
-        client.cancel([f for f, i in futures.items() if i not in out.rows])
+        cancel_and_wait(client, [f for f, i in futures.items() if i not in out.rows])
     finally:
         if progress is not None:
             progress.update(done=passed, failed=failed, running=0, force=True)

@@ -6,6 +6,7 @@ import contextlib
 import importlib
 import os
 import queue
+import signal
 import socket
 import subprocess
 import sys
@@ -27,6 +28,12 @@ settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
 
 ROOT = Path(__file__).resolve().parents[1]
+# The process tests press Ctrl-C (SIGINT) on the processes they start. A shell that starts the
+# suite in the background without job control (`make test &` in a script, some CI runners)
+# makes it ignore SIGINT, and an ignored signal stays ignored in every child: each Ctrl-C would
+# be lost. With a handler here, the children start with the default again (exec resets it).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 # udp_multicast buses join their group on loopback only (no IGMP report on the host's network;
 # children inherit it); tests/transport/test_multicast_netns.py tests the default join in a
 # network namespace of its own

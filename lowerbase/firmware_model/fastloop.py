@@ -27,7 +27,7 @@ from lowerbase.clock import SimClock
 from lowerbase.firmware_model import lean_bits as bits
 from lowerbase.firmware_model import mcu_defs as m
 from lowerbase.firmware_model.encoder import wrap_int32 as wrap
-from lowerbase.firmware_model.fastkernel import KernelLoop, hook_data, kernel
+from lowerbase.firmware_model.fastkernel import NO_HOOKS, KernelLoop, hook_data, kernel
 
 if TYPE_CHECKING:  # pragma: no cover
     from lowerbase.firmware_model.mcu_defs import McuParts, Send
@@ -261,7 +261,7 @@ class LeanLoop:
         send_rows = self.send_rows
         counters = mcu._counters
         send = mcu._send_out if hooks else mcu._send
-        _, step, slow = hook_data(mcu) if hooks else (0, 1, False)
+        _, step, slow = hook_data(mcu) if hooks else NO_HOOKS
         stuck = step == 0
         sent = 0
         edge = now + 1e-9

@@ -101,7 +101,7 @@ class WorldNode(WorldInputs):
         self.scan_odom = ScanOdom()  #: each scan with /odom at its stamp, for the localizer
         self.stats: dict[str, int] = {"scans": 0, "scans_cast": 0, "frames": 0, "bad_odom": 0,
                                       "bad_initialpose": 0, "amcl_poses": 0}
-        self._watches: list[RateWatch] = []  #: the loops' (camera, lidar on wall time)
+        self._watches: dict[str, RateWatch] = {}  #: the loops' by name (camera, lidar)
         self._pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
         self._services: list[Any] = []
@@ -296,7 +296,7 @@ class WorldNode(WorldInputs):
         pace = pace_for(self.rospy, self.stop)
         catch_up = catch_up and isinstance(pace, RosPace)
         watch = RateWatch(name, rate_hz)  # the dropping loop says what rate it keeps
-        self._watches.append(watch)
+        self._watches[name] = watch
 
         def guarded() -> None:
             try:
@@ -320,13 +320,17 @@ class WorldNode(WorldInputs):
     def frames_dropped(self) -> int:
         """Camera frames dropped so far (their loop could not keep its rate): the stop line's
         ``frames_dropped``, counted once, by the loop's :class:`RateWatch`."""
-        return sum(w.total_dropped for w in self._watches if w.name == "camera")
+        return self._dropped("camera")
 
     @property
     def scans_dropped(self) -> int:
         """Scans dropped on wall time (the lidar loop could not keep its rate): the stop
         line's ``scans_dropped``."""
-        return sum(w.total_dropped for w in self._watches if w.name == "lidar")
+        return self._dropped("lidar")
+
+    def _dropped(self, name: str) -> int:
+        watch = self._watches.get(name)
+        return watch.total_dropped if watch is not None else 0
 
     def shutdown(self) -> None:
         self.stop.set()

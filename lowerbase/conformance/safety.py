@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import time
 
 from lowerbase.conformance.catalog import control_period
@@ -15,6 +16,7 @@ from lowerbase.conformance.context import (
     Context,
 )
 from lowerbase.conformance.core import CheckFailed, CheckSkipped, Outcome, passed, require
+from lowerbase.conformance.lower_client import Received
 from lowerbase.protocol.status_codes import StatusBit
 
 # -- safety ---------------------------------------------------------------------------------------
@@ -112,14 +114,80 @@ def watchdog_limits(ctx: Context, timeout: float, speed: float) -> dict[str, flo
             "brake": brake, "still": brake + (1.0 - STILL) * speed / decel}
 
 
+#: tries of the watchdog measurement: a late one the host disturbed is measured again
+WATCHDOG_TRIES = 3
+
+
+def host_disturbance(ctx: Context, t0: float, t1: float) -> str:
+    """Why reception times in [t0, t1] do not show the lower computer's timing ('' when they
+    do): a gap in MotionState's reception of more than two cycles (the lower computer or this
+    process stalled: its frames came late, in a burst), or a slip of the lower computer's time
+    (Heartbeat.Overruns changed, its own count of falling behind real time)."""
+    cycle = ctx.codec.message("MotionState").cycle_time or 0.02
+    times = [f.t for f in ctx.client.frames("MotionState", t0 - cycle) if f.t <= t1]
+    gap = max((b - a for a, b in itertools.pairwise(times)), default=0.0)
+    if gap > 2 * cycle:
+        return f"MotionState came {gap:.3f} s apart (cycle {cycle:g} s)"
+    beats = [f.values for f in ctx.client.frames("Heartbeat", t0 - 2.0) if f.t <= t1 + 1.0]
+    if len(beats) >= 2 and int(beats[0].get("Overruns", 0)) != int(beats[-1].get("Overruns", 0)):
+        return "the lower computer's Heartbeat counted Overruns (its time slipped)"
+    return ""
+
+
 def check_watchdog(ctx: Context) -> Outcome:
+    """Times after the last MotionCommand, by reception. A try that is late where the host
+    disturbed the reception (:func:`host_disturbance`) is repeated, up to
+    :data:`WATCHDOG_TRIES`; the limits stay. The last try is judged as measured."""
     ctx.require_motion()
     timeout = ctx.parameter("commandTimeout")
-    speed = ctx.settings.speed
-    limits = watchdog_limits(ctx, timeout, speed)
+    limits = watchdog_limits(ctx, timeout, ctx.settings.speed)
+    measured = {"command_timeout_s": timeout, **{f"limit_{k}_s": round(v, 3)
+                                                 for k, v in limits.items()}}
+    disturbed: list[str] = []
+    for attempt in range(1, WATCHDOG_TRIES + 1):
+        t_stop, got = _watchdog_try(ctx, limits)
+        late = [(name, what, f) for name, (what, f) in got.items()
+                if f is None or f.t - t_stop > limits[name]]
+        if not late:
+            break
+        ends = [f.t for _, _, f in late if f is not None]
+        why = host_disturbance(ctx, t_stop, max(ends, default=time.monotonic()))
+        if not why or attempt == WATCHDOG_TRIES:
+            break
+        disturbed.append(why)
+    retried = {"host_disturbed_tries": len(disturbed)} if disturbed else {}
+    n = len(disturbed)
+    note = f" (measured again after {n} tr{'y' if n == 1 else 'ies'} the host disturbed: " \
+        f"{disturbed[-1]})" if disturbed else ""
+    if late:
+        name, what, f = late[0]
+        when = "never" if f is None else f"after {f.t - t_stop:.3f} s"
+        raise CheckFailed(f"{what} {when}, limit {limits[name]:.3f} s after the last "
+                          f"MotionCommand (commandTimeout {timeout:g} s){note}",
+                          **measured, **retried)
+    flag, braking, still = (got[k][1] for k in ("flag", "brake", "still"))
+    assert flag is not None and braking is not None and still is not None
+    bit = ctx.client.expect("StatusCode", lambda v: v["Code"] & StatusBit.WATCHDOG_STOP,
+                            since=t_stop, timeout=0.5)
+    require(bit is not None, "SystemStatus WatchdogStop without StatusCode WATCHDOG_STOP")
+    latency = flag.t - t_stop
+    require(latency >= timeout - 0.05,
+            f"WatchdogStop after {latency:.3f} s, before commandTimeout {timeout:g} s")
+    return passed(f"WatchdogStop {latency:.3f} s (limit {limits['flag']:.3f}), braking "
+                  f"{braking.t - t_stop:.3f} s, standstill {still.t - t_stop:.3f} s after "
+                  f"the last MotionCommand (commandTimeout {timeout:g} s){note}",
+                  watchdog_s=round(latency, 3), brake_s=round(braking.t - t_stop, 3),
+                  stop_s=round(still.t - t_stop, 3), **measured, **retried)
+
+
+def _watchdog_try(ctx: Context, limits: dict[str, float]
+                  ) -> tuple[float, dict[str, tuple[str, Received | None]]]:
+    """Drive, stop sending, and wait for the watchdog's three signs (waiting
+    :data:`LATE_REPORT` past each limit, to report by how much it was late): the last
+    MotionCommand's time and, per limit, what was seen and its first frame (None: never)."""
     ctx.ensure_active()
     try:
-        with ctx.driving(speed) as sender:
+        with ctx.driving(ctx.settings.speed) as sender:
             require(ctx.wait_moving() is not None, "did not move on MotionCommand")
             time.sleep(0.1)  # past the ramp: braking is a drop from the speed reached
         t_stop = sender.last_sent
@@ -133,27 +201,9 @@ def check_watchdog(ctx: Context) -> Outcome:
         braking = ctx.client.expect("MotionState", lambda v: abs(v["Linear"]) < 0.9 * cruise,
                                     since=t_stop, timeout=within(limits["brake"]))
         still = ctx.wait_still(t_stop, timeout=within(limits["still"]))
-        bit = ctx.client.expect("StatusCode", lambda v: v["Code"] & StatusBit.WATCHDOG_STOP,
-                                since=t_stop, timeout=0.5)
-        measured = {"command_timeout_s": timeout, **{f"limit_{k}_s": round(v, 3)
-                                                     for k, v in limits.items()}}
-        for name, got, what in (("flag", flag, "SystemStatus WatchdogStop"),
-                                ("brake", braking, "MotionState braking"),
-                                ("still", still, "MotionState standstill")):
-            late = "never" if got is None else f"after {got.t - t_stop:.3f} s"
-            require(got is not None and got.t - t_stop <= limits[name],
-                    f"{what} {late}, limit {limits[name]:.3f} s after the last MotionCommand "
-                    f"(commandTimeout {timeout:g} s)", **measured)
-        assert flag is not None and still is not None and braking is not None
-        require(bit is not None, "SystemStatus WatchdogStop without StatusCode WATCHDOG_STOP")
-        latency = flag.t - t_stop
-        require(latency >= timeout - 0.05,
-                f"WatchdogStop after {latency:.3f} s, before commandTimeout {timeout:g} s")
-        return passed(f"WatchdogStop {latency:.3f} s (limit {limits['flag']:.3f}), braking "
-                      f"{braking.t - t_stop:.3f} s, standstill {still.t - t_stop:.3f} s after "
-                      f"the last MotionCommand (commandTimeout {timeout:g} s)",
-                      watchdog_s=round(latency, 3), brake_s=round(braking.t - t_stop, 3),
-                      stop_s=round(still.t - t_stop, 3), **measured)
+        return t_stop, {"flag": ("SystemStatus WatchdogStop", flag),
+                        "brake": ("MotionState braking", braking),
+                        "still": ("MotionState standstill", still)}
     finally:
         ctx.client.send("MotionCommand", Linear=0.0, Angular=0.0, Mode="Raw")
         ctx.control("Standby")

@@ -5,11 +5,14 @@ the StepController (stuck, settle, waiting, blocked patience) is on it too. ROS-
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable
 from typing import Any, Protocol
 
-from lowerbase.world.pacing import Pace, paced_loop
+from lowerbase.world.pacing import Pace, RateWatch, RosPace, paced_loop
+
+log = logging.getLogger(__name__)
 
 Pose = tuple[float, float, float]
 
@@ -35,18 +38,30 @@ def pose2d(transform: Any) -> Pose | None:
 
 def control_loop(pace: Pace, tick: Callable[[float], None],
                  publish_costmaps: Callable[[bool], None], setup: Rates,
-                 running: Callable[[], bool]) -> None:
+                 running: Callable[[], bool], watch: RateWatch | None = None) -> None:
     """``tick(now)`` every ``1 / setup.rate_hz`` s of ``pace``'s clock (``now`` on that clock),
-    the costmaps every ``setup.costmap_rate_hz``; a late tick is caught up within 1 s, a longer
-    stall starts the schedule again (lowerbase.world.pacing.paced_loop)."""
+    the costmaps every ``setup.costmap_rate_hz``. On ROS time a late tick is caught up within
+    1 s (a longer stall starts the schedule again: lowerbase.world.pacing.paced_loop). On wall
+    time a late tick is missed, as move_base's loop misses its rate: ticks back to back would
+    all see the same pose and time; the missed ones are counted in ``watch`` (its
+    :attr:`~lowerbase.world.pacing.RateWatch.total_dropped`), whose line on the rate kept is
+    logged as a warning at most every 30 s."""
     every = max(1, round(setup.rate_hz / setup.costmap_rate_hz))
+    catch_up = isinstance(pace, RosPace)
+    watch = watch if watch is not None else RateWatch("control loop", setup.rate_hz, what="tick")
     k = 0
 
     def work() -> None:
         nonlocal k
-        tick(pace.now())
+        now = pace.now()
+        tick(now)
         if k % every == 0:
             publish_costmaps(True)
         k += 1
+        if not catch_up:
+            watch.done(now)
+            line = watch.report(now)
+            if line is not None:
+                log.warning("%s", line)
 
-    paced_loop(pace, work, setup.rate_hz, True, running)
+    paced_loop(pace, work, setup.rate_hz, catch_up, running, watch.dropped)

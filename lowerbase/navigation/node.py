@@ -37,7 +37,7 @@ from lowerbase.world.grid import OccupancyGrid
 from lowerbase.world.lazy_scan import LazyScan, resolve
 from lowerbase.world.lidar import LaserScan
 from lowerbase.world.localization.poses import compose
-from lowerbase.world.pacing import Pace
+from lowerbase.world.pacing import Pace, RateWatch
 from lowerbase.world.stamped import PoseHistory, StampedSensors
 
 log = logging.getLogger(__name__)
@@ -135,6 +135,8 @@ class NavigationNode:
                                       "bad_footprint": 0, "bad_parameter": 0, "no_pose": 0,
                                       "cmd_vel": 0, "plans": 0, "superseded": 0}
         self._tail = 0
+        #: the control loop's rate on wall time: ticks missed on a busy host (``ticks_missed``)
+        self.control_watch = RateWatch("move_base control loop", setup.rate_hz, what="tick")
         self.pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
         self._services: list[Any] = []
@@ -382,7 +384,8 @@ class NavigationNode:
 
             self.pace = WallPace(self.stop)
         control_loop(self.pace, self.tick, self.publish_costmaps, self.setup,
-                     lambda: not self.stop.is_set() and not rospy.is_shutdown())
+                     lambda: not self.stop.is_set() and not rospy.is_shutdown(),
+                     self.control_watch)
 
     def shutdown(self) -> None:
         self.stop.set()
@@ -437,5 +440,6 @@ def run(setup: NavigationSetup, ros_args: Sequence[str], where: str) -> int:
             node.spin()
         finally:
             node.shutdown()
-            session.stopped({**node.stats, **node.sensors.stats})
+            session.stopped({**node.stats, **node.sensors.stats,
+                             "ticks_missed": node.control_watch.total_dropped})
     return 0

@@ -7,8 +7,9 @@ rospy's time condition, which rospy notifies on every /clock it receives (as ``r
 does), so the loop wakes on /clock. Otherwise :class:`WallPace` (the monotonic clock).
 
 :func:`paced_loop` is the loop itself, the same on either: ``work()`` every ``1 / rate_hz``
-[s of that time]; a late tick is caught up (``catch_up``: up to 1 s late) or dropped and
-counted; time that went backwards (a /clock restarted by someone else) starts the schedule
+[s of that time]; a late tick is caught up (``catch_up``: up to 1 s late) or, once a whole
+period late, dropped and counted (each period of the schedule is either run or counted);
+time that went backwards (a /clock restarted by someone else) starts the schedule
 again from now.
 """
 
@@ -89,10 +90,14 @@ def paced_loop(pace: Pace, work: Callable[[], None], rate_hz: float, catch_up: b
             due = now
             continue
         late = now - due
-        if late > (1.0 if catch_up else period):
-            if not catch_up and dropped is not None:
-                dropped(int(late / period + 1e-6))
-            due = now
+        if catch_up:
+            if late > 1.0:
+                due = now
+        elif late > period:  # whole periods missed: dropped, on the schedule's phase
+            missed = int(late / period + 1e-6)
+            if dropped is not None:
+                dropped(missed)
+            due += missed * period
 
 
 #: [s] how often a sensor that cannot keep its rate says what rate it achieves
@@ -105,8 +110,9 @@ class RateWatch:
     every ``every`` s of the loop's time and only when ticks were dropped since the last
     report, one line with the achieved rate (None otherwise)."""
 
-    def __init__(self, name: str, rate_hz: float, every: float = RATE_REPORT_EVERY) -> None:
-        self.name, self.rate_hz, self.every = name, rate_hz, every
+    def __init__(self, name: str, rate_hz: float, every: float = RATE_REPORT_EVERY,
+                 what: str = "frame") -> None:
+        self.name, self.rate_hz, self.every, self.what = name, rate_hz, every, what
         self.total_done = self.total_dropped = 0
         self._since: float | None = None
         self._done = self._dropped = 0
@@ -129,5 +135,5 @@ class RateWatch:
         if not dropped:
             return None
         return (f"{self.name}: {done / span:.1f} Hz of {self.rate_hz:g} Hz over the last "
-                f"{span:.0f} s ({dropped} frames dropped: a frame takes longer than a period "
-                f"on this host); a lower rate keeps its period")
+                f"{span:.0f} s ({dropped} {self.what}s dropped: a {self.what} takes longer than "
+                f"a period on this host); a lower rate keeps its period")

@@ -56,12 +56,12 @@ def test_ctrl_c_stops_the_run_and_the_emulator(tmp_path: Path, lowerbase_proc: A
     def running() -> bool:  # the driver has configured the lower computer: the run is on
         return run_log.exists() and "lower computer configured" in run_log.read_text()
 
-    deadline = time.monotonic() + 20
+    deadline = time.monotonic() + 120  # a bound, not a speed: a busy host starts slowly
     while time.monotonic() < deadline and not running():
         time.sleep(0.05)
     assert running(), proc.popen.poll()
     proc.popen.send_signal(signal.SIGINT)
-    code, err = proc.wait(timeout=20)
+    code, err = proc.wait(timeout=60)
     assert code == 130, err
     assert "stopped after" in log.read_text()  # the child was stopped, not orphaned
     summary = json.loads((out / "summary.json").read_text())

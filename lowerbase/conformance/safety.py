@@ -155,10 +155,10 @@ def check_watchdog(ctx: Context) -> Outcome:
         if not why or attempt == WATCHDOG_TRIES:
             break
         disturbed.append(why)
-    retried = {"host_disturbed_tries": len(disturbed)} if disturbed else {}
     n = len(disturbed)
+    retried = {"host_disturbed_tries": n} if n else {}
     note = f" (measured again after {n} tr{'y' if n == 1 else 'ies'} the host disturbed: " \
-        f"{disturbed[-1]})" if disturbed else ""
+        f"{disturbed[-1]})" if n else ""
     if late:
         name, what, f = late[0]
         when = "never" if f is None else f"after {f.t - t_stop:.3f} s"

@@ -59,9 +59,6 @@ def control_loop(pace: Pace, tick: Callable[[float], None],
             publish_costmaps(True)
         k += 1
         if not catch_up:
-            watch.done(now)
-            line = watch.report(now)
-            if line is not None:
-                log.warning("%s", line)
+            watch.done_and_warn(now, log)
 
     paced_loop(pace, work, setup.rate_hz, catch_up, running, watch.dropped)

@@ -306,11 +306,7 @@ class WorldNode(WorldInputs):
                 failed.set()
                 return
             if not catch_up:
-                now = pace.now()
-                watch.done(now)
-                line = watch.report(now)
-                if line is not None:
-                    log.warning("%s", line)
+                watch.done_and_warn(pace.now(), log)
 
         failed = threading.Event()
         paced_loop(pace, guarded, rate_hz, catch_up, lambda: running() and not failed.is_set(),

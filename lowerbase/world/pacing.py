@@ -15,6 +15,7 @@ again from now.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -122,6 +123,14 @@ class RateWatch:
             self._since = now
         self._done += 1
         self.total_done += 1
+
+    def done_and_warn(self, now: float, log: logging.Logger) -> None:
+        """:meth:`done`, then the :meth:`report` line, when one is due, as a warning on
+        ``log`` (the dropping loop's own logger)."""
+        self.done(now)
+        line = self.report(now)
+        if line is not None:
+            log.warning("%s", line)
 
     def dropped(self, n: int) -> None:
         self._dropped += n

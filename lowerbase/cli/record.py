@@ -77,6 +77,22 @@ class McapFrames:
         self.recorder.close()
 
 
+#: at most this many frames already queued are written once --duration is over
+DRAIN_LIMIT = 100_000
+
+
+def drain(bus: Any, write: Callable[[Any], int]) -> int:
+    """Write the frames ``bus`` received before now (queued while the loop was held up: the
+    writer's set-up, a busy host); a frame received after now ends it. Returns the count."""
+    cutoff, count = time.time(), 0
+    for _ in range(DRAIN_LIMIT):
+        msg = bus.recv(0.0)
+        if msg is None or msg.timestamp > cutoff:
+            break
+        count += write(msg)
+    return count
+
+
 def open_writer(path: Path) -> Any:
     """The writer of ``path``: its suffix picks the format (.mcap: :class:`McapFrames`)."""
     import can
@@ -146,25 +162,31 @@ def run(args: argparse.Namespace) -> int:
     print(f"lowerbase record: {describe(config)} -> {path}; Ctrl-C stops", file=sys.stderr)
     end = started + args.duration if args.duration is not None else None
     live = LiveCount(sys.stderr, path, enabled=not args.print_frames)
+
+    def write(msg: Any) -> int:
+        if ids is not None and msg.arbitration_id not in ids:
+            return 0
+        writer.on_message_received(msg)
+        if args.print_frames:
+            try:
+                name, values = codec.decode(msg.arbitration_id, bytes(msg.data),
+                                            decode_choices=True, strict=False)
+            except LowerbaseError as exc:
+                name, values = f"0x{msg.arbitration_id:03X}", {"error": str(exc)}
+            print(f"{msg.timestamp:.6f} {name:<18} {values}", flush=True)
+        return 1
+
     try:
         with contextlib.suppress(KeyboardInterrupt):
             while not stop.is_set():
                 live.update(count)
                 timeout = 0.2 if end is None else min(0.2, end - time.monotonic())
-                if timeout <= 0:
+                if timeout <= 0:  # the duration is over: what queued before it goes in too
+                    count += drain(bus, write)
                     break
                 msg = bus.recv(timeout)
-                if msg is None or (ids is not None and msg.arbitration_id not in ids):
-                    continue
-                writer.on_message_received(msg)
-                count += 1
-                if args.print_frames:
-                    try:
-                        name, values = codec.decode(msg.arbitration_id, bytes(msg.data),
-                                                    decode_choices=True, strict=False)
-                    except LowerbaseError as exc:
-                        name, values = f"0x{msg.arbitration_id:03X}", {"error": str(exc)}
-                    print(f"{msg.timestamp:.6f} {name:<18} {values}", flush=True)
+                if msg is not None:
+                    count += write(msg)
     finally:
         live.done()
         writer.stop()

@@ -63,13 +63,19 @@ def test_record_shows_the_count_only_on_a_terminal(monkeypatch: pytest.MonkeyPat
         assert "\r" not in text and len(text.splitlines()) == 2
 
 
+SETUP = 0.9  #: [s] of the fake clock that opening the file's writer takes
+
+
 @pytest.mark.parametrize("suffix", [".mcap", ".log", ".blf"])
 def test_duration_counts_from_when_frames_start_to_be_recorded(
         monkeypatch: pytest.MonkeyPatch, tmp_path: Path, suffix: str) -> None:
     """`record --duration D` ends D after the bus opened (from then frames queue for the
     file), however long the file's writer takes to set up (the MCAP writer's imports took 4-7 s
     on a loaded host and the recording then held 14-17 s for 10); the frames that queued
-    meanwhile are recorded. The writer's set-up is made to take 0.6 s of a fake clock."""
+    meanwhile are recorded. The writer's set-up is made to take SETUP = 0.9 s of a fake clock: a
+    recording counted from after the set-up would stop 1.9 s after the bus opened, one counted
+    from the bus 1 s after, plus however late the host wakes the loop (the bound is that gap,
+    not a speed); the time is taken when the recording stops, before the file is closed."""
     import types
 
     import can
@@ -78,7 +84,8 @@ def test_duration_counts_from_when_frames_start_to_be_recorded(
     from lowerbase.cli import record
 
     offset = [0.0]
-    fake_time = types.SimpleNamespace(monotonic=lambda: time.monotonic() + offset[0])
+    fake_time = types.SimpleNamespace(monotonic=lambda: time.monotonic() + offset[0],
+                                      time=time.time)
     monkeypatch.setattr(record, "time", fake_time)
     channel = f"record-duration-{suffix[1:]}"
     real_open_writer = record.open_writer
@@ -89,10 +96,18 @@ def test_duration_counts_from_when_frames_start_to_be_recorded(
             for i in range(3):
                 peer.send(can.Message(arbitration_id=0x90, data=bytes([i] * 8),
                                       is_extended_id=False))
-        offset[0] += 0.6
+        offset[0] += SETUP
+        real_stop = writer.stop
+
+        def stop() -> None:
+            stopped.append(fake_time.monotonic())
+            real_stop()
+
+        writer.stop = stop
         return writer
 
     opened: list[float] = []
+    stopped: list[float] = []
     real_open_bus = transport.open_bus
 
     def open_bus(config: Any) -> Any:
@@ -104,8 +119,8 @@ def test_duration_counts_from_when_frames_start_to_be_recorded(
     monkeypatch.setattr(transport, "open_bus", open_bus)
     path = tmp_path / f"run{suffix}"
     assert main(["record", str(path), "--duration", "1", "-i", "virtual", "-c", channel]) == 0
-    elapsed = fake_time.monotonic() - opened[0]  # from the bus open to the end of the command
-    assert 1.0 <= elapsed < 1.5, f"recorded for {elapsed:.2f} s of --duration 1"
+    elapsed = stopped[0] - opened[0]  # from the bus open to the end of the recording
+    assert 1.0 <= elapsed < 1.0 + SETUP, f"recorded for {elapsed:.2f} s of --duration 1"
     if suffix == ".mcap":
         from mcap.reader import make_reader
 
@@ -115,3 +130,24 @@ def test_duration_counts_from_when_frames_start_to_be_recorded(
     else:
         with can.LogReader(str(path)) as reader:
             assert [bytes(m.data) for m in reader] == [bytes([i] * 8) for i in range(3)]
+
+
+def test_the_end_of_a_recording_writes_what_queued_before_it_and_nothing_after() -> None:
+    import can
+
+    from lowerbase.cli.record import drain
+
+    now = time.time()
+    queued = [can.Message(arbitration_id=0x90, data=bytes([i]), timestamp=now - 0.5 + i * 0.1)
+              for i in range(3)]
+    later = can.Message(arbitration_id=0x90, data=b"\x09", timestamp=now + 60.0)
+    inbox = [*queued, later, *queued]
+
+    class Bus:
+        def recv(self, timeout: float) -> can.Message | None:
+            assert timeout == 0.0  # draining never waits
+            return inbox.pop(0) if inbox else None
+
+    written: list[can.Message] = []
+    assert drain(Bus(), lambda m: written.append(m) or 1) == 3
+    assert written == queued  # the frame received after the end stopped it, unwritten

@@ -173,6 +173,9 @@ def print_outcomes(result: Any, out: Path | None, *, stream: Any = None) -> None
     print(f"scenario {result.scenario.name}: {verdict} ({counts['passed']} passed, "
           f"{counts['failed']} failed{extra}); {result.trace.end:.1f} s {result.mode} in "
           f"{result.wall_time:.1f} s", file=stream)
+    lag = getattr(result, "lag", None)
+    if lag is not None and lag.lagged:
+        print(f"  note: {lag.describe()}", file=stream)
     if out is not None:
         print(f"report: {out / 'index.html'} (plots, summary.json, junit.xml)", file=stream)
 

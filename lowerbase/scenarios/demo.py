@@ -28,7 +28,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
-from lowerbase.errors import ConfigError, TransportError
+from lowerbase.clock import Clock
+from lowerbase.errors import ConfigError, ProtocolError, TransportError
+from lowerbase.scenarios.lag import HostLag
 from lowerbase.scenarios.runner import FrameTap, Harness, RunResult, run_scenario
 from lowerbase.scenarios.timeline import ROBOT_STATES, Action, FaultAt, Unplug
 from lowerbase.scenarios.wheeled import Scenario
@@ -122,7 +124,8 @@ class BusHarness:
     """DriverCore on a python-can bus, real time; the lower computer is elsewhere."""
 
     def __init__(self, bus: Any, *, truth_path: Path | None = None,
-                 tap: FrameTap | None = None, dt: float = 0.005) -> None:
+                 tap: FrameTap | None = None, dt: float = 0.005,
+                 clock: Clock | None = None) -> None:
         import can
 
         from lowerbase.clock import RealClock
@@ -136,12 +139,15 @@ class BusHarness:
         self.tap = tap
         self.codec = default_codec()
         self._upper_ids = {m.frame_id for m in self.codec if "Lower" not in m.senders}
-        self.clock = RealClock()
+        self.clock: Clock = clock or RealClock()
         self.t0 = self.clock.now()
         self.cut_until = -math.inf
         self.truth_log = TruthFollower(truth_path) if truth_path is not None else None
         self.driver = DriverCore(self._send, self.clock)
         self._deadline = self.clock.now()
+        self.lag: HostLag | None = HostLag()
+        self._heartbeat = self.codec.message("Heartbeat")
+        self._overruns: int | None = None  # the last Heartbeat's Overruns (mod 16)
 
     def _send(self, frame_id: int, data: bytes) -> None:
         now = self.now()
@@ -159,13 +165,24 @@ class BusHarness:
             return None  # our own frames, heard back
         if self.tap is not None:
             self.tap(self.now(), "lower", frame_id, data)
+        if frame_id == self._heartbeat.frame_id:
+            self._count_overruns(data)
         self.driver.on_frame(frame_id, data)
         return frame_id, data
+
+    def _count_overruns(self, data: bytes) -> None:
+        try:
+            overruns = int(self._heartbeat.decode(data)["Overruns"])
+        except ProtocolError:  # the driver counts and logs a bad frame itself
+            return
+        if self._overruns is not None and self.lag is not None:
+            self.lag.overruns((overruns - self._overruns) % 16)
+        self._overruns = overruns
 
     def start(self, timeout: float = START_TIMEOUT) -> None:
         """Wait for a Heartbeat; scenario time 0 is the emulator's boot."""
         deadline = self.clock.now() + timeout
-        heartbeat = self.codec.message("Heartbeat")
+        heartbeat = self._heartbeat
         while self.clock.now() < deadline:
             msg = self.bus.recv(0.1)
             if msg is None:
@@ -189,7 +206,10 @@ class BusHarness:
             if msg is None:
                 break
             self._handle(msg)
-        if self.clock.now() - self._deadline > 1.0:  # suspended or overloaded: no burst
+        late = self.clock.now() - self._deadline
+        if self.lag is not None:
+            self.lag.step_started(late)
+        if late > 1.0:  # suspended or overloaded: no burst (counted late above)
             self._deadline = self.clock.now()
         self.driver.tick()
 

@@ -25,6 +25,7 @@ from typing import Any, Protocol
 from lowerbase.driver.core import DriverCore
 from lowerbase.errors import ConfigError
 from lowerbase.scenarios.expect import Outcome, Trace
+from lowerbase.scenarios.lag import HostLag
 from lowerbase.scenarios.timeline import (
     LINK_STATES,
     TWIST_PERIOD,
@@ -51,6 +52,7 @@ class Harness(Protocol):
 
     driver: DriverCore
     dt: float  #: [s] one step
+    lag: HostLag | None  #: how late the host kept a run on the wall clock (None: simulated)
 
     def now(self) -> float:
         """Scenario time [s]."""
@@ -101,6 +103,7 @@ class SimHarness:
         self.driver = self.loop.driver
         self.dt = self.loop.mcu.dt
         self.realtime = realtime
+        self.lag: HostLag | None = HostLag() if realtime else None
         self._wall0: float | None = None
         pose = scenario.initial.pose
         truth = self.loop.mcu.truth
@@ -128,6 +131,8 @@ class SimHarness:
             delay = self._wall0 + self.loop.now - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
+            elif self.lag is not None:  # the same results, later than the wall clock
+                self.lag.step_started(-delay)
 
     def truth(self) -> tuple[float, float, float, float, float] | None:
         t = self.loop.mcu.truth
@@ -175,6 +180,7 @@ class RunResult:
     wall_time: float  #: [s]
     events: list[tuple[float, str]] = field(default_factory=list)  #: (t, label) as fired
     interrupted: bool = False
+    lag: HostLag | None = None  #: on the wall clock: how far the host kept the run late
 
     @property
     def passed(self) -> bool:
@@ -263,7 +269,7 @@ def run_scenario(scenario: Scenario, harness: Harness, *, mode: str = "simulated
         interrupted = True
     outcomes = [(exp, exp.evaluate(trace)) for exp in scenario.expectations]
     return RunResult(scenario, trace, outcomes, mode, time.monotonic() - wall0, events,
-                     interrupted)
+                     interrupted, harness.lag)
 
 
 def _fire(action: Action, harness: Harness, publisher: _Publisher, now: float) -> None:

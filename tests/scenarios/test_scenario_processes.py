@@ -37,12 +37,19 @@ SHORT = {
 
 def test_a_scenario_over_processes(tmp_path: Path, udp_bus_config: dict[str, Any]) -> None:
     scenario = scenario_from_dict(SHORT)
-    result = run_over_bus(scenario, tmp_path, bus_config=udp_bus_config)
+    # a run on the wall clock: one the host held up says so (result.lag) and is tried again;
+    # a run that failed on time fails the test at once
+    for attempt in range(1, 4):
+        workdir = tmp_path / f"try{attempt}"
+        result = run_over_bus(scenario, workdir, bus_config=udp_bus_config)
+        assert result.lag is not None
+        if result.passed or not result.lag.lagged:
+            break
     failed = [f"{e.title()}: {o.detail}" for e, o in result.outcomes if not o.passed]
-    assert result.passed, failed
+    assert result.passed, (failed, result.lag.describe())
     assert all(o.status == "passed" for _, o in result.outcomes)  # the truth came back too
     assert math.isfinite(result.trace["truth_x"][-1])
-    log = (tmp_path / "emulator.log").read_text()
+    log = (workdir / "emulator.log").read_text()
     assert "faults: estop@2+0.5" in log and "stopped after" in log  # the child ended cleanly
 
 

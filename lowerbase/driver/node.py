@@ -29,6 +29,7 @@ import logging
 import math
 import sys
 import threading
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import ModuleType
@@ -203,7 +204,9 @@ class DriverNode:
         # held by the tick) hands a backlog over at once, and the core's timing checks (wheel
         # sample gaps, Uptime) must see the frames' spacing, not the burst
         age = getattr(self.link, "last_age", 0.0)
-        with self.lock:
+        waited = time.monotonic()
+        with self.lock:  # held by the tick, which a busy host can deschedule for seconds
+            age += time.monotonic() - waited  # that wait is part of the frame's age too
             clock = self.core.clock
             ago = getattr(clock, "ago", None)
             stamp = ago(age) if ago is not None else clock.now() - age

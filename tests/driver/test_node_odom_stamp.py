@@ -20,6 +20,15 @@ BACKLOG = 0.5  #: [s] the reader stalls this long, then reads what waited in the
 BMS_FRAMES = ("BmsStatus", "BmsPack", "BmsCapacity", "BmsCell", "BmsLife")  #: a 1 Hz burst
 
 
+@pytest.fixture(autouse=True)
+def no_wall_time(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The node adds the wall time a frame waited for its lock to the frame's age; here the
+    waits are the test's (``last_age``) and the lock is free: the wall clock stands still."""
+    from lowerbase.driver import node as node_module
+
+    monkeypatch.setattr(node_module, "time", SimpleNamespace(monotonic=lambda: 0.0))
+
+
 class StubLink:
     description = "frames handed over by the test"
     last_age = 0.0  #: [s] how long the frame being handled waited (its receive stamp's age)
@@ -165,3 +174,36 @@ def test_battery_after_a_backlog_carries_the_stamp_of_its_burst(woosh_msgs: Any)
     assert max(bursts) < loop.clock.now() - 0.1
     assert msg.header.stamp.to_sec() == pytest.approx(max(bursts), abs=1e-6), (
         msg.header.stamp.to_sec(), bursts, loop.clock.now())
+
+
+def test_a_frame_that_waited_for_the_lock_is_stamped_when_it_arrived(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The reader hands a frame over while the tick holds the node's lock (a busy host can
+    deschedule the tick for seconds): the frame's time is when the bus received it, not when
+    the lock came free. Stamped late, a Heartbeat's Uptime looked 0.8 s behind its timeline;
+    several in a row made the driver see reboots that never happened, beside a CPU hog."""
+    from lowerbase.clock import SimClock
+    from lowerbase.driver import node as node_module
+    from lowerbase.driver.node import DriverNode
+
+    clock = SimClock(100.0)
+    monkeypatch.setattr(node_module, "time", SimpleNamespace(monotonic=clock.now))
+    settings, config = load_settings({})
+    link = StubLink()
+    node = DriverNode(settings, config, link, clock=clock)
+    seen: list[float | None] = []
+    node.core.on_frame = lambda frame_id, data, stamp=None: seen.append(stamp)  # type: ignore[method-assign]
+
+    class HeldLock:
+        """The tick keeps the lock 0.8 s after the frame came to it."""
+
+        def __enter__(self) -> None:
+            clock.advance(0.8)
+
+        def __exit__(self, *exc: object) -> None:
+            pass
+
+    node.lock = HeldLock()  # type: ignore[assignment]
+    link.last_age = 0.1  # it waited 0.1 s in the socket before the reader took it
+    node.on_frame(0x90, bytes(8))
+    assert seen == [pytest.approx(100.0 - 0.1)]

@@ -34,6 +34,10 @@ DRIVER_DIR = ROOT / "lowerbase" / "driver"
 LAUNCH = DRIVER_DIR / "launch" / "driver_base.launch"
 CONFIG = DRIVER_DIR / "config" / "driver_base.yaml"
 
+#: [s] every wait below is for something to happen, and returns when it does: a bound against
+#: a hang sized for a busy CI host (beside 12 busy processes a 5 s bound failed), not a speed
+BOUND = 90.0
+
 #: topic -> type the node must publish (vendor names: seed 000, woosh_msgs)
 PUBLISHED = {
     "/odom_raw": "nav_msgs/Odometry",
@@ -347,7 +351,7 @@ def rig(ros_master: Any, tmp_path_factory: pytest.TempPathFactory) -> Iterator[d
         node_env = {k: v for k, v in ros_master.env.items() if k != "ROS_IP"}
         node = Proc(["driver", *bus_cli_args(bus), "__name:=driver_base"], node_env)
         procs.append(node)
-        node.wait_for("link ready", timeout=30.0)
+        node.wait_for("link ready", timeout=BOUND)
         script = tmp / "probe.py"
         script.write_text(PROBE)
         probe = Probe(script, ros_master.env, {**PUBLISHED, **EXTRA})
@@ -369,7 +373,7 @@ def _msg(stats: dict[str, Any], topic: str) -> dict[str, Any]:
 @pytest.mark.process
 def test_every_topic_is_there_with_the_vendor_type(rig: dict[str, Any]) -> None:
     probe: Probe = rig["probe"]
-    probe.wait_for(lambda s: all(s.get(t, {}).get("count") for t in PUBLISHED), 10.0,
+    probe.wait_for(lambda s: all(s.get(t, {}).get("count") for t in PUBLISHED), BOUND,
                    "a message on every topic")
     types = probe.ask(op="types")
     for topic, type_ in PUBLISHED.items():
@@ -391,7 +395,7 @@ def test_every_topic_is_there_with_the_vendor_type(rig: dict[str, Any]) -> None:
 def test_parameter_and_information_come_from_the_lower_computer(rig: dict[str, Any]) -> None:
     profile = load_profile()
     stats = rig["probe"].wait_for(
-        lambda s: s["/information"]["count"] and s["/driver_base/parameter"]["count"], 10.0,
+        lambda s: s["/information"]["count"] and s["/driver_base/parameter"]["count"], BOUND,
         "/information and /driver_base/parameter")
     param = _msg(stats, "/driver_base/parameter")
     c = profile.chassis
@@ -443,10 +447,10 @@ def test_base_cmd_vel_drives_the_robot_and_stale_commands_stop_it(rig: dict[str,
     x0, raw0 = (_msg(start, t)["pose"]["pose"]["position"]["x"] for t in ("/odom", "/odom_raw"))
     probe.ask(op="publish", topic="/base_cmd_vel", type="geometry_msgs/Twist",
               fields={"linear": {"x": 0.4}, "angular": {"z": 0.0}}, rate=20, duration=1.5)
-    probe.wait_for(lambda s: _msg(s, "/odom_twist")["linear"]["x"] > 0.3, 6.0,
+    probe.wait_for(lambda s: _msg(s, "/odom_twist")["linear"]["x"] > 0.3, BOUND,
                    "odom_twist at the commanded speed")
     moved = probe.wait_for(
-        lambda s: _msg(s, "/odom")["pose"]["pose"]["position"]["x"] > x0 + 0.15, 6.0,
+        lambda s: _msg(s, "/odom")["pose"]["pose"]["position"]["x"] > x0 + 0.15, BOUND,
         "/odom moving forward")
     assert _msg(moved, "/odom_raw")["pose"]["pose"]["position"]["x"] > raw0 + 0.1
     tf = _msg(moved, "/tf")["transforms"][0]["transform"]["translation"]
@@ -454,7 +458,7 @@ def test_base_cmd_vel_drives_the_robot_and_stale_commands_stop_it(rig: dict[str,
     # the publisher stops after 1.5 s: 0.5 s later the command is stale and the robot stops
     stopped = probe.wait_for(
         lambda s: abs(_msg(s, "/odom_twist")["linear"]["x"]) < 0.005
-        and time.monotonic() > s["/odom_twist"]["first"], 8.0, "odom_twist back to zero")
+        and time.monotonic() > s["/odom_twist"]["first"], BOUND, "odom_twist back to zero")
     assert abs(_msg(stopped, "/odom")["twist"]["twist"]["linear"]["x"]) < 0.05
 
 
@@ -467,7 +471,7 @@ def test_rosbag_record_reads_back(rig: dict[str, Any]) -> None:
     topics = [t for t in PUBLISHED if t != "/driver_base/link_state"]
     rec = subprocess.run(
         ["rosbag", "record", "--duration=2", "-O", str(bag_path), *topics],
-        env={**os.environ, **rig["env"]}, capture_output=True, text=True, timeout=30,
+        env={**os.environ, **rig["env"]}, capture_output=True, text=True, timeout=BOUND,
         cwd=rig["tmp"],
     )
     assert rec.returncode == 0, rec.stderr
@@ -488,11 +492,11 @@ def test_rostopic_echo_battery_with_ros_package_path_only(rig: dict[str, Any]) -
     env = {**os.environ, **rig["env"]}
     env.pop("PYTHONPATH")  # the system rostopic finds woosh_msgs through ROS_PACKAGE_PATH
     out = subprocess.run(["rostopic", "echo", "-n1", "/battery"], env=env, capture_output=True,
-                         text=True, timeout=20)
+                         text=True, timeout=BOUND)
     assert out.returncode == 0, out.stderr
     assert "batteryPercentage: 80" in out.stdout
     out = subprocess.run(["rostopic", "echo", "-n1", "/driver_base/parameter"], env=env,
-                         capture_output=True, text=True, timeout=20)
+                         capture_output=True, text=True, timeout=BOUND)
     assert "pulsePerCircle: 10000" in out.stdout  # latched: a late subscriber gets it
 
 
@@ -517,7 +521,7 @@ def test_roslaunch_starts_the_node_with_the_parameter_file(rig: dict[str, Any]) 
     # what roslaunch will run: the package's script with the given interpreter and bus
     args = subprocess.run(
         ["roslaunch", "--args", "driver_base", str(LAUNCH), f"bus_args:={bus_args}",
-         f"python:={sys.executable}"], env=env, capture_output=True, text=True, timeout=30)
+         f"python:={sys.executable}"], env=env, capture_output=True, text=True, timeout=BOUND)
     assert args.returncode == 0, args.stderr
     assert args.stdout.split()[:2] == [sys.executable, str(DRIVER_DIR / "scripts" /
                                                            "driver_base")]
@@ -528,12 +532,12 @@ def test_roslaunch_starts_the_node_with_the_parameter_file(rig: dict[str, Any]) 
     try:
         stats = rig["probe"].wait_for(
             lambda s: _msg(s, "/launched/driver_base/link_state")["data"] == "ready"
-            and s["/launched/odom"]["count"] > 5, 30.0, "the launched node ready")
+            and s["/launched/odom"]["count"] > 5, BOUND, "the launched node ready")
         assert _msg(stats, "/launched/odom")["child_frame_id"] == "base_link"
     finally:
         launch.send_signal(2)
         try:
-            launch.wait(timeout=20)
+            launch.wait(timeout=BOUND)
         except subprocess.TimeoutExpired:
             launch.kill()
             launch.wait()
@@ -563,12 +567,12 @@ def test_replay_feeds_a_recorded_run_through_the_driver(rig: dict[str, Any]) -> 
     replay = Proc(["driver", "--replay", str(path), "__name:=replayer", "__ns:=/replay",
                    "_publish_tf:=false", *remaps], rig["env"])
     rig["procs"].append(replay)
-    replay.wait_for("link ready", timeout=20.0)
+    replay.wait_for("link ready", timeout=BOUND)
     stats = rig["probe"].wait_for(
         lambda s: _msg(s, "/replay/odom_twist")["linear"]["x"] > 0.4, 10.0,
         "the replayed run moving")
     assert stats["/replay/odom"]["count"] > 10
-    code, err = replay.wait(timeout=20.0)
+    code, err = replay.wait(timeout=BOUND)
     assert code == 0, err
     assert "lowerbase driver: replay finished" in err
 
@@ -599,7 +603,7 @@ def test_services_operate_the_chassis(rig: dict[str, Any]) -> None:
         return reply
 
     def status(bit: StatusBit, on: bool, what: str) -> None:
-        probe.wait_for(lambda s: bool(_msg(s, "/status_code")["data"] & bit) == on, 5.0, what)
+        probe.wait_for(lambda s: bool(_msg(s, "/status_code")["data"] & bit) == on, BOUND, what)
 
     def drive() -> None:
         probe.ask(op="publish", topic="/base_cmd_vel", type="geometry_msgs/Twist",
@@ -611,9 +615,9 @@ def test_services_operate_the_chassis(rig: dict[str, Any]) -> None:
     status(StatusBit.ESTOP_COMMAND, False, "the e-stop bit released")
     call("enable")  # released into standby: enable again, no driver restart
     drive()
-    probe.wait_for(lambda s: _msg(s, "/odometer")["data"] > 0.1, 6.0, "odometer counting")
+    probe.wait_for(lambda s: _msg(s, "/odometer")["data"] > 0.1, BOUND, "odometer counting")
     call("odometer_reset")
-    probe.wait_for(lambda s: _msg(s, "/odometer")["data"] < 0.05, 6.0, "odometer reset")
+    probe.wait_for(lambda s: _msg(s, "/odometer")["data"] < 0.05, BOUND, "odometer reset")
 
     bus = open_bus(rig["bus"])  # a MotionCommand too short to decode: latched COMMAND_REJECTED
     try:
@@ -630,10 +634,10 @@ def test_services_operate_the_chassis(rig: dict[str, Any]) -> None:
     status(StatusBit.COMMAND_REJECTED, False, "the latched fault cleared")
 
     call("reboot")
-    rig["node"].wait_for("link configuring", timeout=10.0)
-    rig["node"].wait_for("link ready", timeout=15.0)
+    rig["node"].wait_for("link configuring", timeout=BOUND)
+    rig["node"].wait_for("link ready", timeout=BOUND)
     drive()  # re-enabled by the driver after the reboot
-    probe.wait_for(lambda s: _msg(s, "/odom_twist")["linear"]["x"] > 0.2, 6.0,
+    probe.wait_for(lambda s: _msg(s, "/odom_twist")["linear"]["x"] > 0.2, BOUND,
                    "driving after the reboot")
 
 

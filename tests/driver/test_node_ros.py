@@ -235,7 +235,7 @@ def publish(topic, type_, fields, rate, duration):
     cls = get_message_class(type_)
     if topic not in pubs:
         pubs[topic] = rospy.Publisher(topic, cls, queue_size=10)
-        deadline = time.monotonic() + 5
+        deadline = time.monotonic() + 90  # a hang guard: a busy host connects slowly
         while pubs[topic].get_num_connections() == 0 and time.monotonic() < deadline:
             time.sleep(0.02)
     msg = cls()
@@ -274,7 +274,7 @@ for line in sys.stdin:
         print(json.dumps({"t": time.monotonic()}), flush=True)
     elif op == "call":
         from roslib.message import get_service_class
-        rospy.wait_for_service(req["name"], timeout=10)
+        rospy.wait_for_service(req["name"], timeout=90)
         proxy = rospy.ServiceProxy(req["name"], get_service_class(req["type"]))
         print(json.dumps(to_plain(proxy(**req.get("args", {})))), flush=True)
     elif op == "quit":

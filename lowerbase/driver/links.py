@@ -103,7 +103,8 @@ def receive_age(msg: Any, wall_now: float) -> float:
 class BusLink:
     """A python-can bus that is closed on any error and reopened every ``reopen_period``.
 
-    ``last_age`` is :func:`receive_age` of the frame being handed to ``on_frame``.
+    ``last_age`` is :func:`receive_age` of the frame being handed to ``on_frame``, and
+    ``last_received`` its receive time on the wall clock (``time.time``), None when not known.
     A serial device that does not exist at start (:func:`missing_device`) is waited for:
     ``announce`` (a line for the user; default: a warning in the log) says so once, and that
     it is open when it appears; any other failure to open at start is raised."""
@@ -137,6 +138,8 @@ class BusLink:
         self.reopens = 0
         self.frames = 0
         self.last_age = 0.0  #: [s, wall] since the frame now in ``on_frame`` was received
+        #: [s, wall clock] when the bus received it (None: its stamp is not believed)
+        self.last_received: float | None = None
 
     def _open(self, config: dict[str, Any]) -> Any:
         bus = self._open_bus(config)
@@ -216,7 +219,9 @@ class BusLink:
                 on_idle()
         elif is_catalog_frame(msg):
             self.frames += 1
-            self.last_age = receive_age(msg, time.time())
+            wall = time.time()
+            self.last_age = receive_age(msg, wall)
+            self.last_received = wall - self.last_age if self.last_age > 0.0 else None
             on_frame(msg.arbitration_id, bytes(msg.data))
         return 0.0
 

@@ -203,10 +203,14 @@ class DriverNode:
         # stamped when the bus received it: a reader that fell behind (a busy host, this lock
         # held by the tick) hands a backlog over at once, and the core's timing checks (wheel
         # sample gaps, Uptime) must see the frames' spacing, not the burst
+        received = getattr(self.link, "last_received", None)
         age = getattr(self.link, "last_age", 0.0)
-        waited = time.monotonic()
+        handed = time.time()
         with self.lock:  # held by the tick, which a busy host can deschedule for seconds
-            age += time.monotonic() - waited  # that wait is part of the frame's age too
+            # the frame's age as its stamp is taken: since the bus received it, the reader's
+            # hand-over and the wait for this lock included
+            wall = time.time()
+            age = wall - received if received is not None else age + (wall - handed)
             clock = self.core.clock
             ago = getattr(clock, "ago", None)
             stamp = ago(age) if ago is not None else clock.now() - age

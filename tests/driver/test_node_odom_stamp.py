@@ -26,12 +26,13 @@ def no_wall_time(monkeypatch: pytest.MonkeyPatch) -> None:
     waits are the test's (``last_age``) and the lock is free: the wall clock stands still."""
     from lowerbase.driver import node as node_module
 
-    monkeypatch.setattr(node_module, "time", SimpleNamespace(monotonic=lambda: 0.0))
+    monkeypatch.setattr(node_module, "time", SimpleNamespace(time=lambda: 0.0))
 
 
 class StubLink:
     description = "frames handed over by the test"
     last_age = 0.0  #: [s] how long the frame being handled waited (its receive stamp's age)
+    last_received: float | None = None  #: [s, wall] when, if known (then it wins)
 
     def send(self, frame_id: int, data: bytes) -> None:
         pass
@@ -186,8 +187,8 @@ def test_a_frame_that_waited_for_the_lock_is_stamped_when_it_arrived(
     from lowerbase.driver import node as node_module
     from lowerbase.driver.node import DriverNode
 
-    clock = SimClock(100.0)
-    monkeypatch.setattr(node_module, "time", SimpleNamespace(monotonic=clock.now))
+    clock = SimClock(100.0)  # the wall clock too, here
+    monkeypatch.setattr(node_module, "time", SimpleNamespace(time=clock.now))
     settings, config = load_settings({})
     link = StubLink()
     node = DriverNode(settings, config, link, clock=clock)
@@ -206,4 +207,7 @@ def test_a_frame_that_waited_for_the_lock_is_stamped_when_it_arrived(
     node.lock = HeldLock()  # type: ignore[assignment]
     link.last_age = 0.1  # it waited 0.1 s in the socket before the reader took it
     node.on_frame(0x90, bytes(8))
-    assert seen == [pytest.approx(100.0 - 0.1)]
+    link.last_received = 100.8 - 0.3  # received 0.3 s ago, when the reader stamps it
+    clock.advance(0.5)  # the reader was descheduled before handing it over (a busy host)
+    node.on_frame(0x90, bytes(8))
+    assert seen == [pytest.approx(100.0 - 0.1), pytest.approx(100.5)]

@@ -132,10 +132,13 @@ def test_receive_age_believes_only_plausible_stamps() -> None:
 def test_bus_link_hands_each_frame_with_its_age() -> None:
     import time
 
+    stamps: list[float] = []
+
     class Queued:
         def recv(self, timeout: float | None = None) -> can.Message:
             m = can.Message(arbitration_id=0x90, data=b"\0" * 8, is_extended_id=False)
             m.timestamp = time.time() - 0.2  # waited 0.2 s in the socket
+            stamps.append(m.timestamp)
             return m
 
         def shutdown(self) -> None:
@@ -143,9 +146,10 @@ def test_bus_link_hands_each_frame_with_its_age() -> None:
 
     link = BusLink({"interface": "virtual", "channel": "x"}, opener=lambda cfg: Queued(),
                    clock=SimClock(), catalog_filter=False)
-    ages: list[float] = []
-    link.poll(lambda fid, data: ages.append(link.last_age))
-    assert ages and 0.2 <= ages[0] < 0.2 + 1.0
+    ages: list[tuple[float, float | None]] = []
+    link.poll(lambda fid, data: ages.append((link.last_age, link.last_received)))
+    assert ages and 0.2 <= ages[0][0] < 0.2 + 1.0
+    assert ages[0][1] == pytest.approx(stamps[0])  # the receive time itself, for the node
 
 
 class FakeRospy:

@@ -178,7 +178,7 @@ def test_battery_after_a_backlog_carries_the_stamp_of_its_burst(woosh_msgs: Any)
 
 
 def test_a_frame_that_waited_for_the_lock_is_stamped_when_it_arrived(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+        monkeypatch: pytest.MonkeyPatch, woosh_msgs: Any) -> None:
     """The reader hands a frame over while the tick holds the node's lock (a busy host can
     deschedule the tick for seconds): the frame's time is when the bus received it, not when
     the lock came free. Stamped late, a Heartbeat's Uptime looked 0.8 s behind its timeline;

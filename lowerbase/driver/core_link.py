@@ -54,6 +54,8 @@ class LinkLifecycle(OdometryInput):
             self._enable_wanted = self.config.auto_enable
             self._configure("first contact")
             return
+        if boot == self.boot_counter:  # every slip it counted (a reboot restarts the count)
+            self.stats["lower_computer_overruns"] += slipped
         if _continues(self._uptime, uptime, now, self.uptime_slack):
             self._uptime = (uptime, now)
             if self._reboot_suspect is not None:

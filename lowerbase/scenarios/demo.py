@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from lowerbase.clock import Clock
-from lowerbase.errors import ConfigError, ProtocolError, TransportError
+from lowerbase.errors import ConfigError, TransportError
 from lowerbase.scenarios.lag import HostLag
 from lowerbase.scenarios.runner import FrameTap, Harness, RunResult, run_scenario
 from lowerbase.scenarios.timeline import ROBOT_STATES, Action, FaultAt, Unplug
@@ -146,8 +146,6 @@ class BusHarness:
         self.driver = DriverCore(self._send, self.clock)
         self._deadline = self.clock.now()
         self.lag: HostLag | None = HostLag()
-        self._heartbeat = self.codec.message("Heartbeat")
-        self._overruns: int | None = None  # the last Heartbeat's Overruns (mod 16)
 
     def _send(self, frame_id: int, data: bytes) -> None:
         now = self.now()
@@ -165,24 +163,13 @@ class BusHarness:
             return None  # our own frames, heard back
         if self.tap is not None:
             self.tap(self.now(), "lower", frame_id, data)
-        if frame_id == self._heartbeat.frame_id:
-            self._count_overruns(data)
         self.driver.on_frame(frame_id, data)
         return frame_id, data
-
-    def _count_overruns(self, data: bytes) -> None:
-        try:
-            overruns = int(self._heartbeat.decode(data)["Overruns"])
-        except ProtocolError:  # the driver counts and logs a bad frame itself
-            return
-        if self._overruns is not None and self.lag is not None:
-            self.lag.overruns((overruns - self._overruns) % 16)
-        self._overruns = overruns
 
     def start(self, timeout: float = START_TIMEOUT) -> None:
         """Wait for a Heartbeat; scenario time 0 is the emulator's boot."""
         deadline = self.clock.now() + timeout
-        heartbeat = self._heartbeat
+        heartbeat = self.codec.message("Heartbeat")
         while self.clock.now() < deadline:
             msg = self.bus.recv(0.1)
             if msg is None:
@@ -209,6 +196,8 @@ class BusHarness:
         late = self.clock.now() - self._deadline
         if self.lag is not None:
             self.lag.step_started(late)
+            # the lower computer's own count of falling behind, as its Heartbeats told the driver
+            self.lag.lower_overruns = self.driver.stats["lower_computer_overruns"]
         if late > 1.0:  # suspended or overloaded: no burst (counted late above)
             self._deadline = self.clock.now()
         self.driver.tick()

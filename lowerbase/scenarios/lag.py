@@ -28,10 +28,6 @@ class HostLag:
             self.late_steps += 1
             self.max_late = max(self.max_late, late)
 
-    def overruns(self, count: int) -> None:
-        """The lower computer counted ``count`` more Overruns."""
-        self.lower_overruns += count
-
     @property
     def lagged(self) -> bool:
         return self.late_steps > 0 or self.lower_overruns > 0

@@ -19,7 +19,7 @@ from statistics import fmean
 from typing import Any
 
 from lowerbase.conformance.catalog import WheelSample, wheel_samples
-from lowerbase.conformance.context import Context
+from lowerbase.conformance.context import STILL, Context
 from lowerbase.conformance.core import (
     CheckFailed,
     CheckSkipped,
@@ -133,6 +133,21 @@ def _steady_window(ctx: Context) -> tuple[float, float]:
     return t0, t1
 
 
+def _motion_began(ctx: Context, linear: float, angular: float, sent: float) -> float:
+    """When [s, time.monotonic] the lower computer began the motion commanded at ``sent``:
+    the reception of its first MotionState with the commanded component (Linear, or Angular
+    for a spin) past STILL of its command. The ramp is waited from there, so a command or
+    frames the host delayed (a busy host's proxy, driver, scheduler) do not put the ramp
+    into the window; how fast the firmware answers a MotionCommand is safety.enable's
+    finding. ``sent`` when no such frame comes within reply_timeout (the window then shows
+    what the firmware did)."""
+    key, want = ("Linear", linear) if angular == 0.0 else ("Angular", angular)
+    limit = STILL * abs(want)
+    got = ctx.client.expect("MotionState", lambda v: math.copysign(1.0, want) * v[key] >= limit,
+                            timeout=ctx.settings.reply_timeout, since=sent)
+    return sent if got is None else got.t
+
+
 def _between(ctx: Context, name: str, t0: float, t1: float) -> list[dict[str, Any]]:
     return [f.values for f in ctx.client.frames(name, t0) if f.t <= t1]
 
@@ -168,14 +183,17 @@ def _measure_motions(ctx: Context) -> list[Segment]:
     speed = ctx.settings.speed
     spin = min(2.0 * speed / geo.track, 0.8 * ctx.parameter("maxAngular"))
     ramp_v = speed / ctx.parameter("linearAccelLimit")
-    ramp_w = spin / ctx.parameter("angularAccelLimit")
+    # the spin starts while the straight motion brakes
+    ramp_w = max(spin / ctx.parameter("angularAccelLimit"),
+                 speed / ctx.parameter("linearDecelLimit"))
     ctx.ensure_active()
     segments = []
     try:
         for name, linear, angular, ramp in (("straight", speed, 0.0, ramp_v),
                                             ("spin", 0.0, spin, ramp_w)):
             with ctx.driving(linear, angular):
-                time.sleep(ramp + SETTLE)
+                began = _motion_began(ctx, linear, angular, time.monotonic())
+                time.sleep(max(0.0, began + ramp + SETTLE - time.monotonic()))
                 t0, t1 = _steady_window(ctx)
             wheels = wheel_samples((f.t, f.values) for f in ctx.client.frames("WheelFeedback", t0)
                                    if f.t <= t1)

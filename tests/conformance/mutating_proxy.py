@@ -4,7 +4,8 @@ It sits between the emulator's bus and the suite's bus: every frame the lower co
 decoded with the project's codec, changed by the mutations (scale, offset, delay or drop a
 signal or a message), re-encoded and forwarded; everything the suite sends goes back unchanged,
 except that ``hold_commands`` keeps repeating the last MotionCommand for that long after the
-suite stopped sending (a watchdog that reacts that much later).
+suite stopped sending (a watchdog that reacts that much later), and ``command_delay`` delivers
+each of them that much later (a busy host between the suite and a correct lower computer).
 """
 
 from __future__ import annotations
@@ -61,15 +62,17 @@ def swap_wheels(values: dict[str, Any]) -> dict[str, Any]:
 class MutatingProxy:
     def __init__(self, lower: can.BusABC, upper: can.BusABC,
                  mutations: Sequence[Mutation] = (), hold_commands: float = 0.0,
-                 codec: Codec | None = None) -> None:
+                 codec: Codec | None = None, command_delay: float = 0.0) -> None:
         self.lower, self.upper = lower, upper
         self.codec = codec or default_codec()
         self.mutations = list(mutations)
         self.hold_commands = hold_commands
+        self.command_delay = command_delay
         self._lower_ids = frozenset(m.frame_id for m in self.codec if "Lower" in m.senders)
         self._motion_id = self.codec.message("MotionCommand").frame_id
         self._last_motion: tuple[float, can.Message] | None = None
-        self._queue: list[tuple[float, int, can.Message]] = []
+        #: (due, sequence, frame, the bus it goes to)
+        self._queue: list[tuple[float, int, can.Message, can.BusABC]] = []
         self._seq = itertools.count()
         self._cond = threading.Condition()
         self._stop = threading.Event()
@@ -78,10 +81,17 @@ class MutatingProxy:
         self._notifiers = [can.Notifier(lower, [self._from_lower], timeout=0.05),
                            can.Notifier(upper, [self._from_upper], timeout=0.05)]
 
-    def set(self, mutations: Sequence[Mutation] = (), hold_commands: float = 0.0) -> None:
+    def set(self, mutations: Sequence[Mutation] = (), hold_commands: float = 0.0,
+            command_delay: float = 0.0) -> None:
         with self._cond:
             self.mutations = list(mutations)
             self.hold_commands = hold_commands
+            self.command_delay = command_delay
+
+    def _later(self, delay: float, msg: can.Message, bus: can.BusABC) -> None:
+        with self._cond:
+            heapq.heappush(self._queue, (time.monotonic() + delay, next(self._seq), msg, bus))
+            self._cond.notify()
 
     def _from_upper(self, msg: can.Message) -> None:
         if msg.arbitration_id in self._lower_ids and not msg.is_extended_id:
@@ -89,7 +99,10 @@ class MutatingProxy:
         if msg.arbitration_id == self._motion_id and not msg.is_extended_id:
             with self._cond:
                 self._last_motion = (time.monotonic(), msg)
-        self._send(self.lower, msg)
+        if self.command_delay > 0:
+            self._later(self.command_delay, msg, self.lower)
+        else:
+            self._send(self.lower, msg)
 
     def _from_lower(self, msg: can.Message) -> None:
         if (msg.arbitration_id not in self._lower_ids or msg.is_extended_id
@@ -116,9 +129,7 @@ class MutatingProxy:
         out = can.Message(arbitration_id=msg.arbitration_id, data=m.encode(values),
                           is_extended_id=False)
         if delay > 0:
-            with self._cond:
-                heapq.heappush(self._queue, (time.monotonic() + delay, next(self._seq), out))
-                self._cond.notify()
+            self._later(delay, out, self.upper)
         else:
             self._send(self.upper, out)
 
@@ -134,18 +145,19 @@ class MutatingProxy:
         """Release delayed frames, and repeat the last MotionCommand while held."""
         while not self._stop.is_set():
             now = time.monotonic()
-            due: list[can.Message] = []
+            due: list[tuple[can.Message, can.BusABC]] = []
             repeat = None
             with self._cond:
                 while self._queue and self._queue[0][0] <= now:
-                    due.append(heapq.heappop(self._queue)[2])
+                    _, _, msg, bus = heapq.heappop(self._queue)
+                    due.append((msg, bus))
                 last = self._last_motion
                 if (self.hold_commands > 0 and last is not None
                         and 0.02 <= now - last[0] <= self.hold_commands):
                     repeat = last[1]
                 wait = min(0.005, self._queue[0][0] - now if self._queue else 0.005)
-            for msg in due:
-                self._send(self.upper, msg)
+            for msg, bus in due:
+                self._send(bus, msg)
             if repeat is not None:
                 self._send(self.lower, repeat)
                 self._stop.wait(0.02)

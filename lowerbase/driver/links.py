@@ -22,10 +22,11 @@ import math
 import os
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
-from lowerbase.clock import Clock, RealClock
+from lowerbase.clock import CATCH_UP, SLIP_WARN_EVERY, Clock, RealClock
 from lowerbase.driver.replay import REPLAY_SUFFIXES, ReplayLink
 from lowerbase.errors import LowerbaseError
 from lowerbase.protocol.codec import default_codec
@@ -100,6 +101,43 @@ def receive_age(msg: Any, wall_now: float) -> float:
         return 0.0
     age = wall_now - float(stamp)
     return age if 0.0 <= age <= MAX_RECEIVE_AGE else 0.0
+
+
+#: [s] a frame handed on this long after its bus received it was handled late: the reader is
+#: behind its bus (as far as a paced emulator may run behind before its time slips)
+LATE_HANDLING = CATCH_UP
+
+
+class HandlingLag:
+    """How far behind its bus a reader runs, said rather than hidden: each frame handled more
+    than :data:`LATE_HANDLING` after the bus received it is counted (``stats
+    ["frames_handled_late"]``; the latest of them in ``worst`` [s]) and warned of at most every
+    :data:`~lowerbase.clock.SLIP_WARN_EVERY` s. Such frames keep their receive stamps, so the
+    odometry stays right; what comes late is everything the node sends from them."""
+
+    def __init__(self, stats: Counter[str], name: str = "driver_base") -> None:
+        self.stats = stats
+        self.name = name
+        self.worst = 0.0  #: [s] the latest frame so far
+        self._warned: float | None = None
+        self._since = 0  # late frames since the last warning
+        self._since_worst = 0.0
+
+    def handled(self, age: float, now: float) -> None:
+        """A frame handed on ``age`` [s] after its reception, at wall time ``now`` [s]."""
+        if not age > LATE_HANDLING:
+            return
+        self.stats["frames_handled_late"] += 1
+        self.worst = max(self.worst, age)
+        self._since += 1
+        self._since_worst = max(self._since_worst, age)
+        if self._warned is None or now - self._warned >= SLIP_WARN_EVERY:
+            log.warning("%s is behind its bus (a busy host): %d frame(s) handled up to %.3f s "
+                        "after they were received; what it publishes from them comes that late "
+                        "(%d late in all)", self.name, self._since, self._since_worst,
+                        self.stats["frames_handled_late"])
+            self._warned = now
+            self._since, self._since_worst = 0, 0.0
 
 
 class BusLink:

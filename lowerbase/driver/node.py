@@ -38,7 +38,12 @@ from typing import Any
 from lowerbase.clock import Clock, RealClock
 from lowerbase.driver import services
 from lowerbase.driver.core import DriverConfig, DriverCore, LinkState
-from lowerbase.driver.links import REPLAY_SUFFIXES, BusLink, ReplayLink  # noqa: F401 (re-export)
+from lowerbase.driver.links import (  # noqa: F401 (re-export)
+    REPLAY_SUFFIXES,
+    BusLink,
+    HandlingLag,
+    ReplayLink,
+)
 from lowerbase.driver.settings import NodeSettings
 from lowerbase.errors import RosUnavailableError
 from lowerbase.ros1.node import ROS_HINT
@@ -118,6 +123,8 @@ class DriverNode:
         self.core = core if core is not None else \
             DriverCore(link.send, clock or RealClock(self.stop), config)
         self._shared_core = core is not None
+        #: how far behind its bus the reader runs (frames handled late: counted and warned of)
+        self.lag = HandlingLag(self.core.stats)
         self.core.listeners.append(self._on_event)
         self._throttles = {k: Throttle(r) for k, r in settings.rates.items()}
         self._battery_dirty = False
@@ -211,6 +218,8 @@ class DriverNode:
             # hand-over and the wait for this lock included
             wall = time.time()
             age = wall - received if received is not None else age + (wall - handed)
+            if received is not None:
+                self.lag.handled(age, wall)
             clock = self.core.clock
             ago = getattr(clock, "ago", None)
             stamp = ago(age) if ago is not None else clock.now() - age

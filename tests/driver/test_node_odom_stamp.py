@@ -211,3 +211,6 @@ def test_a_frame_that_waited_for_the_lock_is_stamped_when_it_arrived(
     clock.advance(0.5)  # the reader was descheduled before handing it over (a busy host)
     node.on_frame(0x90, bytes(8))
     assert seen == [pytest.approx(100.0 - 0.1), pytest.approx(100.5)]
+    # the second is 1.6 s late: counted and warned of (the first's reception is not known)
+    assert node.core.stats["frames_handled_late"] == 1
+    assert node.lag.worst == pytest.approx(1.6)

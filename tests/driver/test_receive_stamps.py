@@ -8,7 +8,9 @@ kernel's, on udp_multicast and SocketCAN) reach the core through ``BusLink.last_
 
 from __future__ import annotations
 
+import logging
 import math
+from collections import Counter
 from typing import Any
 
 import can
@@ -16,7 +18,13 @@ import pytest
 
 from lowerbase.clock import SimClock
 from lowerbase.driver.core import LinkState
-from lowerbase.driver.links import MAX_RECEIVE_AGE, BusLink, receive_age
+from lowerbase.driver.links import (
+    LATE_HANDLING,
+    MAX_RECEIVE_AGE,
+    BusLink,
+    HandlingLag,
+    receive_age,
+)
 from lowerbase.driver.rostime import RosClock
 from lowerbase.simloop.loop import SimLoop
 
@@ -195,3 +203,22 @@ def test_a_late_senders_burst_gives_the_cycles_true_spacing() -> None:
     assert loop.driver.stats["wheel_late_samples"] > 0
     # at most 4/3: the burst's last sample is on its receive time, within half a cycle
     assert max(speeds) < 0.5 * 1.4
+
+
+def test_frames_handled_late_are_counted_and_warned_of_at_a_bounded_rate(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A reader behind its bus says so (it was silent more than 5 s behind, beside a CPU hog):
+    each frame handed on more than LATE_HANDLING after its reception counts; one warning at
+    most every 10 s of wall time sums up the ones since the last."""
+    stats: Counter[str] = Counter()
+    lag = HandlingLag(stats)
+    with caplog.at_level(logging.WARNING, logger="lowerbase.driver.links"):
+        for age, now in ((0.0, 0.0), (LATE_HANDLING, 0.5), (0.5, 1.0), (0.3, 2.0), (2.0, 5.0),
+                         (0.05, 6.0), (0.4, 11.0)):
+            lag.handled(age, now)
+    assert stats["frames_handled_late"] == 4
+    assert lag.worst == 2.0
+    warned = [r.getMessage() for r in caplog.records]
+    assert len(warned) == 2, warned
+    assert "1 frame(s) handled up to 0.500 s" in warned[0]
+    assert "3 frame(s) handled up to 2.000 s" in warned[1] and "(4 late in all)" in warned[1]

@@ -258,11 +258,16 @@ for line in sys.stdin:
             for t, e in seen.items():
                 sent = [h for s, h in zip(e["stamps"], e["sent"]) if s >= since]
                 # the rate by the messages' own stamps: a backlog delivered at once (a busy
-                # host) does not raise it, as counting arrivals in a window does
+                # host) does not raise it, as counting arrivals in a window does; "cycle" by
+                # the median step between stamps, which messages a busy host lost (this
+                # subscriber's queue overflowing) or a sender's slipped time do not lower
                 timed = len(sent) >= 3 and None not in sent and sent[-1] > sent[0]
                 rate = (len(sent) - 1) / (sent[-1] - sent[0]) if timed else None
+                steps = sorted(b - a for a, b in zip(sent, sent[1:])) if timed else []
+                cycle = steps[len(steps) // 2] if steps else None
                 out[t] = {"count": e["count"], "first": e["first"], "last": e["last"],
-                          "msg": to_plain(e["msg"]), "recent": len(sent), "rate": rate}
+                          "msg": to_plain(e["msg"]), "recent": len(sent), "rate": rate,
+                          "cycle": cycle}
         print(json.dumps(out), flush=True)
     elif op == "types":
         print(json.dumps(dict(rospy.get_published_topics())), flush=True)
@@ -421,8 +426,14 @@ def test_rates_follow_the_frame_cycles_and_values_make_sense(rig: dict[str, Any]
     expected = {"/odom": 50, "/odom_raw": 50, "/imu/data_raw": 100, "/odom_twist": 50,
                 "/status_code": 10, "/odometer": 10}
     for topic, hz in expected.items():  # by header stamps where the message has them
-        rate = stats[topic]["rate"] or stats[topic]["recent"] / window
-        assert 0.6 * hz <= rate <= 1.3 * hz, (topic, rate)
+        got = stats[topic]
+        if got["cycle"]:
+            # the cycle between two stamps, and never more messages than the cycles: a busy
+            # host can lose messages or slip the emulator's time, but not add any
+            assert 0.8 / hz <= got["cycle"] <= 1.25 / hz, (topic, got["cycle"])
+            assert got["rate"] <= 1.3 * hz, (topic, got["rate"])
+        else:  # no stamps: counted in the window
+            assert 0.6 * hz <= got["recent"] / window <= 1.3 * hz, (topic, got["recent"])
     assert 1 <= stats["/battery"]["recent"] <= 3
     imu = _msg(stats, "/imu/data_raw")
     assert imu["orientation_covariance"][0] == -1.0

@@ -89,6 +89,22 @@ class Context:
         assert got is not None
         return got
 
+    def time_slipped(self, t0: float, t1: float) -> bool | None:
+        """Whether the lower computer reports that its time slipped in [t0, t1] (reception
+        times): Heartbeat.Overruns (its own count of falling behind real time) differs between
+        its last Heartbeat before t0 and its first after t1 (waited for: two cycles at most).
+        None when they are not both there to tell, or a reboot lies between them (the reboot
+        checks' finding)."""
+        cycle = self.codec.message("Heartbeat").cycle_time or 0.5
+        before = [f for f in self.client.frames("Heartbeat", t0 - 2 * cycle) if f.t <= t0]
+        after = self.client.expect("Heartbeat", timeout=2 * cycle, since=t1)
+        if not before or after is None:
+            return None
+        a, b = before[-1].values, after.values
+        if a.get("BootCounter") != b.get("BootCounter"):
+            return None
+        return int(a.get("Overruns", 0)) != int(b.get("Overruns", 0))
+
     def state(self) -> int:
         """RobotState from a SystemStatus that reflects the last ControlCommand sent."""
         since = self._last_control + SETTLE

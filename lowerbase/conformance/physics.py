@@ -119,17 +119,10 @@ def _steady_window(ctx: Context) -> tuple[float, float]:
     its first after it (waited for, two cycles at most). Up to WINDOW_TRIES windows while the
     motion goes on; the last one when each slipped (judged all the same: the frame checks and
     frame.Heartbeat.uptime count the slips), or the first one when no Heartbeat comes."""
-    cycle = ctx.codec.message("Heartbeat").cycle_time or 0.5
     for _ in range(WINDOW_TRIES):
         t0, t1 = _window(ctx, MEASURE_WINDOW)
-        before = [f for f in ctx.client.frames("Heartbeat", t0 - 2 * cycle) if f.t <= t0]
-        after = ctx.client.expect("Heartbeat", timeout=2 * cycle, since=t1)
-        if not before or after is None:
+        if not ctx.time_slipped(t0, t1):
             break
-        a, b = before[-1].values, after.values
-        if a.get("BootCounter") != b.get("BootCounter") or int(a.get("Overruns", 0)) == int(
-                b.get("Overruns", 0)):
-            break  # a reboot is the reboot checks' finding
     return t0, t1
 
 

@@ -10,6 +10,8 @@ import pytest
 
 from lowerbase.conformance import physics
 from lowerbase.conformance.catalog import WheelSample
+from lowerbase.conformance.context import Context
+from lowerbase.conformance.core import Settings
 from lowerbase.conformance.lower_client import Received
 from lowerbase.conformance.physics import _firmware_span
 from lowerbase.protocol.codec import default_codec
@@ -83,12 +85,19 @@ class _Heartbeats:
             self.got.append(Received(t, "Heartbeat", {"Overruns": overruns % 16,
                                                       "BootCounter": boot}, b""))
 
+    codec = default_codec()
+
     def frames(self, name: str, since: float = 0.0) -> list[Received]:
-        return [f for f in self.got if f.t >= since]
+        return [f for f in self.got if f.t >= since and f.name == name]
 
     def expect(self, name: str, timeout: float = 2.0, since: float | None = None
                ) -> Received | None:
-        return next((f for f in self.got if since is not None and f.t >= since), None)
+        return next((f for f in self.got if since is not None and f.t >= since
+                     and f.name == name), None)
+
+
+def _context(client: _Heartbeats) -> Context:
+    return Context(client, Settings())  # type: ignore[arg-type]
 
 
 @pytest.fixture
@@ -114,16 +123,26 @@ def test_a_window_in_which_the_lower_computer_slipped_is_measured_again(
     short; the Heartbeat's Overruns said so. A window with a slip is measured again (the
     motion goes on), at most WINDOW_TRIES times; slips outside the Heartbeats around a window
     do not count."""
-    ctx = SimpleNamespace(codec=default_codec(), client=_Heartbeats(slips))
+    ctx = _context(_Heartbeats(slips))
     got = physics._steady_window(ctx)  # type: ignore[arg-type]
     assert len(windows) == tries == min(tries, physics.WINDOW_TRIES)
     assert got == windows[-1]
 
 
 def test_a_reboot_or_no_heartbeat_ends_the_tries(windows: list[tuple[float, float]]) -> None:
-    ctx = SimpleNamespace(codec=default_codec(), client=_Heartbeats((0.6,), boot_at=0.6))
+    ctx = _context(_Heartbeats((0.6,), boot_at=0.6))
     assert physics._steady_window(ctx) == windows[0]  # type: ignore[arg-type]
-    silent = SimpleNamespace(codec=default_codec(), client=_Heartbeats(()))
+    silent = _context(_Heartbeats(()))
     silent.client.got.clear()
     assert physics._steady_window(silent) == windows[1]  # type: ignore[arg-type]
     assert len(windows) == 2
+
+
+def test_the_watchdogs_retry_sees_the_slip_the_heartbeats_around_its_try_report() -> None:
+    """safety.watchdog measures a late try again when the lower computer's time slipped in it:
+    the same Heartbeats as the physics windows (its last before, its first after the try)."""
+    from lowerbase.conformance.safety import host_disturbance
+
+    assert "Overruns" in host_disturbance(_context(_Heartbeats((1.0,))), 0.5, 1.2)
+    assert host_disturbance(_context(_Heartbeats((3.0,))), 0.5, 1.2) == ""
+    assert host_disturbance(_context(_Heartbeats((0.1,))), 0.5, 1.2) == ""

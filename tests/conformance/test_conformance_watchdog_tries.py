@@ -11,6 +11,7 @@ from typing import Any
 import pytest
 
 from lowerbase.conformance import safety
+from lowerbase.conformance.context import Context
 from lowerbase.conformance.core import CheckFailed, Status
 from lowerbase.conformance.lower_client import Received
 from lowerbase.protocol.codec import default_codec
@@ -46,6 +47,8 @@ class _Ctx:
         self.client = _Client()
         self.tries = tries
         self.done = 0
+
+    time_slipped = Context.time_slipped  # the Context's own, on these frames
 
     def require_motion(self) -> None:
         pass

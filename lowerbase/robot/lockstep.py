@@ -32,7 +32,8 @@ from lowerbase.robot.plan import UPPER
 from lowerbase.world.maps import DEFAULT_MAP
 
 CLOCK_RATE = 100.0  #: [Hz] of simulated time: /clock, at the IMU's rate (the fastest sensor)
-WAKE_PERIOD = 0.05  #: [s] of simulated time: how often rospy's sleepers here are woken
+#: [Hz] actionlib's status rate where ``actionlib_status_frequency`` is not set (its default)
+STATUS_HZ = 5.0
 NODE = "lowerbase_robot"  #: this process' node name (the faces keep their own names)
 UNTIL = ("", "move_base", "task")  #: the conditions a step can stop at (simcontrol)
 
@@ -50,16 +51,28 @@ class LockstepOptions:
     truth: str | None = None  #: --truth FILE: the emulator's ground truth as CSV
 
 
+def status_period(rospy: Any) -> float:
+    """[s] between two statuses of this process' action servers: ``actionlib_status_frequency``
+    found as actionlib finds it (searched up the namespace; 5 Hz by default)."""
+    name = rospy.search_param("actionlib_status_frequency")
+    hz = float(rospy.get_param(name, STATUS_HZ)) if name else STATUS_HZ
+    return 1.0 / hz if hz > 0 else 1.0  # (0: no status timers; a wake a second all the same)
+
+
 class RosTime:
     """Sets this process' ROS time (``rospy.rostime``) to the simulated time. rospy's setter
-    also wakes every thread sleeping on ROS time (actionlib's status timers: each wakes,
-    finds its time not yet come and sleeps again), which cost as much as the setting at
-    every step; they are woken once per :data:`WAKE_PERIOD` of simulated time instead, which
-    a 5 Hz timer does not notice (its next time is from its schedule, not from its wake)."""
+    also wakes every thread sleeping on ROS time, which cost more than the setting at every
+    step. Those threads are actionlib's status timers (the faces' own loops do not run here:
+    the lockstep runs their work), each due once per :func:`status_period`; they are woken
+    once per ``wake_period`` (default: that period) of simulated time on its grid instead:
+    every wake finds one status due, none is skipped, each comes less than a period after its
+    time (a timer's next time is from its schedule, not from its wake)."""
 
-    def __init__(self, rospy: Any, wake_period: float = WAKE_PERIOD) -> None:
+    def __init__(self, rospy: Any, wake_period: float | None = None) -> None:
         import rospy.rostime as rostime
 
+        if wake_period is None:
+            wake_period = status_period(rospy)
         self.rospy, self.rostime, self.wake_period = rospy, rostime, wake_period
         self._wake_next = -math.inf  #: [s] the simulated time the sleepers are woken next
 

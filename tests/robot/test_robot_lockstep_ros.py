@@ -107,12 +107,13 @@ import rospy
 from rosgraph_msgs.msg import Clock
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, LaserScan
+from actionlib_msgs.msg import GoalStatusArray
 from lowerbase_sim_msgs.srv import Step
 # disable_rostime: without it rospy follows /clock itself (use_sim_time is true), with a
 # queue of 1 that the /clock subscriber below shares: a busy host then drops /clock messages
 # that arrive together (rospy.impl.simtime), which are what this counts
 rospy.init_node("stamps", anonymous=True, disable_rostime=True)
-got = {"/clock": [], "/imu/data_raw": [], "/odom": [], "/scan": []}
+got = {"/clock": [], "/imu/data_raw": [], "/odom": [], "/scan": [], "/move_base/status": []}
 def keep(topic, stamp):
     got[topic].append(stamp.to_sec())
 subs = [rospy.Subscriber("/clock", Clock, lambda m: keep("/clock", m.clock), queue_size=10000),
@@ -121,7 +122,9 @@ subs = [rospy.Subscriber("/clock", Clock, lambda m: keep("/clock", m.clock), que
         rospy.Subscriber("/odom", Odometry, lambda m: keep("/odom", m.header.stamp),
                          queue_size=10000),
         rospy.Subscriber("/scan", LaserScan, lambda m: keep("/scan", m.header.stamp),
-                         queue_size=10000)]
+                         queue_size=10000),
+        rospy.Subscriber("/move_base/status", GoalStatusArray,
+                         lambda m: keep("/move_base/status", m.header.stamp), queue_size=10000)]
 rospy.wait_for_service("/lowerbase/step", timeout=60)
 step = rospy.ServiceProxy("/lowerbase/step", Step)
 while any(s.get_num_connections() == 0 for s in subs):
@@ -151,7 +154,10 @@ def test_topics_come_at_their_rates_of_simulated_time_with_distinct_rising_stamp
         ros_master: Any, tmp_path: Path) -> None:  # noqa: F811
     """/clock and /imu/data_raw at 100 Hz, /odom at 50 Hz and /scan at 25 Hz of simulated
     time, each stamp later than the one before: over 5 simulated seconds of /lowerbase/step
-    (stepped 50 ms at a time, counted by stamp: no queue can overflow on a busy host)."""
+    (stepped 50 ms at a time, counted by stamp: no queue can overflow on a busy host). And
+    actionlib's /move_base/status at its 5 Hz: its timer thread is woken once per status
+    period, not at every step (lockstep.RosTime), and none is skipped (it runs on its own,
+    beside the steps: one more or less at the window's ends)."""
     import json
 
     require_ros(("rospy", "lowerbase_sim_msgs.srv"))
@@ -174,6 +180,9 @@ def test_topics_come_at_their_rates_of_simulated_time_with_distinct_rising_stamp
         stamps = got[topic]
         assert all(b > a for a, b in itertools.pairwise(stamps)), (topic, stamps[:20])
         assert abs(len(stamps) - 5 * rate) <= 2, (topic, len(stamps))
+    status = got["/move_base/status"]
+    assert all(b > a for a, b in itertools.pairwise(status)), status
+    assert abs(len(status) - 5 * 5) <= 2, status
 
 
 LEGGED = '''

@@ -10,6 +10,7 @@ tests are exact. :func:`real_seconds` turns a span of a clock's time into wall s
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -128,6 +129,29 @@ SLIP_WARN_EVERY = 10.0
 DUE_WITHIN = 1e-9
 
 
+class WarnLimiter:
+    """A warning said at most once per ``period`` [s] of the caller's clock, with what happened
+    since the last one: :meth:`take` counts an event (and the largest ``value`` seen) and,
+    when a warning is due (the first event, then the first at least ``period`` after the last
+    warning), returns (events, largest value) since that warning and starts counting anew;
+    None otherwise."""
+
+    def __init__(self, period: float) -> None:
+        self.period = float(period)
+        self._said: float | None = None
+        self._count = 0
+        self._worst = -math.inf
+
+    def take(self, now: float, value: float = 0.0) -> tuple[int, float] | None:
+        self._count += 1
+        self._worst = max(self._worst, value)
+        if self._said is not None and now - self._said < self.period:
+            return None
+        said = self._count, self._worst
+        self._said, self._count, self._worst = now, 0, -math.inf
+        return said
+
+
 class PacedClock:
     """The time of a model run in real time (an emulator's control loop): ``now()`` is the
     time of the period being run, moved only by :meth:`enter`, so everything the model reports
@@ -153,7 +177,7 @@ class PacedClock:
         self.name = name
         self._t = reference.now()
         self._offset = 0.0  # reference time - model time: the sum of the slips
-        self._warned: float | None = None
+        self._warn = WarnLimiter(SLIP_WARN_EVERY)
         self.overruns = 0  #: slips: times the loop fell more than catch_up behind
         self.slipped = 0.0  #: [s] the model's time lost against the reference, in all
 
@@ -192,9 +216,7 @@ class PacedClock:
         self._offset += lag
         self.overruns += 1
         self.slipped += lag
-        now = self.reference.now()
-        if self._warned is None or now - self._warned >= SLIP_WARN_EVERY:
-            self._warned = now
+        if self._warn.take(self.reference.now()) is not None:
             logging.getLogger(self.name).warning(
                 "%s fell %.3f s behind real time (a busy host); its time slipped: frames come "
                 "late, their times and the motion stay consistent (%d slips, %.3f s in all)",

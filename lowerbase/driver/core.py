@@ -41,7 +41,7 @@ from collections.abc import Callable
 from typing import Any
 
 from lowerbase.bms.frames import BmsFrameAccumulator
-from lowerbase.clock import Clock
+from lowerbase.clock import Clock, WarnLimiter
 from lowerbase.driver.core_defs import (
     _ESTOP_BITS,
     HOLD_COMMANDS,
@@ -152,8 +152,7 @@ class DriverCore(LinkLifecycle, StatusInput):
         self._twist_stamp = -math.inf
         self._next_command = -math.inf
         self._stale_sent = True
-        self._last_malformed_log = -math.inf
-        self._malformed_since_log = 0
+        self._malformed_log = WarnLimiter(self.config.malformed_log_period)
 
     # -- inputs from the upper side ------------------------------------------------------------
 
@@ -260,12 +259,10 @@ class DriverCore(LinkLifecycle, StatusInput):
 
     def _malformed(self, frame_id: int, exc: Exception, now: float) -> None:
         self.stats["malformed"] += 1
-        self._malformed_since_log += 1
-        if now - self._last_malformed_log >= self.config.malformed_log_period:
-            log.warning("%d malformed frame(s) dropped, latest ID 0x%03X: %s",
-                        self._malformed_since_log, frame_id, exc)
-            self._last_malformed_log = now
-            self._malformed_since_log = 0
+        said = self._malformed_log.take(now)
+        if said is not None:
+            log.warning("%d malformed frame(s) dropped, latest ID 0x%03X: %s", said[0],
+                        frame_id, exc)
 
     # -- periodic work -----------------------------------------------------------------------
 

@@ -26,7 +26,7 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
-from lowerbase.clock import CATCH_UP, SLIP_WARN_EVERY, Clock, RealClock
+from lowerbase.clock import CATCH_UP, SLIP_WARN_EVERY, Clock, RealClock, WarnLimiter
 from lowerbase.driver.replay import REPLAY_SUFFIXES, ReplayLink
 from lowerbase.errors import LowerbaseError
 from lowerbase.protocol.codec import default_codec
@@ -119,9 +119,7 @@ class HandlingLag:
         self.stats = stats
         self.name = name
         self.worst = 0.0  #: [s] the latest frame so far
-        self._warned: float | None = None
-        self._since = 0  # late frames since the last warning
-        self._since_worst = 0.0
+        self._warn = WarnLimiter(SLIP_WARN_EVERY)
 
     def handled(self, age: float, now: float) -> None:
         """A frame handed on ``age`` [s] after its reception, at wall time ``now`` [s]."""
@@ -129,15 +127,11 @@ class HandlingLag:
             return
         self.stats["frames_handled_late"] += 1
         self.worst = max(self.worst, age)
-        self._since += 1
-        self._since_worst = max(self._since_worst, age)
-        if self._warned is None or now - self._warned >= SLIP_WARN_EVERY:
+        said = self._warn.take(now, age)
+        if said is not None:
             log.warning("%s is behind its bus (a busy host): %d frame(s) handled up to %.3f s "
                         "after they were received; what it publishes from them comes that late "
-                        "(%d late in all)", self.name, self._since, self._since_worst,
-                        self.stats["frames_handled_late"])
-            self._warned = now
-            self._since, self._since_worst = 0, 0.0
+                        "(%d late in all)", self.name, *said, self.stats["frames_handled_late"])
 
 
 class BusLink:

@@ -35,7 +35,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from lowerbase.clock import Clock, RealClock
+from lowerbase.clock import Clock, RealClock, WarnLimiter
 from lowerbase.driver import services
 from lowerbase.driver.core import DriverConfig, DriverCore, LinkState
 from lowerbase.driver.links import (  # noqa: F401 (re-export)
@@ -133,8 +133,7 @@ class DriverNode:
         self._pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
         self._services: list[Any] = []
-        self._bad_twists = 0  # refused since the last warning
-        self._bad_twist_log = -math.inf
+        self._bad_twists = WarnLimiter(self.core.config.malformed_log_period)  # refused twists
         self._tf: Any = None
         self._last_tf_stamp: Any = None  #: of the last odom -> base_link sent
         self._last_odom_stamp: float | None = None  #: [s] of the last /odom
@@ -192,13 +191,10 @@ class DriverNode:
             # refused here, not in the core, so that a NaN stream (20/s) is one line every
             # malformed_log_period seconds, with the count, instead of a line per twist
             self.core.stats["twist_rejected"] += 1
-            self._bad_twists += 1
-            now = self.core.clock.now()
-            if now - self._bad_twist_log >= self.core.config.malformed_log_period:
+            said = self._bad_twists.take(self.core.clock.now())
+            if said is not None:
                 log.warning("ignored %d twist(s) with NaN or infinity, latest (%r, %r)",
-                            self._bad_twists, linear, angular)
-                self._bad_twist_log = now
-                self._bad_twists = 0
+                            said[0], linear, angular)
 
     def _on_led(self, msg: Any, strip: int) -> None:
         with self.lock:

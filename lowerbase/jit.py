@@ -59,11 +59,14 @@ def _njit(fn: F, where: str, options: dict[str, Any]) -> F:
 
 #: every module with kernels (``lowerbase warm`` compiles them all; a test keeps the list whole)
 KERNEL_MODULES = (
+    "lowerbase.protocol.frame_kernel",
     "lowerbase.firmware_model.lean_frames",
     "lowerbase.firmware_model.lean_kernel",
     "lowerbase.firmware_model.lean_batch",
     "lowerbase.firmware_model.imu_kernel",
+    "lowerbase.legged.kernels",
     "lowerbase.driver.ekf_kernels",
+    "lowerbase.legged_driver.reply_kernel",
     "lowerbase.world.raycast_kernel",
     "lowerbase.world.scan_kernel",
     "lowerbase.world.localization.pf_kernel",
@@ -75,6 +78,8 @@ KERNEL_MODULES = (
 
 #: the kernel modules the emulated chassis (``lowerbase emulate``) compiles
 CHASSIS_KERNEL_MODULES = tuple(m for m in KERNEL_MODULES if ".firmware_model." in m)
+#: the kernel modules the emulated legged robot (``lowerbase emulate --robot legged``) compiles
+LEGGED_KERNEL_MODULES = ("lowerbase.protocol.frame_kernel", "lowerbase.legged.kernels")
 
 
 def uncached(modules: Sequence[str] = KERNEL_MODULES) -> list[str]:

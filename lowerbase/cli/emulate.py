@@ -119,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
         if getattr(args, "speed", 1.0) != 1.0:
             raise ConfigError("--speed is for the wheeled robot; drop it with --robot legged")
 
+        _compile_notice("legged")
         return run_legged(args)
     if args.simulated and args.duration is None:
         raise ConfigError("--simulated needs --duration (it runs as fast as the CPU allows)")
@@ -232,20 +233,23 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def compile_notice() -> str | None:
-    """The line that says the chassis kernels compile in this run (not cached yet), or None.
-    On the simulated clock the compile counts against the run's factor (about 14 s of CPU
-    once; docs/benchmarks.md, "CLI emulate")."""
-    from lowerbase.jit import CHASSIS_KERNEL_MODULES, uncached
+def compile_notice(robot: str = "wheeled") -> str | None:
+    """The line that says the ``robot``'s kernels compile in this run (not cached yet), or
+    None. On the simulated clock the compile counts against the run's factor (about 14 s of
+    CPU once for the chassis; docs/benchmarks.md, "CLI emulate"); in real time the emulator
+    starts serving its buses after it."""
+    from lowerbase.jit import CHASSIS_KERNEL_MODULES, LEGGED_KERNEL_MODULES, uncached
 
-    if not uncached(CHASSIS_KERNEL_MODULES):
+    legged = robot == "legged"
+    if not uncached(LEGGED_KERNEL_MODULES if legged else CHASSIS_KERNEL_MODULES):
         return None
-    return ("lowerbase emulate: compiling the chassis' numba kernels first (not cached yet: "
-            "once, seconds to minutes; `lowerbase warm` does it ahead)")
+    whose = "the legged robot's" if legged else "the chassis'"
+    return (f"lowerbase emulate: compiling {whose} numba kernels first (not cached yet: once, "
+            f"seconds to minutes; `lowerbase warm` does it ahead)")
 
 
-def _compile_notice() -> None:
-    line = compile_notice()
+def _compile_notice(robot: str = "wheeled") -> None:
+    line = compile_notice(robot)
     if line is not None:
         print(line, file=sys.stderr, flush=True)
 

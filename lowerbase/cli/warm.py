@@ -13,6 +13,9 @@ from typing import Any
 #: simulated seconds of the task demo that touch every kernel (the lower computer's lean
 #: loop, the IMU, the EKF, the lidars' casts, amcl, the costmaps and the planner)
 WARM_SECONDS = 20.0
+#: then simulated seconds of the legged robot standing up (its period's kernels and its
+#: driver's batch decode)
+LEGGED_WARM_SECONDS = 0.5
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -20,13 +23,26 @@ def add_subparser(subparsers: Any) -> None:
         "warm",
         help="compile the numba kernels into their cache now (make env does), so the first "
         "run is as fast as the next",
-        description="Run a short stretch of the task demo on the simulated clock so that every "
-        "numba kernel is compiled and cached (minutes on the first run, seconds after). "
+        description="Run a short stretch of the task demo, then half a second of the legged "
+        "robot, on the simulated clock so that every numba kernel is compiled and cached "
+        "(minutes on the first run, seconds after). "
         "`make env` runs it; run it yourself after changing a kernel's package.",
     )
     p.add_argument("--check", action="store_true",
                    help="only list the kernel modules not compiled yet (exit 1 if any)")
     p.set_defaults(func=run)
+
+
+def _legged() -> None:
+    from lowerbase.protocol.legged import LocomotionState
+    from lowerbase.simloop.legged import LeggedSimLoop
+
+    loop = LeggedSimLoop()
+    try:
+        loop.set_goal(LocomotionState.STANDING_MODE)
+        loop.run(LEGGED_WARM_SECONDS)
+    finally:
+        loop.close()
 
 
 def run(args: argparse.Namespace) -> int:
@@ -60,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
     quiet.setLevel(logging.WARNING)  # the run's own log lines are not this command's
     try:
         run_tasks_scenario(dataclasses.replace(scenario, duration=WARM_SECONDS))
+        _legged()
     finally:
         quiet.setLevel(level)
     left = uncached()

@@ -9,24 +9,9 @@ import math
 import numpy as np
 
 from lowerbase.jit import compiled
+from lowerbase.protocol.frame_kernel import pymax
 
 _jit = compiled()
-
-@_jit
-def pymax(a: float, b: float) -> float:
-    """Python's ``max(a, b)``: the first unless the second is greater."""
-    return b if b > a else a
-
-
-@_jit
-def pymin(a: float, b: float) -> float:
-    """Python's ``min(a, b)``: the first unless the second is smaller."""
-    return b if b < a else a
-
-
-@_jit
-def clip(value: float, lo: float, hi: float) -> float:
-    return lo if value < lo else hi if value > hi else value
 
 
 @_jit

@@ -38,7 +38,8 @@ from lowerbase.firmware_model.lean_bits import (
     SPEED_LIMITED,
     WATCHDOG_STOP,
 )
-from lowerbase.firmware_model.lean_frames import _jit, clip, emit, pymax, pymin, wrap32
+from lowerbase.firmware_model.lean_frames import _jit, emit, wrap32
+from lowerbase.protocol.frame_kernel import clip, pymax, pymin
 
 TWO_PI = 2.0 * math.pi
 

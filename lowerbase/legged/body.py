@@ -18,8 +18,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from lowerbase.legged.actuator import Actuator, ActuatorParams
-from lowerbase.legged.gait import LegGeometry, Trot, leg_fk, leg_ik, smoothstep
+import numpy as np
+
+from lowerbase.legged import kernels
+from lowerbase.legged.actuator import ActuatorBank, ActuatorParams
+from lowerbase.legged.gait import KinematicsError, LegGeometry, Trot, leg_fk, leg_ik, smoothstep
 from lowerbase.protocol.legged import (
     LEGS,
     NO_JOINT,
@@ -79,7 +82,8 @@ class Body:
                  actuators: tuple[ActuatorParams, ActuatorParams, ActuatorParams],
                  trot: Trot, ambient_c: float = 25.0) -> None:
         self.p, self.g, self.trot = params, geometry, trot
-        self.actuators = [Actuator(actuators[j], ambient_c) for _ in LEGS for j in range(3)]
+        self.bank = ActuatorBank([actuators[j] for _ in LEGS for j in range(3)], ambient_c)
+        self.actuators = self.bank.actuators
         self.state = S.COMM_DISABLED
         self.last_request = NO_REQUEST
         self.result = RequestResult.NONE
@@ -95,8 +99,18 @@ class Body:
         self.vz = 0.0
         self.cmd = (0.0, 0.0, 0.0)
         self._cmd_time = -math.inf
-        self.stance = [True] * 4
         self.test_mode_commands = 0
+        #: what kernels.legs reads and fills: the geometry, the trot, stance, a failing foot,
+        #: the actuators' copper loss and electrical sum [W] of the last step
+        self._geo = np.array([geometry.abad_link, geometry.thigh, geometry.calf,
+                              geometry.hip_x, geometry.hip_y])
+        self._trot = np.array([trot.period, trot.lift])
+        self._stance = np.ones(4, np.bool_)  # of the last step: .stance
+        self._bad = np.zeros(3)
+        self.power = np.zeros(2)
+        # the compiled kernel loaded (or compiled: once, seconds) now, not in the first period
+        # of a real-time run: on a copy, so that nothing here changes
+        self._legs(0.0, False, False, self.bank.copy())
         for leg in range(4):  # lying down: the sitting pose
             for j, q in enumerate(self._leg_angles(leg, (0.0, 0.0, -params.sit_height))):
                 self.actuators[leg * 3 + j].position = q
@@ -206,31 +220,27 @@ class Body:
         self.vz = (self.height - prev_h) / dt
         if self.state is not S.SITDOWN_MODE:
             self._sit_from = self.height
-        feet = self._feet()
-        n_stance = max(sum(self.stance), 1)
-        weight = p.mass * p.gravity / n_stance if self.height > p.sit_height + 1e-9 else 0.0
-        for leg in range(4):
-            q_des = self._leg_angles(leg, feet[leg])
-            loads = self._gravity_torques(leg, q_des, weight if self.stance[leg] else 0.0)
-            for j in range(3):
-                a = self.actuators[leg * 3 + j]
-                if held:
-                    a.set_command(q_des[j], 0.0, p.kp, p.kd, -loads[j])
-                a.step(dt, loads[j] if held or self.height > p.sit_height else 0.0)
+        fail = self._legs(dt, self.state is S.IN_CONTROL, held, self.bank)
+        if fail:
+            x, y, z = self._bad
+            what = "inside the ab/ad offset" if fail % 4 == kernels.INSIDE_OFFSET else \
+                "out of the leg's reach"
+            raise KinematicsError(f"{LEGS[fail // 4 - 1]} foot ({x:.3f}, {y:.3f}, {z:.3f}) "
+                                  f"is {what}")
 
-    def _feet(self) -> list[tuple[float, float, float]]:
-        if self.state is not S.IN_CONTROL:
-            self.stance = [True] * 4
-            return [(0.0, 0.0, -self.height)] * 4
+    @property
+    def stance(self) -> list[bool]:
+        """Which feet (FR, FL, RR, RL) were on the ground in the last step."""
+        return [bool(st) for st in self._stance]
+
+    def _legs(self, dt: float, walking: bool, held: bool, b: ActuatorBank) -> int:
+        p = self.p
         vx, vy, wz = self.v
-        out = []
-        for leg in range(4):
-            hx, hy = FRONT[leg] * self.g.hip_x, SIDES[leg] * self.g.hip_y
-            dx, dy, z, st = self.trot.foot(leg, self._gait_t, (vx - wz * hy, vy + wz * hx),
-                                           self.height)
-            self.stance[leg] = st
-            out.append((dx, dy, z))
-        return out
+        return int(kernels.legs(dt, walking, held, self._gait_t, vx, vy, wz, self.height,
+                                p.sit_height, p.mass * p.gravity, p.kp, p.kd, self._geo,
+                                self._trot, self._stance, self._bad, b.position, b.velocity,
+                                b.torque, b.temperature, b.zero_offset, b.motor_mode, b.error,
+                                b.command, b.par, b.ambient, self.power))
 
     def _walk(self, dt: float) -> None:
         p = self.p
@@ -244,21 +254,9 @@ class Body:
         self.yaw = math.atan2(math.sin(self.yaw + wz * dt), math.cos(self.yaw + wz * dt))
         self._gait_t += dt
 
-    def _gravity_torques(self, leg: int, q: tuple[float, ...], force: float) -> list[float]:
-        """Joint torques of a vertical ground force on the foot (J^T F, numeric Jacobian)."""
-        if force == 0.0:
-            return [0.0, 0.0, 0.0]
-        side, h = SIDES[leg], 1e-6
-        base = leg_fk((q[0], q[1], q[2]), side, self.g)[2]
-        out = []
-        for j in range(3):
-            qq = list(q)
-            qq[j] += h
-            dz = (leg_fk((qq[0], qq[1], qq[2]), side, self.g)[2] - base) / h
-            out.append(-force * dz)  # the ground pushes the foot up: load on the joint
-        return out
-
     def _check_faults(self) -> None:
+        if self.fault or not self.bank.error.any():
+            return
         for i, a in enumerate(self.actuators):
             if a.error is not ActuatorError.NORMAL and not self.fault:
                 self.fault = Fault.ACTUATOR_OVER_TEMPERATURE if \

@@ -5,6 +5,9 @@ Leg frame: origin on the ab/ad axis, x forward, y left, z up. The ab/ad joint tu
 the thigh and the calf joints about y (positive knee folds the leg). ``side`` is -1 for a right
 leg, +1 for a left one; with every joint at zero the leg hangs straight down below the hip,
 offset by ``side * abad_link`` sideways.
+
+The body controller's period runs this arithmetic compiled (:mod:`lowerbase.legged.kernels`);
+these functions are its reference, and tests hold the kernel to them bit for bit.
 """
 
 from __future__ import annotations

@@ -10,6 +10,10 @@ Every 1 ms :meth:`LeggedLower.step`:
    outside it; on entering MOTOR_COMMUTATION the enter-motor-mode frame instead, on leaving
    motor mode the exit frame. Each actuator answers each frame with ``MotorReply``: 3 commands
    and 3 replies per leg bus per ms;
+   The actuators' 24 frames are encoded together, in compiled code (:func:`lowerbase.legged.
+   kernels.traffic`); a ``send_batch(buses, frame_ids, payloads)`` given at construction gets
+   them as arrays in one call (:class:`~lowerbase.simloop.legged.LeggedSimLoop`), else each
+   goes to ``send`` in its order;
 3. sends the body frames that are due on bus 0 at their DBC cycle times (LocomotionStatus,
    Heartbeat, Base*, BodyTemperature, and the Bms* frames while the BMS answers).
 
@@ -33,33 +37,35 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from lowerbase.bms.status import SwitchStatus
 from lowerbase.clock import Clock
-from lowerbase.errors import ConfigError, ProtocolError
-from lowerbase.legged.actuator import Actuator
+from lowerbase.errors import ConfigError, EncodeError, ProtocolError
+from lowerbase.legged import kernels
 from lowerbase.legged.profile import LeggedProfile
-from lowerbase.legged.thermal import BodyThermal, copper_loss, electrical_power
+from lowerbase.legged.thermal import BodyThermal
 from lowerbase.protocol.codec import Codec
 from lowerbase.protocol.legged import (
     BODY_BUS,
     COMMAND_MESSAGES,
+    JOINT_NAMES,
     KD_MAX,
     KP_MAX,
     N_JOINTS,
     P_MAX,
     REPLY_ID,
-    REPLY_PREFIX,
     T_MAX,
     V_MAX,
     Fault,
     LocomotionState,
     RequestResult,
     Special,
+    actuator_layouts,
     joint_address,
     joint_index,
     legged_codec,
     parse_special,
-    special_frame,
 )
 
 log = logging.getLogger(__name__)
@@ -67,6 +73,8 @@ log = logging.getLogger(__name__)
 S = LocomotionState
 #: (bus, frame ID, payload) -> the wire
 Send = Callable[[int, int, bytes], None]
+#: (buses, frame IDs, payloads (n, 8) uint8) -> the wire, in row order; the arrays are reused
+SendBatch = Callable[[np.ndarray, np.ndarray, np.ndarray], None]
 
 DT = 0.001  #: [s] the control loop, = the actuator commands' DBC cycle time
 PROTOCOL_VERSION = 1
@@ -97,12 +105,15 @@ def _clamp(x: float, limit: float, low: float | None = None) -> float:
 class LeggedLower:
     """The lower computer; ``send(bus, frame_id, data)`` puts a frame on leg bus ``bus``.
 
-    ``bms``: a :class:`~lowerbase.bms.adapter.McuBmsAdapter` (None: no battery frames)."""
+    ``bms``: a :class:`~lowerbase.bms.adapter.McuBmsAdapter` (None: no battery frames);
+    ``send_batch``: where the actuator traffic goes as one batch per period (None: to
+    ``send``, frame by frame)."""
 
     def __init__(self, profile: LeggedProfile, clock: Clock, send: Send, *, bms: Any = None,
                  boot_counter: int = 1, codec: Codec | None = None,
-                 defects: tuple[str, ...] = ()) -> None:
+                 defects: tuple[str, ...] = (), send_batch: SendBatch | None = None) -> None:
         self.profile, self.clock, self.send, self.bms = profile, clock, send, bms
+        self.send_batch = send_batch
         self.codec = codec or legged_codec()
         self.dt = DT
         self.body = profile.make_body()
@@ -113,6 +124,8 @@ class LeggedLower:
         self.stats: Counter[str] = Counter()
         self.tick = 0
         self.bms_snapshot: Any = None
+        self._protection_of: Any = None  # the snapshot _protection was made of
+        self._protection = False
         self._wire_state = self.body.state
         self._counters: dict[str, int] = {}
         self._bms_charge = self._bms_elapsed = 0.0
@@ -123,6 +136,7 @@ class LeggedLower:
         self._reply = c.message("MotorReply")
         self._request_id = c.message("LocomotionRequest").frame_id
         self._velocity_id = c.message("BodyVelocityCommand").frame_id
+        self._traffic_tables()
         self._periodic = [(m, round(m.cycle_time / DT)) for m in c
                           if m.is_periodic and "Body" in m.senders and m.cycle_time
                           and m.frame_id not in COMMAND_MESSAGES]
@@ -200,7 +214,7 @@ class LeggedLower:
             a.set_command(float(s["Position"]), float(s["Velocity"]), float(s["Kp"]),
                           float(s["Kd"]), float(s["Torque"]))
             self.body.test_mode_commands += 1
-        self._send_reply(bus, frame_id, a)
+        self._send_reply(bus, index)
 
     # -- the control period -------------------------------------------------------------------
 
@@ -208,13 +222,12 @@ class LeggedLower:
         """One 1 ms period: models, actuator traffic, the body frames that are due."""
         body, dt = self.body, self.dt
         body.step(dt)
-        losses = sum(copper_loss(a) for a in body.actuators)
+        losses, electric = body.power.tolist()  # of the actuators' step just done
         volts = self.bms_snapshot.voltage if self.bms_snapshot is not None else \
             self.profile.battery.nominal_voltage_v
         electronics = self.profile.battery.idle_current_a * volts
         self.thermal.step(dt, electronics + self.profile.thermal.motor_heat_fraction * losses)
-        load = electrical_power(body.actuators, self.profile.power.drive_efficiency) / \
-            max(volts, 1.0)
+        load = max(electric, 0.0) / self.profile.power.drive_efficiency / max(volts, 1.0)
         self._update_bms(dt, load)
         self._check_faults()
         self._watchdog()
@@ -242,31 +255,51 @@ class LeggedLower:
                 special = Special.EXIT_MOTOR_MODE
         if special is None and state in SILENT_STATES:
             return
-        for index in range(N_JOINTS):
-            bus, mid = joint_address(index)
-            a = self.body.actuators[index]
-            if special is not None:
-                data = special_frame(special)
-            elif a.motor_mode:
-                p, v, kp, kd, tau = a.command
-                data = self._cmd[mid].encode({
-                    "Position": _clamp(p, P_MAX), "Velocity": _clamp(v, V_MAX),
-                    "Kp": _clamp(kp, KP_MAX, 0.0), "Kd": _clamp(kd, KD_MAX, 0.0),
-                    "Torque": _clamp(tau, T_MAX[mid])})
-            else:  # outside motor mode: zero gains (the firmware ignores it anyway)
-                data = self._cmd[mid].encode({
-                    "Position": _clamp(a.reported_position, P_MAX), "Velocity": 0.0,
-                    "Kp": 0.0, "Kd": 0.0, "Torque": 0.0})
-            self.send(bus, mid, data)
-            self._send_reply(bus, mid, a)
+        out = self._encode_traffic(special)
+        if self.send_batch is not None:
+            self.send_batch(self._buses, self._ids, out)
+            return
+        data, send = out.tobytes(), self.send
+        for k, (bus, frame_id) in enumerate(self._addresses):
+            send(bus, frame_id, data[8 * k: 8 * k + 8])
 
-    def _send_reply(self, bus: int, mid: int, a: Actuator) -> None:
-        prefix = REPLY_PREFIX[mid]
-        self.send(bus, REPLY_ID, self._reply.encode({
-            "MotorId": mid, f"{prefix}Position": _clamp(a.reported_position, P_MAX),
-            f"{prefix}Velocity": _clamp(a.velocity, V_MAX),
-            f"{prefix}Torque": _clamp(a.torque, T_MAX[mid]),
-            "Temperature": round(_clamp(a.temperature, 215.0, -40.0)), "Error": int(a.error)}))
+    def _encode_traffic(self, special: Special | None) -> np.ndarray:
+        """The period's 24 actuator frames (kernels.traffic), in a reused array."""
+        bank, out, t = self.body.bank, self._frames, self._layouts
+        bad = kernels.traffic(0 if special is None else int(special), bank.position,
+                              bank.zero_offset, bank.velocity, bank.torque, bank.temperature,
+                              bank.error, bank.motor_mode, bank.command, t.command_sig,
+                              t.command_scale, t.reply_sig, t.reply_scale, self._limits,
+                              t.big_endian, out)
+        if bad >= 0:
+            raise EncodeError(f"{JOINT_NAMES[bad // 2]}'s {('command', 'reply')[bad % 2]} "
+                              f"does not encode: a value is not finite (its actuator's "
+                              f"state is broken)")
+        return out
+
+    def _traffic_tables(self) -> None:
+        """The actuator traffic's frames in kernels.traffic's order (per joint: its command,
+        its reply) and the DBC layouts it encodes them by."""
+        self._addresses = [a for i in range(N_JOINTS) for a in (
+            joint_address(i), (joint_address(i)[0], REPLY_ID))]
+        self._buses = np.array([b for b, _ in self._addresses], np.int64)
+        self._ids = np.array([f for _, f in self._addresses], np.int64)
+        self._frames = np.zeros((len(self._addresses), 8), np.uint8)
+        self._reply_row, self._scratch = np.zeros(8, np.uint8), np.zeros(6)
+        self._layouts = actuator_layouts(self.codec)
+        self._limits = np.array([P_MAX, V_MAX, KP_MAX, KD_MAX,
+                                 *(T_MAX[mid] for mid in sorted(COMMAND_MESSAGES))])
+        self._encode_traffic(None)  # the kernel loaded now, not in the first period
+
+    def _send_reply(self, bus: int, index: int) -> None:
+        """Actuator ``index``'s answer to a command from the upper side (IN_TEST_MODE)."""
+        b, row, t = self.body.bank, self._reply_row, self._layouts
+        if not kernels.reply(index, b.position, b.zero_offset, b.velocity, b.torque,
+                             b.temperature, b.error, t.reply_sig, t.reply_scale, self._limits,
+                             t.big_endian, row, self._scratch):
+            raise EncodeError(f"{JOINT_NAMES[index]}'s reply does not encode: a value is not "
+                              f"finite (its actuator's state is broken)")
+        self.send(bus, REPLY_ID, row.tobytes())
 
     # -- faults and the battery ---------------------------------------------------------------
 
@@ -279,8 +312,11 @@ class LeggedLower:
         snap = self.bms_snapshot
         if snap is None:
             return False
-        return not snap.switch_status & SwitchStatus.DISCHARGE or \
-            snap.soc < self.profile.power.critical_battery_soc
+        if snap is not self._protection_of:  # a new snapshot (every BMS poll, 0.5 s)
+            self._protection_of = snap
+            self._protection = not snap.switch_status & SwitchStatus.DISCHARGE or \
+                snap.soc < self.profile.power.critical_battery_soc
+        return self._protection
 
     def _check_faults(self) -> None:
         if self.thermal.temperature >= self.profile.thermal.body_fault_c and \

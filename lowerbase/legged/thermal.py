@@ -7,27 +7,14 @@ over a step the exact update is  T <- T_ss + (T - T_ss) exp(-dt / (R C)),  T_ss 
 
 Load: what the actuators draw from the pack, I = max(sum(tau w + copper loss), 0) / eta / V
 (mechanical power on the joint side plus the winding loss, through the drivers' efficiency;
-braking energy recovered by one actuator feeds the others, the pack is never charged).
+braking energy recovered by one actuator feeds the others, the pack is never charged). Both
+sums are made with the actuators' step (:func:`lowerbase.legged.kernels.legs`, into
+``Body.power``); :class:`~lowerbase.legged.lower.LeggedLower` applies eta and V.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
-
-from lowerbase.legged.actuator import Actuator
-
-
-def copper_loss(a: Actuator) -> float:
-    """Winding loss 3/2 R i_q^2 of the torque the actuator applied last [W]."""
-    i_q = a.current()
-    return 1.5 * a.params.phase_resistance * i_q * i_q
-
-
-def electrical_power(actuators: Iterable[Actuator], efficiency: float) -> float:
-    """Power the actuators draw from the battery bus [W] (>= 0)."""
-    total = sum(a.torque * a.velocity + copper_loss(a) for a in actuators)
-    return max(total, 0.0) / efficiency
 
 
 class BodyThermal:

@@ -6,6 +6,9 @@ frame_id, data)`` callable, like the wheeled :class:`~lowerbase.driver.core.Driv
 rospy node (:mod:`lowerbase.legged_driver.node`) and the tests drive it the same way. Frames
 come from four leg buses (``lowerbase.protocol.legged``): MotorReply on every leg bus, the body
 frames on ``BODY_BUS``. A malformed frame or a body frame on the wrong bus is counted and dropped.
+:meth:`LeggedDriverCore.on_frames` takes a period's frames at once (the simulated loop's 24
+actuator frames per ms), decoded in compiled code (:mod:`.reply_kernel`), with the same result
+as :meth:`~LeggedDriverCore.on_frame` frame by frame.
 
 The velocity the robot is sent, every tick: the joystick holder's Joy (set_listen) if someone
 holds control; else a fresh velocity command (``set_velocity``, the node's cmd_vel); else the
@@ -27,8 +30,8 @@ from typing import ClassVar
 import numpy as np
 
 from lowerbase.clock import Clock
-from lowerbase.errors import LowerbaseError, MapError
-from lowerbase.legged_driver import pcdmap
+from lowerbase.errors import LowerbaseError, MapError, ProtocolError
+from lowerbase.legged_driver import pcdmap, reply_kernel
 from lowerbase.legged_driver.joystick import JoyHandover, JoyListenType, JoyMapping
 from lowerbase.legged_driver.waypoints import (
     GPS,
@@ -44,8 +47,11 @@ from lowerbase.protocol.legged import (
     BODY_BUS,
     JOINT_NAMES,
     N_BUSES,
+    REPLY_ID,
     REPLY_PREFIX,
+    ActuatorLayouts,
     LocomotionState,
+    actuator_layouts,
     joint_index,
     legged_codec,
 )
@@ -117,7 +123,10 @@ class LeggedDriverCore:
         self.codec = legged_codec()
         self._decode = self.codec.decode
         self.stats: Counter[str] = Counter()
-        self.actuators = [Actuator(n) for n in JOINT_NAMES]
+        #: the actuators' last replies, a row per joint: position [rad], velocity [rad/s],
+        #: effort [Nm], temperature [degC], status (the error code)
+        self.joints = np.zeros((len(JOINT_NAMES), 5))
+        self._tables: ActuatorLayouts | None = None  # on_frames' layouts, made at its first
         self.base_pos = [0.0, 0.0, 0.0]
         self.base_quat = [0.0, 0.0, 0.0, 1.0]
         self.base_lin_vel = [0.0, 0.0, 0.0]
@@ -156,12 +165,9 @@ class LeggedDriverCore:
                 return
             motor = int(s["MotorId"])
             prefix = REPLY_PREFIX[motor]
-            a = self.actuators[joint_index(bus, motor)]
-            a.position = float(s[prefix + "Position"])
-            a.velocity = float(s[prefix + "Velocity"])
-            a.effort = float(s[prefix + "Torque"])
-            a.temperature = float(s["Temperature"])
-            a.status = int(s["Error"])
+            self.joints[joint_index(bus, motor)] = (
+                float(s[prefix + "Position"]), float(s[prefix + "Velocity"]),
+                float(s[prefix + "Torque"]), float(s["Temperature"]), int(s["Error"]))
             self.stats["motor_reply"] += 1
             return
         if bus != BODY_BUS:
@@ -176,6 +182,46 @@ class LeggedDriverCore:
         self.stats[name] += 1
         for listener in self.listeners:
             listener(name)
+
+    def on_frames(self, buses: np.ndarray, frame_ids: np.ndarray, data: np.ndarray) -> None:
+        """Frames ``data`` (n, 8) from leg buses ``buses`` in row order, as :meth:`on_frame`
+        takes them one by one: ``buses`` and ``frame_ids`` int64 of length n, ``data`` uint8
+        (n, 8) (8-byte payloads only); other arrays are a :class:`~lowerbase.errors.
+        ProtocolError`."""
+        n = len(frame_ids)
+        if not (data.shape == (n, 8) and buses.shape == frame_ids.shape == (n,)
+                and data.dtype == np.uint8 and buses.dtype == frame_ids.dtype == np.int64):
+            raise ProtocolError(f"on_frames takes int64 buses and frame IDs of one length and "
+                                f"a uint8 (n, 8) payload array, not {buses.dtype}"
+                                f"{buses.shape}, {frame_ids.dtype}{frame_ids.shape}, "
+                                f"{data.dtype}{data.shape}")
+        t = self._tables if self._tables is not None else self._batch_tables()
+        counts = self._counts
+        counts.fill(0)
+        r = 0
+        while r < n:
+            r = reply_kernel.frames(r, buses, frame_ids, data, REPLY_ID, N_BUSES, BODY_BUS,
+                                    t.mux_sig, t.mux_scale, t.reply_sig, t.reply_scale,
+                                    t.command_sig, t.command_scale, t.big_endian, self.joints,
+                                    counts)
+            if r < n:
+                self.on_frame(int(buses[r]), int(frame_ids[r]), data[r].tobytes())
+                r += 1
+        stats = self.stats
+        for key, count in zip(reply_kernel.COUNT_KEYS, counts.tolist(), strict=True):
+            if count:
+                stats[key] += count
+
+    def _batch_tables(self) -> ActuatorLayouts:
+        self._tables = actuator_layouts(self.codec)
+        self._counts = np.zeros(len(reply_kernel.COUNT_KEYS), np.int64)
+        return self._tables
+
+    @property
+    def actuators(self) -> list[Actuator]:
+        """The actuators' last replies by name (robot_state.actuator_states)."""
+        return [Actuator(name, p, v, e, int(st), t) for name, (p, v, e, t, st)
+                in zip(JOINT_NAMES, self.joints.tolist(), strict=True)]
 
     def _locomotion(self, s: dict[str, float | int | str]) -> None:
         self.state = LocomotionState(int(s["State"]))

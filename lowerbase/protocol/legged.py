@@ -11,11 +11,15 @@ raw values) is read as the special frame, as on the real actuator.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from enum import IntEnum, IntFlag
 from functools import cache
 from pathlib import Path
 
+import numpy as np
+
 from lowerbase.protocol.codec import Codec
+from lowerbase.protocol.frame_table import layout
 
 LEGGED_DBC_PATH = Path(__file__).resolve().with_name("legged.dbc")
 
@@ -145,3 +149,40 @@ class ActuatorError(IntEnum):
 def legged_codec() -> Codec:
     """The compiled codec of the packaged ``legged.dbc`` (built once per process)."""
     return Codec(LEGGED_DBC_PATH)
+
+
+@dataclass(frozen=True)
+class ActuatorLayouts:
+    """The actuator frames' DBC layouts for the compiled packers (``frame_kernel``), stacked
+    by CAN ID - 1: command m's Position, Velocity, Kp, Kd, Torque (``command_sig[m]``); reply m's
+    MotorId, position, velocity, torque, Temperature, Error (``reply_sig[m]``); MotorReply's
+    multiplexer alone (``mux_sig``)."""
+
+    command_sig: np.ndarray
+    command_scale: np.ndarray
+    reply_sig: np.ndarray
+    reply_scale: np.ndarray
+    mux_sig: np.ndarray
+    mux_scale: np.ndarray
+    big_endian: bool
+
+
+def actuator_layouts(codec: Codec) -> ActuatorLayouts:
+    """:class:`ActuatorLayouts` of ``codec`` (a legged catalog); TypeError when its actuator
+    frames are not all 8 bytes in one byte order."""
+    ids = sorted(COMMAND_MESSAGES)
+    reply = codec.message("MotorReply")
+    commands = [layout(codec.message(COMMAND_MESSAGES[m]),
+                       ("Position", "Velocity", "Kp", "Kd", "Torque")) for m in ids]
+    replies = [layout(reply, ("MotorId", f"{p}Position", f"{p}Velocity", f"{p}Torque",
+                              "Temperature", "Error")) for p in (REPLY_PREFIX[m] for m in ids)]
+    mux = layout(reply, ("MotorId",))
+    frames = [mux, *commands, *replies]
+    if len({f.big_endian for f in frames}) != 1 or any(f.length != 8 for f in frames):
+        raise TypeError(f"{LEGGED_DBC_PATH.name}: the actuator frames must be 8 bytes long in "
+                        f"one byte order")
+    return ActuatorLayouts(np.stack([f.sig for f in commands]),
+                           np.stack([f.scale for f in commands]),
+                           np.stack([f.sig for f in replies]),
+                           np.stack([f.scale for f in replies]), mux.sig, mux.scale,
+                           mux.big_endian)

@@ -3,7 +3,8 @@ to back, as :class:`~lowerbase.simloop.loop.SimLoop` is for the wheeled chassis.
 
 Every 1 ms (the lower computer's period, :data:`lowerbase.legged.lower.DT`) the lower
 computer steps and its frames go straight to :class:`~lowerbase.legged_driver.core.
-LeggedDriverCore` (``on_frame``) on the same leg bus; every ``1 / command_rate`` the driver
+LeggedDriverCore` on the same leg bus (the 24 actuator frames of a period as one batch,
+``on_frames``; the body frames one by one, ``on_frame``); every ``1 / command_rate`` the driver
 ticks (BodyVelocityCommand) and a locomotion goal (``~walk`` / ``~stand`` / ``~sit``) is
 pursued as the rospy node does it, by the same :class:`lowerbase.legged_driver.goals.
 GoalPursuit` (retried every ``request_retry``). The driver's frames reach the lower computer
@@ -13,6 +14,8 @@ at once. Nothing is lost or reordered; ``tap(t, direction, bus, frame_id, data)`
 from __future__ import annotations
 
 from collections.abc import Callable
+
+import numpy as np
 
 from lowerbase.bms.adapter import McuBmsAdapter
 from lowerbase.bms.device import BmsDevice
@@ -44,7 +47,8 @@ class LeggedSimLoop:
                                     low_soc=p.power.low_battery_soc,
                                     critical_soc=p.power.critical_battery_soc,
                                     temp_warning_c=p.power.battery_temp_warning)
-        self.lower = LeggedLower(self.profile, self.clock, self._from_lower, bms=adapter)
+        self.lower = LeggedLower(self.profile, self.clock, self._from_lower, bms=adapter,
+                                 send_batch=self._batch_from_lower)
         self.driver = LeggedDriverCore(self._from_driver, self.clock, config)
         self.dt = self.lower.dt
         self.tick_every = max(1, round(1.0 / (self.driver.config.command_rate * self.dt)))
@@ -59,6 +63,15 @@ class LeggedSimLoop:
         if self.tap is not None:
             self.tap(self.clock.now(), "lower", bus, frame_id, data)
         self.driver.on_frame(bus, frame_id, data)
+
+    def _batch_from_lower(self, buses: np.ndarray, frame_ids: np.ndarray,
+                          data: np.ndarray) -> None:
+        if self.tap is not None:
+            now, tap = self.clock.now(), self.tap
+            for bus, frame_id, row in zip(buses.tolist(), frame_ids.tolist(), data,
+                                          strict=True):
+                tap(now, "lower", bus, frame_id, row.tobytes())
+        self.driver.on_frames(buses, frame_ids, data)
 
     def _from_driver(self, bus: int, frame_id: int, data: bytes) -> None:
         if self.tap is not None:

@@ -41,10 +41,11 @@ def test_emulate_says_when_its_kernels_compile_in_the_run(tmp_path: Path) -> Non
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     code = ("from lowerbase.cli.emulate import compile_notice; "
             "from lowerbase.jit import CHASSIS_KERNEL_MODULES as m; "
-            "print(m); print(compile_notice())")
+            "print(m); print(compile_notice()); print(compile_notice('legged'))")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                          cwd=ROOT, timeout=300)
     assert out.returncode == 0, out.stderr
     assert "lowerbase.firmware_model.lean_kernel" in out.stdout
     assert "lowerbase.world" not in out.stdout
     assert "compiling the chassis' numba kernels first" in out.stdout
+    assert "compiling the legged robot's numba kernels first" in out.stdout

@@ -51,12 +51,14 @@ def _line(proc: subprocess.Popen[str], wanted: str) -> str:
 
 
 def _emulator_stats(stderr: str) -> dict[str, int]:
-    """The counters of ``lowerbase emulate: stopped after T s; key n, key n``."""
+    """The counters of ``lowerbase emulate: stopped after T s; key n, key n`` (the clauses
+    that are no counters, such as the time slipped on a busy host, are left out)."""
     line = next(ln for ln in reversed(stderr.splitlines()) if "stopped after" in ln)
     out = {}
-    for item in line.split("; ", 1)[1].split(", "):
+    for item in line.split("; ", 1)[1].replace("; ", ", ").split(", "):
         key, _, value = item.rpartition(" ")
-        out[key] = int(value)
+        if key and value.isdigit():
+            out[key] = int(value)
     return out
 
 

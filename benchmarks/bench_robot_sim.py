@@ -10,6 +10,13 @@
 - ``paused, with 16 busy processes``: the same goals with ``--paused`` and the client's
   ``--step``, once idle and once beside 16 processes spinning at nice 0: the final true poses
   (``--truth``) must be identical; the wall time of each.
+- ``legged robot alone``: this process becomes the legged lockstep robot (its lower computer,
+  driver core and ROS face, no client on ROS), walks (~walk) and trots for
+  :data:`LEGGED_SECONDS`: simulated seconds per wall second (issue 21's target >= 20 x).
+- ``legged robot trotting``: ``lowerbase robot --robot legged --sim-time --paused --speed max``;
+  a rospy client subscribed to robot_state calls ~walk, steps until IN_CONTROL, gives a
+  waypoint 100 m ahead and times one ``/lowerbase/step`` of :data:`LEGGED_SECONDS`: the 12
+  actuators' 24,000 frames per simulated second, the driver and its face, all the way.
 
 Needs ROS (rosmaster, rospy); skipped without it.
 """
@@ -30,6 +37,36 @@ from benchmarks.common import Row
 
 ROOT = Path(__file__).resolve().parents[1]
 GROUP = "robot --sim-time"
+LEGGED_SECONDS = 30.0  #: simulated seconds of trotting timed (the quick run: a third)
+LEGGED_CLIENT = """
+import json, sys, time
+import rospy
+from std_srvs.srv import Trigger
+from lowerbase_legged_msgs.msg import RobotState, Waypoint
+from lowerbase_legged_msgs.srv import SetWaypoints
+from lowerbase_sim_msgs.srv import Step
+rospy.init_node("legged_bench", anonymous=True)
+states = []
+rospy.Subscriber("/robot_state", RobotState, states.append, queue_size=100000)
+rospy.wait_for_service("/lowerbase/step", timeout=60)
+step = rospy.ServiceProxy("/lowerbase/step", Step)
+step(seconds=1.0, until="")
+rospy.ServiceProxy("/legged_driver/walk", Trigger)()
+for _ in range(40):
+    step(seconds=0.5, until="")
+    time.sleep(0.3)
+    if states and states[-1].state == RobotState.IN_CONTROL:
+        break
+ok = rospy.ServiceProxy("/planning/set_waypoints", SetWaypoints)(
+    waypoints=[Waypoint(frame="odom", x=100.0, y=0.0)], repetition=1, current_index=0).success
+n0, t0 = len(states), time.perf_counter()
+step(seconds=float(sys.argv[2]), until="")
+wall = time.perf_counter() - t0
+time.sleep(1.0)
+walked = [s for s in states[n0:] if s.state == RobotState.IN_CONTROL]
+json.dump({"wall": wall, "mission": ok, "states": len(states) - n0, "trotting": len(walked),
+           "x": states[-1].base_pos[0] - states[n0 - 1].base_pos[0]}, open(sys.argv[1], "w"))
+"""
 
 
 def _free_port() -> int:
@@ -88,18 +125,24 @@ for i in range({goals}):
 print(json.dumps([r.now - s0, time.perf_counter() - t0, ok]))
 r.shutdown(); rospy.signal_shutdown("done")
 """
+    sim, wall, ok = _result(master, code, "the lockstep robot")
+    return float(sim), float(wall), int(ok)
+
+
+def _result(master: _Master, code: str, what: str) -> list[Any]:
+    """The JSON list ``code`` prints, run as a child process on ``master``."""
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          env=master.env(), cwd=ROOT, timeout=3600)
     # the faces print their stop lines after the result: take the result's own line
     lines = [ln for ln in out.stdout.splitlines() if ln.startswith("[") and ln.endswith("]")]
     if not lines:
-        raise RuntimeError(f"the lockstep robot gave no result: {out.stderr[-2000:]}")
-    sim, wall, ok = json.loads(lines[-1])
-    return float(sim), float(wall), int(ok)
+        raise RuntimeError(f"{what} gave no result: {out.stderr[-2000:]}")
+    return list(json.loads(lines[-1]))
 
 
-def _robot(master: _Master, tmp: Path, *extra: str) -> subprocess.Popen[str]:
-    proc = subprocess.Popen([sys.executable, "-m", "lowerbase", "robot", "--map", "warehouse",
+def _robot(master: _Master, tmp: Path, *extra: str,
+           robot: tuple[str, ...] = ("--map", "warehouse")) -> subprocess.Popen[str]:
+    proc = subprocess.Popen([sys.executable, "-m", "lowerbase", "robot", *robot,
                              "--sim-time", "--log-dir", str(tmp / "logs"), *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=master.env(), cwd=ROOT)
@@ -114,6 +157,57 @@ def _stop(proc: subprocess.Popen[str]) -> str:
     proc.send_signal(2)
     out, _ = proc.communicate(timeout=120)
     return out
+
+
+def _legged_in_process(master: _Master, seconds: float) -> Row:
+    code = f"""
+import json, time
+from lowerbase.protocol.legged import LocomotionState as S
+from lowerbase.robot.lockstep import LockstepOptions
+from lowerbase.robot.lockstep_legged import LeggedLockstep
+from lowerbase.robot.simrun import init_rospy
+rospy = init_rospy()
+r = LeggedLockstep(LockstepOptions(), rospy)
+r.advertise()
+r.node.goals.set(S.IN_CONTROL)
+r.run_periods(5000)
+state = int(r.loop.driver.state)
+t0, x0 = time.perf_counter(), r.loop.lower.body.x
+for _ in range({round(seconds * 20)}):  # cmd_vel at 20 Hz, as a teleop would
+    r.node.core.set_velocity(0.5, 0.0, 0.2)
+    r.run_periods(50)
+print(json.dumps([time.perf_counter() - t0, state, int(r.loop.driver.state),
+                  r.loop.lower.body.x - x0]))
+r.shutdown(); rospy.signal_shutdown("done")
+"""
+    wall, before, after, dx = _result(master, code, "the legged lockstep robot")
+    if before != after or after != 7:
+        raise RuntimeError(f"the legged robot did not trot throughout (state {before} -> "
+                           f"{after})")
+    return Row(GROUP, "legged robot alone, trotting, 12 actuators at 1 kHz", seconds / wall,
+               "x", f"{seconds:g} simulated s IN_CONTROL in {wall:.2f} s wall (driver core, "
+               f"robot_state at 50 Hz, /clock; nobody subscribed); the base {dx:.1f} m on; "
+               f"load {os.getloadavg()[0]:.1f}")
+
+
+def _legged(master: _Master, tmp: Path, seconds: float) -> Row:
+    robot = _robot(master, tmp / "legged", "--paused", "--speed", "max",
+                   robot=("--robot", "legged"))
+    script, report = tmp / "legged_client.py", tmp / "legged.json"
+    script.write_text(LEGGED_CLIENT)
+    try:
+        run = subprocess.run([sys.executable, str(script), str(report), str(seconds)],
+                             capture_output=True, text=True, env=master.env(), timeout=3600)
+        if run.returncode != 0:
+            raise RuntimeError(f"the legged client failed: {run.stderr[-2000:]}")
+    finally:
+        _stop(robot)
+    got = json.loads(report.read_text())
+    return Row(GROUP, "legged robot trotting, 12 actuators at 1 kHz, a rospy client",
+               seconds / got["wall"], "x",
+               f"one /lowerbase/step of {seconds:g} simulated s in {got['wall']:.2f} s wall; "
+               f"robot_state {got['states']} messages ({got['trotting']} IN_CONTROL), the "
+               f"base {got['x']:.1f} m ahead; load {os.getloadavg()[0]:.1f}")
 
 
 def _client(master: _Master, report: Path, goals: int, *extra: str) -> dict[str, Any]:
@@ -132,6 +226,8 @@ def run(quick: bool = False) -> list[Row]:
     master = _Master()
     tmp = Path(tempfile.mkdtemp(prefix="bench-robot-sim-"))
     try:
+        rows.append(_legged_in_process(master, LEGGED_SECONDS / (3 if quick else 1)))
+        rows.append(_legged(master, tmp, LEGGED_SECONDS / (3 if quick else 1)))
         sim, wall, ok = _in_process(master, 3 if quick else 10)
         rows.append(Row(GROUP, "whole robot, our parts only, --speed max", sim / wall, "x",
                         f"{sim:.0f} simulated s of move_base goals in {wall:.1f} s wall; "

@@ -22,7 +22,7 @@ from typing import Any
 from lowerbase.robot.lockstep import NODE, LockstepOptions, LockstepRobot
 from lowerbase.robot.pace import Pacer
 from lowerbase.robot.simcontrol import SimControl
-from lowerbase.ros1.wire import RosWire
+from lowerbase.ros1.wire import RosWire, publish_synchronously
 
 
 @dataclass(frozen=True)
@@ -97,6 +97,7 @@ def run_sim(run: SimRun, show: Callable[[str], None],
     try:
         robot.advertise()
         control.advertise(RosWire(rospy))
+        publish_synchronously(rospy)  # a busy host slows time down; nothing is dropped
         deadline = None if run.duration is None else time.monotonic() + run.duration
         import rosgraph
 

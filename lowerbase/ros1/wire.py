@@ -175,6 +175,31 @@ def connected(publisher: Any) -> bool:
     return impl is None or bool(impl.has_connections())
 
 
+def publish_synchronously(rospy: Any) -> int:
+    """Make every publication of this process write each message on the publishing thread,
+    into the subscriber's socket (rospy's publishing without a ``queue_size``), instead of a
+    queue of ``queue_size`` that a writer thread empties and that drops its oldest message
+    when full. In lockstep a busy host starves that thread while simulated time runs on, so
+    an outside node lost messages silently (robot_state beside 12 busy processes); written
+    here, a subscriber that reads slowly slows simulated time down instead (its socket's
+    buffer full holds the publisher), and none is lost. Call it after every publisher is made
+    (the faces', /clock, tf2's and actionlib's); returns how many publications were
+    changed. A connection made before (queued already) is left as it is."""
+    from rospy.impl.registration import get_topic_manager
+
+    manager = get_topic_manager()
+    if manager is None:
+        return 0
+    with manager.lock:
+        publications = list(manager.pubs.values())
+    changed = 0
+    for impl in publications:
+        if impl.queue_size is not None:
+            impl.queue_size = None  # what rospy.Publisher(queue_size=None) leaves
+            changed += 1
+    return changed
+
+
 class Switchboard:
     """What the faces of one process share: local subscribers by topic, the last message of
     each latched topic, the tf2 buffer the TF publishers feed, and the inbox of messages from

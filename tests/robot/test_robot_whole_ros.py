@@ -124,7 +124,8 @@ def test_the_whole_robot_reaches_a_move_base_goal_and_completes_a_transport_task
             [sys.executable, str(ROOT / "examples" / "transport_task.py"), "--mark", mark,
              "--task-id", "3", "--direction", "2", "--timeout", "300"],
             capture_output=True, text=True, env={**os.environ, **ros_master.env}, timeout=360)
-        assert out.returncode == 0, (out.stdout[-3000:], out.stderr[-2000:])
+        assert out.returncode == 0, (out.stdout[-3000:], out.stderr[-2000:], "" if sim else (
+            tmp_path / "logs" / "navigation.log").read_text()[-3000:])
         at = standing(truth, start)
         assert near(at, places[mark], 0.15, 0.15), (at, places[mark])
     finally:

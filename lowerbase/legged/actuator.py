@@ -49,11 +49,8 @@ class ActuatorParams:
         return self.rotor_inertia * self.gear_ratio ** 2 + self.link_inertia
 
 
-def mit_torque(p: float, v: float, p_des: float, v_des: float, kp: float, kd: float,
-               tau_ff: float, limit: float) -> float:
-    """The MIT impedance law, saturated to +-limit."""
-    tau = kp * (p_des - p) + kd * (v_des - v) + tau_ff
-    return min(max(tau, -limit), limit)
+#: the MIT impedance law, saturated to +-limit (compiled: the actuators' step applies it)
+mit_torque = k.mit_torque
 
 
 def _par_row(p: ActuatorParams) -> list[float]:

@@ -22,7 +22,16 @@ import numpy as np
 
 from lowerbase.legged import kernels
 from lowerbase.legged.actuator import ActuatorBank, ActuatorParams
-from lowerbase.legged.gait import KinematicsError, LegGeometry, Trot, leg_fk, leg_ik, smoothstep
+from lowerbase.legged.gait import (
+    FRONT,
+    SIDES,
+    KinematicsError,
+    LegGeometry,
+    Trot,
+    leg_fk,
+    leg_ik,
+    smoothstep,
+)
 from lowerbase.protocol.legged import (
     LEGS,
     NO_JOINT,
@@ -69,10 +78,6 @@ class BodyParams:
     accel: float  #: body acceleration limit [m/s^2] (and rad/s^2)
     command_timeout: float  #: [s]
     gravity: float = 9.81
-
-
-SIDES = (-1, 1, -1, 1)  # FR, FL, RR, RL
-FRONT = (1, 1, -1, -1)
 
 
 class Body:

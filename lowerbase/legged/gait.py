@@ -17,6 +17,12 @@ from dataclasses import dataclass
 
 from lowerbase.errors import LowerbaseError
 
+#: where each leg's hip is on the body, legs in the order FR, FL, RR, RL: ``SIDES`` is the
+#: leg's ``side`` (-1 right, +1 left; times ``hip_y``), ``FRONT`` +1 ahead of the centre, -1
+#: behind it (times ``hip_x``)
+SIDES = (-1, 1, -1, 1)
+FRONT = (1, 1, -1, -1)
+
 
 class KinematicsError(LowerbaseError):
     """A foot position the leg cannot reach."""

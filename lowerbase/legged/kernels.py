@@ -3,11 +3,12 @@
 loads (feet, inverse kinematics, gravity torques: :meth:`lowerbase.legged.body.Body.step`) and
 the actuator traffic's 24 frames (:meth:`lowerbase.legged.lower.LeggedLower.step`).
 
-The arithmetic is the Python models' own, operation for operation (gait.py's ``leg_ik``,
-``leg_fk``, ``Trot.foot``, ``smoothstep``; actuator.py's impedance law and thermal update), and
-Python's ``min``/``max`` semantics are kept (NaN passes through, as it does there); tests hold
-the kernels to those functions. The state lives in the bank's arrays, so nothing is copied in
-or out."""
+The kinematics are gait.py's arithmetic, operation for operation (``leg_ik``, ``leg_fk``,
+``Trot.foot``, ``smoothstep``), and Python's ``min``/``max`` semantics are kept (NaN passes
+through, as it does there); tests hold the kernels to those functions. The actuators' impedance
+law (:func:`mit_torque`) and thermal update are defined here only: :class:`~lowerbase.legged.
+actuator.Actuator` steps through them too. The state lives in the bank's arrays, so nothing
+is copied in or out."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import math
 import numpy as np
 
 from lowerbase.jit import compiled
+from lowerbase.legged.gait import FRONT, SIDES, Trot
 from lowerbase.protocol.frame_kernel import clip, encodable, pack, pymax, pymin
 
 _jit = compiled()
@@ -26,9 +28,7 @@ INERTIA, DAMPING, RESISTANCE, KT_GEAR, R_THERMAL, TAU_THERMAL, TORQUE_MAX, DERAT
 N_PAR = 10
 #: the kernel's answers besides 0 (done): the leg's IK failed (``bad`` holds the foot)
 INSIDE_OFFSET, OUT_OF_REACH = 1, 2
-SIDES = (-1.0, 1.0, -1.0, 1.0)  # FR, FL, RR, RL (body.SIDES)
-FRONT = (1.0, 1.0, -1.0, -1.0)  # body.FRONT
-OFFSETS = (0.0, 0.5, 0.5, 0.0)  # gait.Trot.OFFSETS
+OFFSETS = Trot.OFFSETS
 HAND = 1e-6  #: body._gravity_torques' finite-difference step [rad]
 
 
@@ -47,17 +47,24 @@ def torque_limit(temperature: float, par: np.ndarray) -> float:
 
 
 @_jit
+def mit_torque(p: float, v: float, p_des: float, v_des: float, kp: float, kd: float,
+               tau_ff: float, limit: float) -> float:
+    """The MIT impedance law, saturated to +-limit."""
+    tau = kp * (p_des - p) + kd * (v_des - v) + tau_ff
+    return pymin(pymax(tau, -limit), limit)
+
+
+@_jit
 def actuator_step(i: int, dt: float, external: float, position: np.ndarray,
                   velocity: np.ndarray, torque: np.ndarray, temperature: np.ndarray,
                   zero: np.ndarray, mode: np.ndarray, error: np.ndarray, command: np.ndarray,
-                  par: np.ndarray, ambient: np.ndarray) -> None:
-    """Actuator ``i`` by ``dt`` (Actuator.step)."""
+                  par: np.ndarray, ambient: np.ndarray) -> float:
+    """Actuator ``i`` by ``dt`` (Actuator.step); returns its copper loss 3/2 R i_q^2 [W]."""
     p = par[i]
     if mode[i]:
-        limit = torque_limit(temperature[i], p)
         c = command[i]
-        tau = c[2] * (c[0] - (position[i] - zero[i])) + c[3] * (c[1] - velocity[i]) + c[4]
-        torque[i] = pymin(pymax(tau, -limit), limit)
+        torque[i] = mit_torque(position[i] - zero[i], velocity[i], c[0], c[1], c[2], c[3],
+                               c[4], torque_limit(temperature[i], p))
     else:
         torque[i] = 0.0
     accel = (torque[i] + external - p[DAMPING] * velocity[i]) / p[INERTIA]
@@ -70,6 +77,7 @@ def actuator_step(i: int, dt: float, external: float, position: np.ndarray,
     if temperature[i] >= p[FAULT_C] and error[i] == 0:
         error[i] = 1  # ActuatorError.MOTOR_OVER_TEMPERATURE
         mode[i] = False
+    return loss
 
 
 @_jit
@@ -144,6 +152,8 @@ def legs(dt: float, walking: bool, held: bool, gait_t: float, vx: float, vy: flo
     q = np.empty(3)
     qq = np.empty(3)
     loads = np.empty(3)
+    loss_sum = 0.0
+    electric = 0.0
     for leg in range(4):
         side = SIDES[leg]
         x, y, z = feet[leg, 0], side * geo[0] + feet[leg, 1], feet[leg, 2]
@@ -165,15 +175,10 @@ def legs(dt: float, walking: bool, held: bool, gait_t: float, vx: float, vy: flo
             if held and mode[i]:
                 command[i, 0], command[i, 1], command[i, 2] = q[j], 0.0, kp
                 command[i, 3], command[i, 4] = kd, -loads[j]
-            actuator_step(i, dt, loads[j] if loaded else 0.0, position, velocity, torque,
-                          temperature, zero, mode, error, command, par, ambient)
-    loss_sum = 0.0
-    electric = 0.0
-    for i in range(position.shape[0]):
-        i_q = torque[i] / par[i, KT_GEAR]
-        loss = 1.5 * par[i, RESISTANCE] * i_q * i_q
-        loss_sum += loss
-        electric += torque[i] * velocity[i] + loss
+            loss = actuator_step(i, dt, loads[j] if loaded else 0.0, position, velocity,
+                                 torque, temperature, zero, mode, error, command, par, ambient)
+            loss_sum += loss
+            electric += torque[i] * velocity[i] + loss
     power[0], power[1] = loss_sum, electric
     return 0
 

@@ -133,7 +133,6 @@ class LeggedLower:
         self._was_fresh = False
         c = self.codec
         self._cmd = {mid: c.message(name) for mid, name in COMMAND_MESSAGES.items()}
-        self._reply = c.message("MotorReply")
         self._request_id = c.message("LocomotionRequest").frame_id
         self._velocity_id = c.message("BodyVelocityCommand").frame_id
         self._traffic_tables()

@@ -6,6 +6,11 @@ signal or a message), re-encoded and forwarded; everything the suite sends goes 
 except that ``hold_commands`` keeps repeating the last MotionCommand for that long after the
 suite stopped sending (a watchdog that reacts that much later), and ``command_delay`` delivers
 each of them that much later (a busy host between the suite and a correct lower computer).
+
+Frames reach the suite with the lower bus's timestamp (its kernel's reception time; later by
+a mutation's ``delay``), as a CAN adapter stamps them on the wire: give it an upper bus that
+keeps them (python-can's virtual bus with ``preserve_timestamps=True``). So the proxy's own
+thread, starved on a busy host, does not put gaps into the suite's cycle times.
 """
 
 from __future__ import annotations
@@ -127,7 +132,7 @@ class MutatingProxy:
             if x.transform is not None:
                 values = x.transform(values)
         out = can.Message(arbitration_id=msg.arbitration_id, data=m.encode(values),
-                          is_extended_id=False)
+                          is_extended_id=False, timestamp=msg.timestamp + delay)
         if delay > 0:
             self._later(delay, out, self.upper)
         else:

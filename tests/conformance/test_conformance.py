@@ -83,6 +83,52 @@ def test_cycle_statistics_and_bursts() -> None:
     assert bursts(stamps, 1.0) == [0.0, 1.0, 2.0005]
 
 
+def _cycle_run(gap: float, overruns_after: int, boot_after: int = 1) -> Outcome:
+    """frame.MotionState.cycle on 5 s of 20 ms frames (bus stamps) with one stall of ``gap``
+    [s] at 2.01 s, and Heartbeats every 0.5 s whose Overruns step to ``overruns_after`` (and
+    BootCounter to ``boot_after``) after the stall."""
+    from types import SimpleNamespace
+
+    from lowerbase.conformance.client import RawFrame
+    from lowerbase.conformance.core import Settings
+    from lowerbase.conformance.frames import check_cycle
+
+    motion, heartbeat = CODEC.message("MotionState"), CODEC.message("Heartbeat")
+    stamps = [round(0.02 * k, 6) for k in range(250)]
+    stamps = [t if t < 2.0 else t + gap - 0.02 for t in stamps]
+    frames = [RawFrame(t, 1000.0 + t, motion.encode({"Linear": 0.0, "Angular": 0.0,
+                                                     "Counter": k % 16}))
+              for k, t in enumerate(stamps)]
+    beats = [RawFrame(t, 1000.0 + t, heartbeat.encode({
+        "ProtocolVersion": 1, "Uptime": t, "Counter": k % 16,
+        "BootCounter": 1 if t < 2.0 else boot_after,
+        "Overruns": 0 if t < 2.0 else overruns_after})) for k, t in
+        enumerate(0.5 * k + (gap if k >= 5 else 0.0) for k in range(12))]
+    raw = {motion.frame_id: frames, heartbeat.frame_id: beats}
+    ctx = SimpleNamespace(codec=CODEC, settings=Settings(),
+                          observation=lambda msg: raw[msg.frame_id],
+                          client=SimpleNamespace(raw_frames=lambda fid: raw[fid]))
+    return check_cycle(motion)(ctx)  # type: ignore[arg-type]
+
+
+def test_a_gap_across_a_slip_the_lower_computer_reports_is_shown_not_judged() -> None:
+    """A 300 ms stall of a lower computer that counted it (Heartbeat.Overruns stepped: its
+    time slipped) is reported and left out, as frame.Heartbeat.uptime leaves it out; the same
+    stall without its report, or across a reboot, fails the gap."""
+    told = _cycle_run(0.3, overruns_after=1)
+    assert told.status is Status.PASS, told.detail
+    assert told.measured["slipped_gaps"] == 1 and told.measured["max_gap_ms"] == 20.0
+    assert told.measured["mean_ms"] == pytest.approx(20.0)
+    assert "1 gap up to 300 ms across a slip the lower computer reported" in told.detail
+    silent = _cycle_run(0.3, overruns_after=0)
+    assert silent.status is Status.FAIL and "gap above 100 ms" in silent.detail
+    assert silent.measured["slipped_gaps"] == 0
+    rebooted = _cycle_run(0.3, overruns_after=1, boot_after=2)
+    assert rebooted.status is Status.FAIL
+    # a gap within the limit never asks the Heartbeats
+    assert _cycle_run(0.08, overruns_after=0).status is Status.PASS
+
+
 def _report() -> Report:
     def check(cid: str) -> Check:
         return Check(cid, f"{cid} works", lambda _: passed())

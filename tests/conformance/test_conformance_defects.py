@@ -48,7 +48,8 @@ def proxied() -> Iterator[tuple[MutatingProxy, list[str]]]:
     proc.wait_for("lower computer on")
     channel = f"conformance-proxy-{next(_channels)}-{config['port']}"
     lower = open_bus(config)  # lowerbase's udp_multicast (loopback only), as the emulator's
-    upper = can.Bus(interface="virtual", channel=channel)
+    # the lower bus's kernel timestamps reach the suite (the proxy's thread is no wire)
+    upper = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
     proxy = MutatingProxy(lower, upper)
     try:
         yield proxy, ["-i", "virtual", "-c", channel]
@@ -103,6 +104,39 @@ DEFECTS: dict[str, tuple[list[Mutation], float, set[str]]] = {
 #: checks a defect must fail that ONLY leaves out (they wait for the observation window):
 #: selected for that defect's run only
 EXTRA = ("frame.Heartbeat.uptime",)
+
+
+def test_the_proxy_forwards_the_wire_timestamps() -> None:
+    """Frames reach the suite stamped as the lower bus stamped them (later by a delay only),
+    so a proxy thread that a busy host starves puts no gap into the cycle checks (a 280 ms
+    gap in three cycle checks of test_the_proxy_itself_changes_nothing failed a CI run when
+    the proxy stamped its forwarding time)."""
+    codec = default_codec()
+    motion = codec.message("MotionState")
+    emulator = can.Bus(interface="virtual", channel="proxy-stamps-lower", preserve_timestamps=True)
+    lower = can.Bus(interface="virtual", channel="proxy-stamps-lower")
+    upper = can.Bus(interface="virtual", channel="proxy-stamps-upper", preserve_timestamps=True)
+    suite = can.Bus(interface="virtual", channel="proxy-stamps-upper")
+    proxy = MutatingProxy(lower, upper, codec=codec)
+    try:
+        for stamp, mutations in [(1234.5, []),
+                                 (1240.0, [Mutation("MotionState", "Linear", scale=2.0)]),
+                                 (1250.0, [Mutation("MotionState", delay=0.05)])]:
+            proxy.set(mutations)
+            emulator.send(can.Message(arbitration_id=motion.frame_id, timestamp=stamp,
+                                      data=motion.encode({"Linear": 0.25, "Angular": 0.0,
+                                                          "Counter": 3}),
+                                      is_extended_id=False))
+            got = suite.recv(timeout=10.0)
+            assert got is not None
+            delay = sum(m.delay for m in mutations)
+            assert got.timestamp == pytest.approx(stamp + delay, abs=1e-9)
+            scale = mutations[0].scale if mutations else 1.0
+            assert motion.decode(bytes(got.data))["Linear"] == pytest.approx(0.25 * scale)
+    finally:
+        proxy.close()
+        for bus in (emulator, lower, upper, suite):
+            bus.shutdown()
 
 
 def test_the_proxy_itself_changes_nothing(proxied: tuple[MutatingProxy, list[str]],

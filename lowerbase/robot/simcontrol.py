@@ -123,6 +123,10 @@ class SimControl:
                             else f"until {req.until}", sim_time=self.robot.now,
                             until_met=request.met)
 
+    def should_run(self) -> bool:
+        """Whether simulated time should be moving now: free-running, or a step running."""
+        return not self.paused or self._request is not None
+
     # -- the loop ------------------------------------------------------------------------------
     def run(self, on_tick: Callable[[], None] | None = None) -> None:
         """Until :attr:`stop` is set: free-running chunks at the pace, or the steps asked for

@@ -19,10 +19,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from lowerbase.robot.holdwatch import HoldWatch
 from lowerbase.robot.lockstep import NODE, LockstepOptions, LockstepRobot
 from lowerbase.robot.pace import Pacer
 from lowerbase.robot.simcontrol import SimControl
+from lowerbase.ros1 import held
 from lowerbase.ros1.wire import RosWire, publish_synchronously
+
+#: [bytes] unsent to one subscriber that make it a holder (its socket buffers hold ~2.5 MB on
+#: loopback; one that reads has next to none)
+HELD_BYTES = 64 * 1024
 
 
 @dataclass(frozen=True)
@@ -94,10 +100,15 @@ def run_sim(run: SimRun, show: Callable[[str], None],
     previous = {s: signal.signal(s, lambda *_: control.stop.set())
                 for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     ended: list[str] = []
+    watch: HoldWatch | None = None
     try:
         robot.advertise()
         control.advertise(RosWire(rospy))
         publish_synchronously(rospy)  # a busy host slows time down; nothing is dropped
+        # ... and a subscriber that reads no more holds it: said, with who it is
+        watch = HoldWatch(lambda: robot.now, control.should_run,
+                          lambda: held.backlogs(rospy, HELD_BYTES))
+        watch.start()
         deadline = None if run.duration is None else time.monotonic() + run.duration
         import rosgraph
 
@@ -121,6 +132,9 @@ def run_sim(run: SimRun, show: Callable[[str], None],
         control.shutdown()
         stats = robot.shutdown()
         stats.update(control.stats)
+        if watch is not None:
+            watch.close()
+            stats.update(watch.stats)
         stats["slowed"] = control.pacer.behind
         print(f"lowerbase robot: {status_text(control)}", flush=True)
         with contextlib.suppress(Exception):

@@ -30,6 +30,15 @@ MOTION_PERIOD = 0.02  #: [s] MotionCommand cycle the suite keeps while driving
 SETTLE = 0.03
 
 
+def overrun_steps(a: dict[str, Any], b: dict[str, Any]) -> int | None:
+    """The slips of its time (Heartbeat.Overruns steps, mod 16: its own count of falling
+    behind real time) the lower computer reports from Heartbeat values ``a`` to ``b``; None
+    when a reboot lies between them (BootCounter changed)."""
+    if a.get("BootCounter") != b.get("BootCounter"):
+        return None
+    return (int(b.get("Overruns", 0)) - int(a.get("Overruns", 0))) % 16
+
+
 class Context:
     """What every check gets: the client, the settings, and state shared between checks."""
 
@@ -100,10 +109,8 @@ class Context:
         after = self.client.expect("Heartbeat", timeout=2 * cycle, since=t1)
         if not before or after is None:
             return None
-        a, b = before[-1].values, after.values
-        if a.get("BootCounter") != b.get("BootCounter"):
-            return None
-        return int(a.get("Overruns", 0)) != int(b.get("Overruns", 0))
+        steps = overrun_steps(before[-1].values, after.values)
+        return None if steps is None else steps != 0
 
     def state(self) -> int:
         """RobotState from a SystemStatus that reflects the last ControlCommand sent."""

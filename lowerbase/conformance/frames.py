@@ -14,7 +14,7 @@ from lowerbase.conformance.catalog import (
     shared_counter,
 )
 from lowerbase.conformance.client import RawFrame
-from lowerbase.conformance.context import CheckFunc, Context
+from lowerbase.conformance.context import CheckFunc, Context, overrun_steps
 from lowerbase.conformance.core import (
     Check,
     CheckSkipped,
@@ -110,9 +110,7 @@ def slips_between(heartbeats: Sequence[tuple[float, dict[str, Any]]], a: float, 
     not both there, or a reboot lies between them."""
     before = [v for t, v in heartbeats if t <= a]
     after = [v for t, v in heartbeats if t >= b]
-    if not before or not after or before[-1]["BootCounter"] != after[0]["BootCounter"]:
-        return None
-    return (int(after[0].get("Overruns", 0)) - int(before[-1].get("Overruns", 0))) % 16
+    return overrun_steps(before[-1], after[0]) if before and after else None
 
 
 def _heartbeats(ctx: Context) -> list[tuple[float, dict[str, Any]]]:
@@ -247,9 +245,9 @@ def check_uptime(ctx: Context) -> Outcome:
     problems: list[str] = []
     judged, overruns, counted, advanced = 0, 0, 0.0, 0.0
     for (ta, a), (tb, b) in itertools.pairwise(frames):
-        if a["BootCounter"] != b["BootCounter"]:
+        slipped = overrun_steps(a, b)
+        if slipped is None:
             continue  # a reboot restarts Uptime
-        slipped = (int(b.get("Overruns", 0)) - int(a.get("Overruns", 0))) % 16
         overruns += slipped
         if slipped:
             continue
